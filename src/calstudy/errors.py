@@ -1,0 +1,10 @@
+"""The one exception every calstudy function raises on bad input."""
+
+
+class CalibrationError(ValueError):
+    """Bad or degenerate input to a calibration step.
+
+    The message names the problem and the number that shows it, for example
+    ``"rotation axes of the 6 moves are parallel (condition number 3e+12); add a move about
+    another axis"``.
+    """
