@@ -27,7 +27,9 @@ def check_finite(name: str, array) -> np.ndarray:
     bad = ~np.isfinite(a)
     if bad.any():
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise CalibrationError(f"{name} holds a non-finite value ({a[idx]!r}) at index {idx}")
+        raise CalibrationError(
+            f"{name} holds a non-finite value ({float(a[idx])!r}) at index {idx}"
+        )
     return a
 
 
@@ -40,7 +42,9 @@ def check_shape(name: str, array, shape: tuple) -> np.ndarray:
         If the number of axes or a fixed length differs, or a value is not finite.
     """
     a = np.asarray(array, dtype=float)
-    ok = a.ndim == len(shape) and all(s is None or s == n for s, n in zip(shape, a.shape))
+    ok = a.ndim == len(shape) and all(
+        s is None or s == n for s, n in zip(shape, a.shape, strict=True)
+    )
     if not ok:
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise CalibrationError(f"{name} has shape {a.shape}; expected {want}")
@@ -117,7 +121,7 @@ def apply(transform, points) -> np.ndarray:
 
 
 def rotvec_to_matrix(rotvec) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (axis times angle, rad)."""
+    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (axis x angle, rad)."""
     rv = np.asarray(rotvec, dtype=float)
     return Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(rv.shape[:-1] + (3, 3))
 
@@ -221,7 +225,7 @@ def perturb(transform, sigma_rot: float, sigma_trans: float, rng: np.random.Gene
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
-    """Camera-to-world transform of a camera at ``eye`` whose optical (+z) axis points at ``target``.
+    """Camera-to-world transform of a camera at ``eye`` with its optical (+z) axis on ``target``.
 
     The camera x axis is horizontal (perpendicular to ``up``); if the viewing direction is parallel
     to ``up``, the world x axis is used as the reference instead.

@@ -1,0 +1,82 @@
+# calstudy: `make reproduce` regenerates results/ and the book, `make test` proves it.
+# Both create the virtual environment first (Python 3.11 with venv; pip must reach the package
+# registry). `make help` lists the targets.
+
+SHELL := bash
+.SHELLFLAGS := -euo pipefail -c
+.DEFAULT_GOAL := help
+.DELETE_ON_ERROR:
+MAKEFLAGS += --no-builtin-rules
+
+# Reproducible bytes: no display, single-threaded BLAS, fixed hash seed. The kernel that
+# papermill starts inherits these; the venv's own kernel spec comes first.
+export MPLBACKEND := Agg
+export OMP_NUM_THREADS := 1
+export OPENBLAS_NUM_THREADS := 1
+export MKL_NUM_THREADS := 1
+export PYTHONHASHSEED := 0
+export JUPYTER_PREFER_ENV_PATH := 1
+export PYDEVD_DISABLE_FILE_VALIDATION := 1
+
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+NOTEBOOKS := $(sort $(wildcard notebooks/[0-9][0-9]_*.ipynb))
+EXECUTED := $(patsubst notebooks/%.ipynb,book/notebooks/%.ipynb,$(NOTEBOOKS))
+LIBRARY := $(sort $(wildcard src/calstudy/*.py))
+DATA := $(sort $(shell find data -type f -not -name '.*' -not -path '*/__pycache__/*' 2>/dev/null))
+RESULTS := $(sort $(shell find results -mindepth 2 -type f -not -name '.*' 2>/dev/null))
+BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
+	$(filter-out book/claims.md,$(wildcard book/*.md)) book/claims.md
+BOOK_STAMP := book/_build/html/.built
+
+.PHONY: help venv reproduce notebooks test lint book clean
+
+help: ## list the targets
+	@echo "calstudy: make <target>"
+	@grep -E '^[a-z]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/^([a-z]+):.*## /  \1\t/' | expand -t 14
+
+venv: $(STAMP) ## create .venv with the pinned dependencies and calstudy (editable)
+
+$(STAMP): environment.txt pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -r environment.txt
+	$(BIN)/pip install --no-deps -e .
+	touch $@
+
+reproduce: $(BOOK_STAMP) ## run every notebook, aggregate results/claims.csv, build the book
+	@echo "reproduce: $(words $(EXECUTED)) notebook(s) up to date; book in book/_build/html"
+
+notebooks: $(EXECUTED) ## run the notebooks whose inputs changed (writes results/<notebook>/)
+
+# An executed copy is the record that its notebook ran with default parameters; the notebook
+# writes results/<stem>/ itself. Output goes to a temporary name first, so a failed run leaves
+# no executed copy and is retried next time.
+book/notebooks/%.ipynb: notebooks/%.ipynb $(LIBRARY) $(DATA) $(STAMP)
+	@mkdir -p $(@D)
+	$(BIN)/papermill --cwd notebooks --progress-bar $< $(@D)/.tmp-$*.ipynb
+	mv $(@D)/.tmp-$*.ipynb $@
+
+results/claims.csv: $(EXECUTED) src/calstudy/results.py | $(STAMP)
+	$(BIN)/python -c "from calstudy.results import aggregate_claims; aggregate_claims()"
+
+book/claims.md: results/claims.csv data/claims.csv src/calstudy/book.py | $(STAMP)
+	$(BIN)/python -m calstudy.book claims $@
+
+$(BOOK_STAMP): $(BOOK_SOURCES) $(EXECUTED) $(RESULTS) | $(STAMP)
+	$(BIN)/jupyter-book build book/ --all --warningiserror --nitpick --keep-going
+	touch $@
+
+book: $(BOOK_STAMP) ## build the book (same as reproduce)
+
+test: $(STAMP) ## ruff, then pytest (unit tests, notebook runs, reproducibility of results/)
+	$(BIN)/ruff check src tests notebooks
+	$(BIN)/pytest
+
+lint: $(STAMP) ## ruff check of src, tests and notebooks
+	$(BIN)/ruff check src tests notebooks
+
+clean: ## remove the built book and executed notebooks (results/ and .venv stay)
+	rm -rf book/_build book/notebooks book/claims.md
