@@ -33,7 +33,9 @@ NO_NOTEBOOK = pytest.param(
     None, marks=pytest.mark.skip(reason="notebooks/ holds no NN_*.ipynb notebook yet"), id="none"
 )
 ALL = [pytest.param(p, id=p.stem) for p in NOTEBOOKS] or [NO_NOTEBOOK]
-RTOL, ATOL = 1e-6, 1e-9
+# CSVs hold 6 significant digits (%.6g): one unit in the last digit is up to 1e-5 relative,
+# which is what another machine's floating point may change; anything larger is a real change.
+RTOL, ATOL = 2e-5, 1e-9
 
 # The kernel papermill starts inherits these (the Makefile exports the same values).
 REPRODUCIBLE_ENV = {
