@@ -67,6 +67,12 @@ class Estimate:
         return 0.5 * float(self.residuals @ self.residuals)
 
 
+def condition_number(matrix) -> float:
+    """Ratio of the largest to the smallest singular value of ``matrix`` (inf if singular)."""
+    s = np.linalg.svd(np.asarray(matrix, dtype=float), compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+
+
 def covariance_from_jacobian(
     jac: np.ndarray, residuals: np.ndarray, sigma: float | None = None
 ) -> tuple[np.ndarray, float]:

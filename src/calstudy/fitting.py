@@ -17,6 +17,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .errors import CalibrationError
+from .estimation import condition_number
 from .geometry import check_shape, make_transform, project_to_so3
 
 #: Relative size of the smallest singular value (to the largest) below which a point set is
@@ -319,8 +320,7 @@ def fit_sphere(points) -> tuple[np.ndarray, float, float]:
         raise CalibrationError(f"the {p.shape[0]} points of the sphere fit all coincide")
     q = q / scale
     design = np.column_stack([2.0 * q, np.ones(len(q))])
-    s = np.linalg.svd(design, compute_uv=False)
-    cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    cond = condition_number(design)
     if cond > SPHERE_COND_MAX:
         raise CalibrationError(
             f"the {p.shape[0]} points are coplanar (condition number {cond:.3g} of the sphere "

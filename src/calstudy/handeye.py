@@ -28,7 +28,7 @@ import pinocchio as pin
 
 from . import geometry as geo
 from .errors import CalibrationError
-from .estimation import Estimate, levenberg_marquardt
+from .estimation import Estimate, condition_number, levenberg_marquardt
 from .fitting import fit_rotation
 
 #: largest orientation spread (rad) accepted among moves that should be pure translations
@@ -151,8 +151,7 @@ def translation_from_rotations(flange2base, centres, rotation) -> tuple[np.ndarr
     a = (r[1:] - r[0]).reshape(-1, 3)
     world = np.einsum("nij,jk,nk->ni", r, r_f, x_f)  # R_0i R_F X_Fi
     b = (world[0] - world[1:] + t[0] - t[1:]).reshape(-1)
-    sv = np.linalg.svd(a, compute_uv=False)
-    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    cond = condition_number(a)
     if cond > MAX_CONDITION:
         raise CalibrationError(
             f"rotation axes of the {m - 1} moves are parallel (condition number {cond:.3g}); "
