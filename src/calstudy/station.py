@@ -878,3 +878,32 @@ def hybrid_claims(handeye, stationary, rps, seed: int, notebook: str):
     )
     rows.append(v.row("hybrid.rps", "", "RMS ratio", notebook))
     return rows
+
+
+def summarise_rps(rps):
+    """RMS frame and rotation errors of each 3-2-1 solver per scenario (from :func:`rps_trial`)."""
+    return (
+        rps.groupby(["scenario", "solver"], sort=False)
+        .agg(
+            frame_error_rms_mm=("frame_error_mm", lambda v: float(np.sqrt(np.mean(v**2)))),
+            rotation_error_rms_deg=("rotation_error_deg", lambda v: float(np.sqrt(np.mean(v**2)))),
+            orthogonality_defect_max=("orthogonality_defect", "max"),
+            trials=("trial", "count"),
+        )
+        .reset_index()
+    )
+
+
+def summarise_penalty_sweep(sweep):
+    """Per start and penalty ``M``: converged share, mean evaluations and orthogonality defect,
+    and the largest difference from the SO(3) solution (from :func:`rps_penalty_sweep`)."""
+    return (
+        sweep.groupby(["start", "penalty"], sort=False)
+        .agg(
+            converged_share=("converged", "mean"),
+            evaluations=("evaluations", "mean"),
+            orthogonality_defect=("orthogonality_defect", "mean"),
+            excess_over_so3_max_mm=("excess_over_so3_mm", lambda v: float(np.abs(v).max())),
+        )
+        .reset_index()
+    )
