@@ -32,7 +32,7 @@ BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
 	$(filter-out book/claims.md,$(wildcard book/*.md)) book/claims.md
 BOOK_STAMP := book/_build/html/.built
 
-.PHONY: help venv reproduce notebooks test lint book clean
+.PHONY: help venv reproduce notebooks test lint book bench clean
 
 help: ## list the targets
 	@echo "calstudy: make <target>"
@@ -75,11 +75,14 @@ $(BOOK_STAMP): $(BOOK_SOURCES) $(EXECUTED) $(RESULTS) | $(STAMP)
 book: $(BOOK_STAMP) ## build the book (same as reproduce)
 
 test: $(STAMP) ## ruff, then pytest (unit tests, notebook runs, reproducibility of results/)
-	$(BIN)/ruff check src tests notebooks
+	$(BIN)/ruff check src tests notebooks benchmarks
 	$(BIN)/pytest
 
-lint: $(STAMP) ## ruff check of src, tests and notebooks
-	$(BIN)/ruff check src tests notebooks
+lint: $(STAMP) ## ruff check of src, tests, notebooks and benchmarks
+	$(BIN)/ruff check src tests notebooks benchmarks
+
+bench: $(STAMP) ## time the speed budgets of the issues (prints; writes nothing)
+	@for b in $(sort $(wildcard benchmarks/bench_*.py)); do echo "== $$b"; $(BIN)/python $$b; done
 
 clean: ## remove the built book and executed notebooks (results/ and .venv stay)
 	rm -rf book/_build book/notebooks book/claims.md
