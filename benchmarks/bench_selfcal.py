@@ -1,0 +1,52 @@
+"""Time one selfcal identification: 24 sphere-centre measurements, 30 parameters (budget 50 ms).
+
+Prints the best of several repeats (wall clock) of ``calstudy.selfcal.identify`` from the good
+initial estimate and from the very poor one, and of one model evaluation with its Jacobian.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from calstudy import selfcal as sc
+
+BUDGET_MS = 50.0
+REPEATS = 20
+
+
+def best_ms(fn, repeats: int = REPEATS) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - start)
+    return 1000.0 * best
+
+
+def main() -> None:
+    scenario = sc.load_scenario()
+    station, meas = sc.example_station(scenario, 1)
+    poor = sc.poor_start(scenario, station, np.random.default_rng(0))
+    good_fit = sc.identify(meas, station.nominal_params)
+    poor_fit = sc.identify(meas, poor)
+    model = sc.GlobalModel()
+    timings = {
+        f"identification, good start ({good_fit.iterations} iterations)": best_ms(
+            lambda: sc.identify(meas, station.nominal_params)
+        ),
+        f"identification, very poor start ({poor_fit.iterations} iterations)": best_ms(
+            lambda: sc.identify(meas, poor)
+        ),
+        "points and 72 x 30 Jacobian (one evaluation)": best_ms(
+            lambda: model.points_and_jacobian(station.nominal_params, meas.Q, meas.C)
+        ),
+    }
+    print(f"selfcal: {len(meas)} measurements, {sc.N_PARAMS} parameters, best of {REPEATS}")
+    for label, ms in timings.items():
+        print(f"  {label:<55s} {ms:8.2f} ms   (budget {BUDGET_MS:g} ms per identification)")
+
+
+if __name__ == "__main__":
+    main()
