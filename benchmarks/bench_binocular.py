@@ -8,10 +8,9 @@ that of Eq. 4 for a dot at 900 mm with the optics of ``data/binocular/sensor.tom
 
 from __future__ import annotations
 
-import time
-
 import cv2
 import numpy as np
+from timing import best_seconds
 
 from calstudy import binocular_sim as sim
 from calstudy import coc
@@ -32,15 +31,6 @@ def frame(width: int, height: int, delta: float) -> np.ndarray:
     return cv2.GaussianBlur(out, (0, 0), delta)
 
 
-def best_of(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
 def main() -> None:
     scenario = sim.load_scenario()
     cfg = scenario.config["sensor"]
@@ -56,9 +46,9 @@ def main() -> None:
     )
     width, height = scenario.sensor.width, scenario.sensor.height
     img = frame(width, height, delta)
-    full = best_of(lambda: coc.rectify_coc(img, delta), REPEATS)
+    full = best_seconds(lambda: coc.rectify_coc(img, delta), REPEATS)
     crop = img[300 - CROP // 2 : 300 + CROP // 2, 265 - CROP // 2 : 265 + CROP // 2].copy()
-    loop = best_of(lambda: coc.rectify_coc_reference(crop, delta), 1)
+    loop = best_seconds(lambda: coc.rectify_coc_reference(crop, delta), 1)
     scaled = loop / crop.size * img.size
     verdict = "within" if full <= BUDGET_S else "OVER"
     print(

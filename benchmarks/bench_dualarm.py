@@ -9,24 +9,14 @@ notebook uses) and with finite differences on ``jac_sparsity``, and of the whole
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
+from timing import best_seconds
 
 from calstudy import dualarm as da
 from calstudy import markers as mk
 
 BUDGET_S = 2.0
 REPEATS = 5
-
-
-def best_s(fn, repeats: int = REPEATS) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def main() -> None:
@@ -42,14 +32,15 @@ def main() -> None:
     kw = dict(fixed_view=recon.reference_view, sigma_px=scn.sigma_px, sigma_mm=scn.marker_sigma_mm)
     n_obs = sum(v.ids.size for v in used)
     timings = {
-        "bundle adjustment, analytic sparse Jacobian": best_s(
-            lambda: mk.bundle_adjust(scn.rig, used, poses, points, **kw)
+        "bundle adjustment, analytic sparse Jacobian": best_seconds(
+            lambda: mk.bundle_adjust(scn.rig, used, poses, points, **kw), REPEATS
         ),
-        "bundle adjustment, finite differences on jac_sparsity": best_s(
-            lambda: mk.bundle_adjust(scn.rig, used, poses, points, jacobian="sparse-fd", **kw)
+        "bundle adjustment, finite differences on jac_sparsity": best_seconds(
+            lambda: mk.bundle_adjust(scn.rig, used, poses, points, jacobian="sparse-fd", **kw),
+            REPEATS,
         ),
-        "whole reconstruction (graph to bundle adjustment)": best_s(
-            lambda: da.survey_markers(scn, views)
+        "whole reconstruction (graph to bundle adjustment)": best_seconds(
+            lambda: da.survey_markers(scn, views), REPEATS
         ),
     }
     print(

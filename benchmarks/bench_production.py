@@ -8,23 +8,13 @@ notebook's default run does 100 stations, then 23 sweep values x 40 stations of 
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
+from timing import best_ms
 
 from calstudy import production as pr
 
 BUDGET_S = 90.0
 REPEATS = 5
-
-
-def best_ms(fn, repeats: int = REPEATS) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return 1000.0 * best
 
 
 def main() -> None:
@@ -34,14 +24,14 @@ def main() -> None:
     run = pr.simulate_run(ps, scenario, rng)
     timings = {
         "station drawn and calibrated (sphere + homography)": best_ms(
-            lambda: pr.calibrated_station(np.random.default_rng(1))
+            lambda: pr.calibrated_station(np.random.default_rng(1)), REPEATS
         ),
         "protocol run, 50 products x 58 points": best_ms(
-            lambda: pr.simulate_run(ps, scenario, np.random.default_rng(2))
+            lambda: pr.simulate_run(ps, scenario, np.random.default_rng(2)), REPEATS
         ),
-        "Table 1 analysis of one run": best_ms(lambda: pr.analyse_run(run, 10)),
+        "Table 1 analysis of one run": best_ms(lambda: pr.analyse_run(run, 10), REPEATS),
         "before compensation, 168 Lilliefors tests": best_ms(
-            lambda: pr.before_compensation(run, scenario.n_before)
+            lambda: pr.before_compensation(run, scenario.n_before), REPEATS
         ),
     }
     print(f"production: best of {REPEATS} (budget {BUDGET_S:g} s for the default notebook run)")

@@ -6,23 +6,13 @@ initial estimate and from the very poor one, and of one model evaluation with it
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
+from timing import best_ms
 
 from calstudy import selfcal as sc
 
 BUDGET_MS = 50.0
 REPEATS = 20
-
-
-def best_ms(fn, repeats: int = REPEATS) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return 1000.0 * best
 
 
 def main() -> None:
@@ -34,13 +24,13 @@ def main() -> None:
     model = sc.GlobalModel()
     timings = {
         f"identification, good start ({good_fit.iterations} iterations)": best_ms(
-            lambda: sc.identify(meas, station.nominal_params)
+            lambda: sc.identify(meas, station.nominal_params), REPEATS
         ),
         f"identification, very poor start ({poor_fit.iterations} iterations)": best_ms(
-            lambda: sc.identify(meas, poor)
+            lambda: sc.identify(meas, poor), REPEATS
         ),
         "points and 72 x 30 Jacobian (one evaluation)": best_ms(
-            lambda: model.points_and_jacobian(station.nominal_params, meas.Q, meas.C)
+            lambda: model.points_and_jacobian(station.nominal_params, meas.Q, meas.C), REPEATS
         ),
     }
     print(f"selfcal: {len(meas)} measurements, {sc.N_PARAMS} parameters, best of {REPEATS}")

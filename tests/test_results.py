@@ -23,6 +23,7 @@ from calstudy.results import (
     claim_ids,
     read_claims,
     source_digest,
+    verdict_direction,
     verdict_vs_ml,
     verdict_vs_published,
     write_claims,
@@ -502,3 +503,12 @@ def test_claims_page_without_results_is_all_pending(tmp_path):
 def test_verdict_names_match_the_register_rule():
     assert VERDICTS == ("reproduced", "direction only", "not reproduced", "not testable")
     assert os.path.basename(DATA_DIR) == "data"
+
+
+def test_verdict_direction():
+    lower = verdict_direction(np.full(10, 1.0) + np.arange(10) * 0.01, np.full(10, 3.0))
+    assert lower.verdict == "reproduced" and lower.reproduced < 1
+    same = verdict_direction(np.linspace(1, 3, 10), np.full(10, 2.0))
+    assert same.verdict == "not reproduced"
+    with pytest.raises(CalibrationError, match="must be equal"):
+        verdict_direction(np.ones(3), np.ones(4))

@@ -216,15 +216,6 @@ def test_trial_is_deterministic(scenario):
     assert a["methods"] == b["methods"] and a["history"] == b["history"]
 
 
-def test_verdict_direction():
-    lower = sc.verdict_direction(np.full(10, 1.0) + np.arange(10) * 0.01, np.full(10, 3.0))
-    assert lower.verdict == "reproduced" and lower.reproduced < 1
-    same = sc.verdict_direction(np.linspace(1, 3, 10), np.full(10, 2.0))
-    assert same.verdict == "not reproduced"
-    with pytest.raises(CalibrationError, match="must be equal"):
-        sc.verdict_direction(np.ones(3), np.ones(4))
-
-
 # ----------------------------------------------------------------------------------------------
 # bad input
 

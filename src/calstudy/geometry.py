@@ -94,6 +94,16 @@ def check_transform(name: str, transform, tol: float = ORTHONORMAL_TOL) -> np.nd
 # construction and algebra
 
 
+def skew(v) -> np.ndarray:
+    """Cross-product matrices ``[v]x`` with ``[v]x w = v x w``, batched: (..., 3) -> (..., 3, 3)."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
 def make_transform(rotation, translation) -> np.ndarray:
     """Build 4 x 4 transforms from rotations ``(..., 3, 3)`` and translations ``(..., 3)`` in mm."""
     r = np.asarray(rotation, dtype=float)

@@ -231,17 +231,9 @@ class _SphereProblem:
         # R_F = base exp(delta); exp(delta + e) = exp(delta) exp(Jr(delta) e), so
         # d(R_F^T q)/d(delta) = [R_F^T q]_x Jr(delta), Jr the right Jacobian of SO(3)
         pred = q @ r_f
-        jac[:, :, 3:6] = _skew(pred) @ pin.Jexp3(np.asarray(x[3:6], dtype=float))
+        jac[:, :, 3:6] = geo.skew(pred) @ pin.Jexp3(np.asarray(x[3:6], dtype=float))
         jac[:, :, 6:9] = np.einsum("ji,njk->nik", r_f, r0.transpose(0, 2, 1))
         return (jac / self.sigma[None, :, None]).reshape(n * 3, 9)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
-    return out
 
 
 def sphere_handeye_ml(flange2base, centres, sensor_sigma, initial: np.ndarray) -> Estimate:

@@ -34,7 +34,6 @@ from scipy.spatial.transform import Rotation
 from . import geometry as geo
 from .errors import CalibrationError
 from .fitting import fit_rigid
-from .handeye import _skew  # batched cross-product matrices, (..., 3) -> (..., 3, 3)
 from .sensing import PinholeCamera
 
 #: default largest RMS reprojection error (px) a converged bundle adjustment may leave
@@ -396,7 +395,7 @@ def _residual_blocks(rig, rot, trans, points, view_idx, marker_idx, uv_l, uv_r, 
 def _left_jacobian(rotvec: np.ndarray) -> np.ndarray:
     """Left Jacobian ``(N, 3, 3)`` of SO(3): ``exp(w + d) = exp(J_l(w) d) exp(w)``, first order."""
     theta = np.linalg.norm(rotvec, axis=1)
-    k = _skew(rotvec)
+    k = geo.skew(rotvec)
     small = theta < 1e-8
     th = np.where(small, 1.0, theta)
     a = np.where(small, 0.5, (1 - np.cos(th)) / th**2)
@@ -427,12 +426,12 @@ def _jacobian_blocks(rig, rot, trans, jl, points, view_idx, marker_idx, p_cam) -
         [_projection_derivative(rig.left, pl), _projection_derivative(rig.right, pr) @ a], axis=1
     )  # (N, 4, 3) derivative of the four pixel residuals by p_left
     out = np.zeros((len(x), 7, 9))
-    out[:, :4, :3] = d_pl @ (-_skew(rx) @ jv)
+    out[:, :4, :3] = d_pl @ (-geo.skew(rx) @ jv)
     out[:, :4, 3:6] = d_pl
     out[:, :4, 6:] = d_pl @ r
     rt = np.swapaxes(r, -1, -2)
     y = p_cam - t
-    out[:, 4:, :3] = -rt @ _skew(y) @ jv
+    out[:, 4:, :3] = -rt @ geo.skew(y) @ jv
     out[:, 4:, 3:6] = rt
     out[:, 4:, 6:] = np.eye(3)
     return out

@@ -38,15 +38,15 @@ from .handeye import sphere_handeye
 from .paths import data_path
 from .station import (
     HybridStation,
-    _joint_sigma,
-    _log,
     load_config,
+    log_progress,
     make_station,
+    repeatability_joint_sigma,
     simulate_sphere_measurements,
     stationary_trial,
     trial_generators,
 )
-from .workpiece import RPS_EQUATIONS, _check_datums
+from .workpiece import RPS_EQUATIONS, check_datums
 
 AXES = ("x", "y", "z")
 PHASES = ("compensation", "follow-up")
@@ -261,7 +261,7 @@ def rps_frame_batch(datums_base, datums_work, initial, tol: float = 1e-9, max_it
     if p.ndim != 3 or p.shape[1:] != (3, 3):
         raise CalibrationError(f"datums_base has shape {p.shape}; expected (N, 3, 3)")
     geo.check_finite("datums_base", p)
-    _, w = _check_datums(p[0], datums_work)
+    _, w = check_datums(p[0], datums_work)
     init = geo.check_transform("initial base2work", initial)
     n = p.shape[0]
     di = np.array([d for d, _ in RPS_EQUATIONS])
@@ -277,11 +277,7 @@ def rps_frame_batch(datums_base, datums_work, initial, tol: float = 1e-9, max_it
             break
         # left perturbation R <- exp(w) R moves R p by w x (R p) = -[R p]x w
         v = rp[:, di, :]
-        skew = np.zeros((n, 6, 3, 3))
-        skew[..., 0, 1], skew[..., 0, 2] = -v[..., 2], v[..., 1]
-        skew[..., 1, 0], skew[..., 1, 2] = v[..., 2], -v[..., 0]
-        skew[..., 2, 0], skew[..., 2, 1] = -v[..., 1], v[..., 0]
-        jac[:, :, 3:] = -skew[:, np.arange(6), ai, :]
+        jac[:, :, 3:] = -geo.skew(v)[:, np.arange(6), ai, :]
         try:
             step = np.linalg.solve(jac, -res[..., None])[..., 0]
         except np.linalg.LinAlgError as exc:
@@ -367,7 +363,7 @@ class ProductionStation:
     def joint_sigma(self, repeatability_mm: float) -> float:
         """Joint noise (rad) for a repeatability of +-``repeatability_mm`` (3 sigma)."""
         if repeatability_mm not in self._joint_sigmas:
-            self._joint_sigmas[repeatability_mm] = _joint_sigma(
+            self._joint_sigmas[repeatability_mm] = repeatability_joint_sigma(
                 self.station, repeatability_mm / 3.0
             )
         return self._joint_sigmas[repeatability_mm]
@@ -884,7 +880,9 @@ def production_monte_carlo(
         if k == 0:
             first = run
         if progress and (k + 1) % max(1, n_trials // 5) == 0:
-            _log(progress, f"{k + 1}/{n_trials} stations in {time.perf_counter() - start:.1f} s")
+            log_progress(
+                progress, f"{k + 1}/{n_trials} stations in {time.perf_counter() - start:.1f} s"
+            )
     return pd.DataFrame(system_rows), pd.DataFrame(table_rows), stations, first
 
 
@@ -916,7 +914,7 @@ def sensitivity_sweep(
                         "r_above_0p7": a["r_above_0p7"],
                     }
                 )
-        _log(progress, f"sweep of {name}: {time.perf_counter() - start:.1f} s")
+        log_progress(progress, f"sweep of {name}: {time.perf_counter() - start:.1f} s")
     return pd.DataFrame(rows)
 
 

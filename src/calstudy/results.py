@@ -465,6 +465,33 @@ def verdict_vs_published(
     return Verdict(verdict, value, lo, hi, elo, ehi, null, bool(significant), bool(in_band), note)
 
 
+def verdict_direction(samples, baseline, *, level: float = 0.95) -> Verdict:
+    """Verdict of a claim with a direction but no published size: is ``samples`` lower?
+
+    The figure is the paired ratio ``samples / baseline`` per trial (median and percentile
+    interval). ``reproduced`` when the whole interval lies below 1 (significant and in the
+    paper's direction; with no published size the magnitude band does not apply),
+    ``not reproduced`` otherwise.
+    """
+    s = np.asarray(samples, dtype=float)
+    b = np.asarray(baseline, dtype=float)
+    if s.shape != b.shape or s.ndim != 1 or len(s) < 2 or np.any(b <= 0):
+        raise CalibrationError(
+            f"samples {s.shape} and baseline {b.shape} must be equal (N,) arrays, N >= 2, "
+            "with a positive baseline"
+        )
+    ratio = s / b
+    value = float(np.median(ratio))
+    lo, hi = (float(v) for v in np.percentile(ratio, [50 * (1 - level), 50 * (1 + level)]))
+    significant = hi < 1.0
+    note = (
+        f"ratio {value:.3g} [{lo:.3g}, {hi:.3g}] over {len(s)} trials; "
+        f"{'significantly' if significant else 'not significantly'} below 1; no published size"
+    )
+    verdict = "reproduced" if significant else "not reproduced"
+    return Verdict(verdict, value, lo, hi, lo, hi, 1.0, significant, True, note)
+
+
 def verdict_vs_ml(
     method_error_samples,
     ml_error_samples,

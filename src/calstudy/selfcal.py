@@ -47,11 +47,11 @@ from .geometry import (
     make_transform,
     matrix_to_euler_zyx,
     rotvec_to_matrix,
+    skew,
 )
-from .handeye import _skew  # cross-product matrices, (m, 3) -> (m, 3, 3)
 from .kinematics import Robot, load_robot, perturb_robot
 from .paths import data_path
-from .results import ClaimRow, Verdict, verdict_vs_ml, verdict_vs_published
+from .results import ClaimRow, verdict_direction, verdict_vs_ml, verdict_vs_published
 
 # ----------------------------------------------------------------------------------------------
 # the 30 parameters
@@ -208,7 +208,7 @@ class GlobalModel:
             rot[k], pos[k] = placement.rotation, placement.translation
         lever = np.einsum("mij,mj->mi", rot, C)
         # velocity of the point P = origin + R C: v + w x (R C) = v - [R C]_x w
-        dpoint = jac6[:, :3, :] - _skew(lever) @ jac6[:, 3:, :]
+        dpoint = jac6[:, :3, :] - skew(lever) @ jac6[:, 3:, :]
         return lever + pos, (dpoint @ self._from_params).reshape(3 * m, N_PARAMS)
 
 
@@ -1243,33 +1243,6 @@ def summarise_robot(robot: pd.DataFrame) -> pd.DataFrame:
             }
         )
     return pd.DataFrame(rows)
-
-
-def verdict_direction(samples, baseline, *, level: float = 0.95) -> Verdict:
-    """Verdict of a claim with a direction but no published size: is ``samples`` lower?
-
-    The figure is the paired ratio ``samples / baseline`` per trial (median and percentile
-    interval). ``reproduced`` when the whole interval lies below 1 (significant and in the
-    paper's direction; with no published size the magnitude band does not apply),
-    ``not reproduced`` otherwise.
-    """
-    s = np.asarray(samples, dtype=float)
-    b = np.asarray(baseline, dtype=float)
-    if s.shape != b.shape or s.ndim != 1 or len(s) < 2 or np.any(b <= 0):
-        raise CalibrationError(
-            f"samples {s.shape} and baseline {b.shape} must be equal (N,) arrays, N >= 2, "
-            "with a positive baseline"
-        )
-    ratio = s / b
-    value = float(np.median(ratio))
-    lo, hi = (float(v) for v in np.percentile(ratio, [50 * (1 - level), 50 * (1 + level)]))
-    significant = hi < 1.0
-    note = (
-        f"ratio {value:.3g} [{lo:.3g}, {hi:.3g}] over {len(s)} trials; "
-        f"{'significantly' if significant else 'not significantly'} below 1; no published size"
-    )
-    verdict = "reproduced" if significant else "not reproduced"
-    return Verdict(verdict, value, lo, hi, lo, hi, 1.0, significant, True, note)
 
 
 def selfcal_claims(

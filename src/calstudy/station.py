@@ -357,11 +357,11 @@ def make_station(
         config=cfg,
     )
     rep = cfg["robot"]["repeatability_mm"] if repeatability_mm is None else repeatability_mm
-    station.joint_sigma = _joint_sigma(station, rep / 3.0)
+    station.joint_sigma = repeatability_joint_sigma(station, rep / 3.0)
     return station
 
 
-def _joint_sigma(station: HybridStation, sigma_pos: float) -> float:
+def repeatability_joint_sigma(station: HybridStation, sigma_pos: float) -> float:
     """Joint noise (rad) whose flange scatter at the sphere pose is ``sigma_pos`` mm per axis."""
     if sigma_pos == 0:
         return 0.0
@@ -569,7 +569,7 @@ def trial_generators(seed: int, n_trials: int, stream: int = 0) -> list[np.rando
     return [np.random.default_rng(c) for c in children]
 
 
-def _log(progress: bool, text: str) -> None:
+def log_progress(progress: bool, text: str) -> None:
     if progress:
         print(text, flush=True)
 
@@ -615,7 +615,7 @@ def handeye_monte_carlo(
                     "translation_error_mm": trans,
                 }
             )
-    _log(
+    log_progress(
         progress,
         f"hand-eye, {scenario}, {n_trans}+{n_rot} moves, sigma "
         f"{rows[0]['sigma_point_mm']:g} mm: {n_trials} trials "
@@ -675,7 +675,7 @@ def stationary_monte_carlo(
         calibrated = np.array([r["estimate"] for r in trial_rows if r["variant"] == "homography"])
         for r in rps_trial(station, calibrated, rng):
             rps_rows.append({"trial": k, "scenario": scenario} | r)
-    _log(
+    log_progress(
         progress,
         f"stationary sensors, {scenario}: {n_trials} trials in {time.perf_counter() - start:.1f} s",
     )

@@ -27,7 +27,7 @@ RPS_EQUATIONS = ((0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 2))
 DATUM_NAMES = ("A (slot)", "B (hole)", "C (plane)")
 
 
-def _check_datums(datums_base, datums_work) -> tuple[np.ndarray, np.ndarray]:
+def check_datums(datums_base, datums_work) -> tuple[np.ndarray, np.ndarray]:
     p_b = geo.check_shape("datums in base", datums_base, (3, 3))
     p_w = geo.check_shape("datums in workpiece (CAD)", datums_work, (3, 3))
     # A and B fix the line of rotation about z and y; C must lie off that line for rotation about x
@@ -99,7 +99,7 @@ def rps_frame_penalty(
     CalibrationError
         On bad input, a non-positive penalty, non-convergence, or a reflection (det R < 0).
     """
-    p_b, p_w = _check_datums(datums_base, datums_work)
+    p_b, p_w = check_datums(datums_base, datums_work)
     init = geo.check_transform("initial base2work", initial)
     if not np.isfinite(penalty) or penalty <= 0:
         raise CalibrationError(f"penalty factor M must be positive and finite; got {penalty}")
@@ -135,7 +135,7 @@ def rps_frame_so3(datums_base, datums_work, initial) -> Estimate:
     correction ``base2work = [R_init exp(w) | T]``; the covariance is that of unit-variance
     datum coordinates (scale it by the datum measurement variance).
     """
-    p_b, p_w = _check_datums(datums_base, datums_work)
+    p_b, p_w = check_datums(datums_base, datums_work)
     init = geo.check_transform("initial base2work", initial)
 
     def unpack(x):
