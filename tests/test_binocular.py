@@ -268,3 +268,20 @@ def test_rendered_pipeline_without_noise_or_defocus(scenario):
     err = trial["table2"] - trial["standard"][:, None]
     assert np.abs(err).max() < 0.01
     np.testing.assert_array_equal(trial["table2"][:, 0], trial["table2"][:, 1])
+
+
+def test_load_scenario_from_own_directory(tmp_path):
+    import shutil
+
+    from calstudy.paths import data_path
+
+    for name in ("sensor", "calibrator", "station"):
+        shutil.copy(data_path("binocular", f"{name}.toml"), tmp_path / f"{name}.toml")
+    station = tmp_path / "station.toml"
+    station.write_text(station.read_text().replace("p7_height_mm = 600.0", "p7_height_mm = 650.0"))
+    default, own = bsim.load_scenario(), bsim.load_scenario(tmp_path)
+    assert np.array_equal(own.layout, default.layout)
+    assert own.calibrator2base[2, 3] == pytest.approx(default.calibrator2base[2, 3] + 50.0)
+    (tmp_path / "calibrator.toml").unlink()
+    with pytest.raises(CalibrationError, match=r"calibrator\.toml: no such file"):
+        bsim.load_scenario(tmp_path)

@@ -22,6 +22,7 @@ import itertools
 import math
 import tomllib
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -40,9 +41,16 @@ P8_FROM = (0, 3, 5)
 TARGET_NAMES = ("P1", "P2", "P3", "P4", "P5", "P6", "P7", "P8")
 
 
-def load_toml(name: str) -> dict:
-    """Read ``data/binocular/<name>.toml``."""
-    with data_path("binocular", f"{name}.toml").open("rb") as handle:
+def load_toml(name: str, directory=None) -> dict:
+    """Read ``<directory>/<name>.toml`` (default directory: ``data/binocular``)."""
+    path = (
+        data_path("binocular", f"{name}.toml")
+        if directory is None
+        else Path(directory) / f"{name}.toml"
+    )
+    if not path.is_file():
+        raise CalibrationError(f"{path}: no such file; the binocular station needs {name}.toml")
+    with path.open("rb") as handle:
         return tomllib.load(handle)
 
 

@@ -52,9 +52,15 @@ def _plate_frame(centre, normal) -> np.ndarray:
     return geo.make_transform(np.column_stack([x, np.cross(z, x), z]), centre)
 
 
-def load_scenario() -> Scenario:
-    """The station of ``data/binocular/*.toml`` and ``data/robots/kuka_kr210.toml``."""
-    sensor_t, cal_t, station_t = (bino.load_toml(n) for n in ("sensor", "calibrator", "station"))
+def load_scenario(directory=None) -> Scenario:
+    """The station of ``data/binocular/*.toml`` and ``data/robots/kuka_kr210.toml``.
+
+    ``directory`` holds your own ``sensor.toml``, ``calibrator.toml`` and ``station.toml`` (same
+    keys as those of ``data/binocular``) in their place.
+    """
+    sensor_t, cal_t, station_t = (
+        bino.load_toml(n, directory) for n in ("sensor", "calibrator", "station")
+    )
     layout, residual = bino.solve_calibrator_layout(
         cal_t["standard"]["distance_mm"], cal_t["standard"]["start_angle_deg"]
     )
