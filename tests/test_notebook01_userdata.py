@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import papermill as pm
 import pytest
-import yaml
+from test_notebooks import ci_parameters
 
 from calstudy import handeye as he
 from calstudy import station as st
@@ -23,7 +23,7 @@ def test_notebook01_runs_on_user_csv(tmp_path):
     meas, _ = st.simulate_sphere_measurements(station, 4, 6, rng)
     csv = tmp_path / "my_cell.csv"
     he.write_sphere_measurements(meas, csv)
-    params = yaml.safe_load((ROOT / "notebooks" / "ci-params.yml").read_text())
+    params = ci_parameters(NOTEBOOK.stem)
     params |= {"measurements_csv": str(csv), "results_dir": str(tmp_path / "out")}
     out_nb = tmp_path / "out.ipynb"
     pm.execute_notebook(

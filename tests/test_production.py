@@ -318,7 +318,7 @@ def test_notebook02_runs_on_user_csvs(tmp_path):
     from pathlib import Path
 
     import papermill as pm
-    import yaml
+    from test_notebooks import ci_parameters
 
     notebook = Path(__file__).resolve().parents[1] / "notebooks"
     notebook = notebook / "02_hybrid_production_compensation.ipynb"
@@ -329,8 +329,7 @@ def test_notebook02_runs_on_user_csvs(tmp_path):
     for which, name in ((0, "hybrid"), (1, "cmm")):
         paths[name] = tmp_path / f"{name}.csv"
         pr.measurements_frame(ps.features.ids, run, which).to_csv(paths[name], index=False)
-    params = yaml.safe_load((notebook.parent / "ci-params.yml").read_text())
-    params = {k: v for k, v in params.items() if not isinstance(v, dict)} | params[notebook.stem]
+    params = ci_parameters(notebook.stem)
     params |= {
         "n_trials": 2,
         "n_sweep_trials": 2,
