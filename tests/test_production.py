@@ -203,6 +203,35 @@ def test_missing_columns_and_unknown_phase_raise():
         pr.measurements_from_frames(_tables().replace({"phase": {"follow-up": "later"}}), _tables())
 
 
+def test_tables_of_other_products_or_with_bad_values_raise():
+    h = _tables()
+    with pytest.raises(
+        CalibrationError, match=r"products differ .* only in hybrid \[4\], only in CMM \[5\]"
+    ):
+        pr.measurements_from_frames(h, h.replace({"product": {4: 5}}))
+    with pytest.raises(CalibrationError, match="a product has different phases"):
+        other = h.copy()
+        other.loc[other["product"] == 2, "phase"] = "follow-up"
+        pr.measurements_from_frames(h, other)
+    nan = h.copy()
+    nan.loc[3, "y_mm"] = np.nan
+    with pytest.raises(CalibrationError, match="the CMM table holds 1 non-finite coordinates"):
+        pr.measurements_from_frames(h, nan)
+    with pytest.raises(CalibrationError, match="the hybrid table is empty"):
+        pr.measurements_from_frames(h.iloc[:0], h)
+
+
+def test_offsets_of_mismatched_runs_raise():
+    x = np.zeros((10, 4, 3))
+    with pytest.raises(CalibrationError, match=r"hybrid has shape \(10, 4, 3\) and cmm"):
+        pr.offsets(x, x[:, :3])
+    with pytest.raises(CalibrationError, match=r"offset has shape \(3, 3\)"):
+        pr.compensate(x, np.zeros((3, 3)))
+    run = {"compensation": (x[:5], x[:5]), "follow-up": (x, x)}
+    with pytest.raises(CalibrationError, match="n_compensation is 10 but only 5"):
+        pr.analyse_run(run, 10)
+
+
 def test_duplicated_feature_ids_in_the_data_file_raise():
     cfg = pr.load_production_config()
     cfg["flexible"]["features"][1]["id"] = cfg["flexible"]["features"][0]["id"]
@@ -218,6 +247,52 @@ def test_scenario_checks_its_values():
         sc.with_(n_compensation=2)
     with pytest.raises(CalibrationError, match="part_sigma_mm is -0.1"):
         sc.with_(part_sigma_mm=-0.1)
+
+
+# ---------------------------------------------------------------------------------------------
+# verdicts from trial tables
+
+
+def _claim_inputs(size_mm, scatter_mm, within, uncompensated, r_above):
+    n = 20
+    rng = np.random.default_rng(11)
+    systematic = pd.DataFrame(
+        {
+            "trial": np.arange(n),
+            "systematic_median_mm": size_mm + rng.normal(0, 0.01, n),
+            "scatter_median_mm": scatter_mm + rng.normal(0, 0.001, n),
+            "lilliefors_not_rejected": 95.0,
+            "mean_nonzero": 90.0,
+        }
+    )
+    trials = pd.DataFrame(
+        {
+            "trial": np.arange(n),
+            "n_compensation": 10,
+            "within_0p3": within + rng.normal(0, 0.5, n),
+            "within_0p3_uncompensated": uncompensated + rng.normal(0, 0.5, n),
+            "r_above_0p7": r_above + rng.normal(0, 0.5, n),
+            "beyond_0p5": 0.0,
+            "n_fixed": 6,
+        }
+    )
+    return systematic, trials
+
+
+def test_claims_reproduced_when_the_trials_match_the_paper():
+    rows = pr.production_claims(*_claim_inputs(3.0, 0.06, 96.0, 30.0, 86.0), 10, "nb")
+    assert [r.id for r in rows] == ["hybrid.systematic", "hybrid.deviation", "hybrid.correlation"]
+    assert [r.verdict for r in rows] == ["reproduced"] * 3
+    assert "168 coordinates" in rows[2].note
+
+
+def test_claims_not_reproduced_without_an_effect():
+    # a mean deviation no larger than the scatter is not systematic; compensation that gains
+    # nothing over the raw readings is no effect
+    rows = pr.production_claims(*_claim_inputs(0.05, 0.06, 96.0, 96.0, 86.0), 10, "nb")
+    assert [r.verdict for r in rows[:2]] == ["not reproduced", "not reproduced"]
+    rows = pr.production_claims(*_claim_inputs(1.0, 0.06, 80.0, 30.0, 100.0), 10, "nb")
+    assert [r.verdict for r in rows] == ["direction only"] * 3
 
 
 # ---------------------------------------------------------------------------------------------
@@ -305,6 +380,18 @@ def test_table1_from_csv_files_equals_table1_from_arrays(tmp_path):
     source, ids_read, run_read = pr.station_data(tmp_path / "h.csv", tmp_path / "c.csv", [], {})
     assert "measured tables" in source and ids_read == ids
     pd.testing.assert_frame_equal(pr.station_table1(run_read, 10), pr.station_table1(run, 10))
+
+
+def test_fig6_figure_shows_the_named_point_and_rejects_an_unknown_one():
+    import matplotlib.pyplot as plt
+
+    d = np.random.default_rng(13).normal(2.0, 0.1, (10, 2, 3))
+    fig = pr.fig6_figure(d, ["A", "B"], "B")
+    lines = fig.axes[0].get_lines()
+    np.testing.assert_array_equal(lines[2].get_ydata(), d[:, 1, 2])
+    plt.close(fig)
+    with pytest.raises(CalibrationError, match="featured point 'H11' is not among the 2"):
+        pr.fig6_figure(d, ["A", "B"], "H11")
 
 
 def test_station_data_needs_both_tables():
