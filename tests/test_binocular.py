@@ -82,9 +82,15 @@ def test_rectification_does_not_depend_on_the_strip_height():
     np.testing.assert_array_equal(coc.rectify_coc(img, 2.0, 5), coc.rectify_coc(img, 2.0, 1000))
 
 
-def test_rectification_rejects_a_tiny_radius():
+def test_rectification_rejects_a_tiny_radius_and_nan_pixels():
     with pytest.raises(CalibrationError, match="below 1/3 px"):
         coc.rectify_coc(disk_image(), 0.2)
+    img = disk_image()
+    img[3, 4] = np.nan
+    with pytest.raises(CalibrationError, match="NaN or inf pixels"):
+        coc.rectify_coc(img, 2.0)
+    with pytest.raises(CalibrationError, match="not finite"):
+        coc.coc_radius_px(np.nan, 850.0, 55.5, 8.0, 0.0046)
 
 
 def test_render_and_detect_recover_the_projected_centre(sensor):
@@ -153,9 +159,12 @@ def test_noise_free_pipeline_returns_the_standard_distances(scenario, sensor):
 
 def test_projection_matches_opencv_round_trip(sensor):
     p = np.array([[10.0, 20.0, 800.0], [-50.0, 5.0, 900.0]])
-    uv_l, _ = sensor.project(p)
-    x = sensor.normalise(uv_l, "left")
-    np.testing.assert_allclose(x, p[:, :2] / p[:, 2:], atol=1e-12)
+    uv_l, uv_r = sensor.project(p)
+    np.testing.assert_allclose(sensor.normalise(uv_l, "left"), p[:, :2] / p[:, 2:], atol=1e-12)
+    p_r = geo.apply(sensor.left2right, p)  # p_right = R p_left + t
+    np.testing.assert_allclose(sensor.normalise(uv_r, "right"), p_r[:, :2] / p_r[:, 2:], atol=1e-12)
+    with pytest.raises(CalibrationError, match="camera side"):
+        sensor.normalise(uv_l, "Left")
 
 
 def test_rays_that_do_not_intersect(sensor):
@@ -199,8 +208,9 @@ def test_modification_needs_eight_distances():
 def test_axx_b_needs_two_rotation_axes():
     rot = geo.rotvec_to_matrix(np.array([[0, 0, a] for a in (0.0, 0.2, 0.4, 0.6)]))
     poses = geo.make_transform(rot, np.arange(12.0).reshape(4, 3))
+    targets = geo.invert(poses)  # any target poses: the check comes first
     with pytest.raises(CalibrationError, match="parallel"):
-        bino.check_rotation_axes(poses)
+        bino.preliminary_handeye(poses, targets)
     with pytest.raises(CalibrationError, match="at least 2 rotations"):
         bino.check_rotation_axes(geo.make_transform(np.eye(3)[None].repeat(3, 0), np.eye(3)))
 
@@ -214,7 +224,25 @@ def test_noise_free_handeye_to_1e9(scenario):
     pts8 = bino.with_virtual(points)
     upd, d_eta = bino.correct_transformation(flange, pre, pts8, pts8)
     assert np.abs(d_eta).max() < 1e-9
+    assert geo.rotation_error(upd, scenario.sensor2flange) < 1e-9
     assert geo.translation_error(upd, scenario.sensor2flange) < 1e-9
+
+
+def test_correction_uses_the_observed_error_terms(scenario):
+    """Eq. 21 with measured points off by observed errors and modified points exact: the
+    ``R dX`` terms must cancel those errors, so a wrong matrix is still recovered."""
+    flange, points = exact_views(scenario)
+    wrong = scenario.sensor2flange @ geo.exp6(np.array([0.3, -0.2, 0.4, 2e-4, -1e-4, 3e-4]))
+    exact = bino.with_virtual(points)
+    measured = exact + np.random.default_rng(4).normal(0.0, 0.05, exact.shape)
+    upd, _ = bino.correct_transformation(flange, wrong, measured, exact)
+    assert geo.translation_error(upd, scenario.sensor2flange) < 1e-3
+    assert geo.rotation_error(upd, scenario.sensor2flange) < 1e-6
+    # without the modification the same errors leave the matrix visibly off
+    off, _ = bino.correct_transformation(flange, wrong, measured, measured)
+    assert geo.translation_error(off, scenario.sensor2flange) > 10 * geo.translation_error(
+        upd, scenario.sensor2flange
+    )
 
 
 def test_correction_recovers_a_perturbed_matrix(scenario):
@@ -240,8 +268,15 @@ def test_defocus_shift_grows_with_the_circle_of_confusion(scenario):
 def test_one_trial_runs_and_is_seeded(scenario):
     a = bsim.run_trial(scenario, np.random.default_rng(5))
     assert a["table2"].shape == (7, 2) and a["fig13"].shape == (10, 2)
+    assert len(a["field"]) == 3
     assert np.all(np.abs(a["table2"] - a["standard"][:, None]) < 0.5)
     assert math.isfinite(a["fig13_standard"])
+    # same seed, same numbers; skipping the field check (drawn last) changes nothing else
+    b = bsim.run_trial(scenario, np.random.default_rng(5), field=False)
+    assert b["field"] == []
+    for key in ("standard", "table2", "table3", "fig13"):
+        np.testing.assert_array_equal(a[key], b[key])
+    np.testing.assert_array_equal(a["handeye"]["updated"], b["handeye"]["updated"])
 
 
 def test_holdout_modification_does_not_see_the_evaluated_target(scenario):

@@ -128,7 +128,12 @@ class StereoSensor:
         return out[0], out[1]
 
     def normalise(self, uv, side: str) -> np.ndarray:
-        """Undistorted normalised coordinates ``(N, 2)`` of image points of one camera."""
+        """Undistorted normalised coordinates ``(N, 2)`` of image points of one camera.
+
+        ``side`` is ``"left"`` or ``"right"``.
+        """
+        if side not in ("left", "right"):
+            raise CalibrationError(f"camera side is {side!r}; expected 'left' or 'right'")
         k, dist = (
             (self.k_left, self.dist_left) if side == "left" else (self.k_right, self.dist_right)
         )
@@ -266,7 +271,7 @@ def solve_calibrator_layout(distances_mm, start_angle_deg) -> tuple[np.ndarray, 
         Distances of the layout minus the standard ones, mm.
     """
     d = np.asarray(distances_mm, dtype=float)
-    if d.shape != (7,) or np.any(d <= 0):
+    if d.shape != (7,) or not np.all(np.isfinite(d)) or np.any(d <= 0):
         raise CalibrationError(f"need 7 positive distances to P7, got {d}")
     radii = d[:6]
 
@@ -461,11 +466,8 @@ def correct_transformation(
     rot = sensor2base[:, :3, :3]
     xb = np.einsum("nij,nmj->nmi", rot, xc) + sensor2base[:, None, :3, 3]
     dx_b = np.einsum("nij,nmj->nmi", rot, xr - xc)
-    skew = np.zeros(xr.shape + (3,))
-    skew[..., 0, 1], skew[..., 0, 2] = -xr[..., 2], xr[..., 1]
-    skew[..., 1, 0], skew[..., 1, 2] = xr[..., 2], -xr[..., 0]
-    skew[..., 2, 0], skew[..., 2, 1] = -xr[..., 1], xr[..., 0]
-    p = np.concatenate([np.broadcast_to(np.eye(3), skew.shape), -skew], axis=-1)
+    skew = geo.skew(xr)
+    p = np.concatenate([np.broadcast_to(np.eye(3), skew.shape), -skew], axis=-1)  # Eq. 19
     rp = np.einsum("nij,nmjk->nmik", rot, p)
     rows_u, rows_v = [], []
     for i, j in itertools.combinations(range(g.shape[0]), 2):

@@ -26,6 +26,9 @@ from .errors import CalibrationError
 from .kinematics import Robot, load_robot, perturb_robot
 from .stats import rmse
 
+#: Viewpoints drawn per requested pose before :func:`viewpoints` gives up (unreachable target).
+MAX_VIEW_TRIES = 20
+
 
 @dataclass
 class Scenario:
@@ -53,7 +56,8 @@ def _plate_frame(centre, normal) -> np.ndarray:
 
 
 def load_scenario(directory=None) -> Scenario:
-    """The station of ``data/binocular/*.toml`` and ``data/robots/kuka_kr210.toml``.
+    """The station of ``data/binocular/*.toml`` and the robot ``data/robots/<model>.toml``
+    named in ``station.toml [robot]`` (the KR 210 by default).
 
     ``directory`` holds your own ``sensor.toml``, ``calibrator.toml`` and ``station.toml`` (same
     keys as those of ``data/binocular``) in their place.
@@ -75,7 +79,7 @@ def load_scenario(directory=None) -> Scenario:
         sensor=bino.StereoSensor.from_table(sensor_t),
         layout=layout,
         layout_residual=residual,
-        robot=load_robot("kuka_kr210"),
+        robot=load_robot(station_t["robot"]["model"]),
         sensor2flange=h,
         calibrator2base=_plate_frame(p7, normal),
         config={"sensor": sensor_t, "calibrator": cal_t, "station": station_t},
@@ -96,7 +100,7 @@ def _ik_any(robot: Robot, flange2base: np.ndarray) -> np.ndarray:
                 q0[3:] = np.radians([a4, a5, a6])
                 try:
                     return robot.ik(flange2base, q0, tol=1e-9)
-                except CalibrationError:
+                except (CalibrationError, np.linalg.LinAlgError):  # singular at full stretch
                     continue
     raise CalibrationError("no IK solution found for a viewpoint; the view is out of reach")
 
@@ -113,11 +117,18 @@ def viewpoints(scenario: Scenario, target2base, n: int, rng: np.random.Generator
         Joint angles (computed with the nominal model, as the controller does).
     flange2base : (n, 4, 4) array
         Flange poses the controller reports (nominal model).
+
+    Raises
+    ------
+    CalibrationError
+        If fewer than ``n`` of ``MAX_VIEW_TRIES * n`` drawn viewpoints are reachable.
     """
     cfg = scenario.config["station"]["poses"]
     t = np.asarray(target2base, dtype=float)
     qs, flanges = [], []
-    while len(qs) < n:
+    for _ in range(MAX_VIEW_TRIES * n):
+        if len(qs) == n:
+            break
         cone = math.radians(cfg["cone_deg"]) * math.sqrt(rng.uniform())
         phi = rng.uniform(0, 2 * math.pi)
         roll = math.radians(rng.uniform(-cfg["roll_deg"], cfg["roll_deg"]))
@@ -138,6 +149,11 @@ def viewpoints(scenario: Scenario, target2base, n: int, rng: np.random.Generator
             continue
         qs.append(q)
         flanges.append(scenario.robot.fk(q))
+    if len(qs) < n:
+        raise CalibrationError(
+            f"only {len(qs)} of {n} viewpoints are within the robot's reach after "
+            f"{MAX_VIEW_TRIES * n} draws; move the target closer or narrow cone_deg"
+        )
     return np.array(qs), np.array(flanges)
 
 
@@ -154,7 +170,9 @@ def _project(k, dist, point) -> np.ndarray:
 
 @dataclass
 class Imaging:
-    """Per-trial imaging settings (from ``sensor.toml``), with switches for the tests."""
+    """Switches of the imaging model: ``noise`` (image noise, camera-calibration errors, SBR dot
+    offsets, CMM and tracker errors, robot repeatability) and ``defocus`` (Eq. 4, 7); both on in
+    the notebook, off in the noise-free tests."""
 
     noise: bool = True
     defocus: bool = True
@@ -327,11 +345,9 @@ def _true_sensor_pose(scenario, world, q, rng, noise: bool) -> np.ndarray:
     return flange @ scenario.sensor2flange
 
 
-def _view_calibrator(scenario, world, n, rng, imaging):
-    q, flange = viewpoints(scenario, scenario.calibrator2base, n, rng)
-    dots = geo.apply(scenario.calibrator2base, scenario.layout[:6] + world.dot_offsets)
-    normal = scenario.calibrator2base[:3, 2]
-    obs = [
+def _observe_from(scenario, world, q, dots, normal, rng, imaging) -> list:
+    """Observations of the dots ``(m, 3)`` (base frame) from each joint configuration in ``q``."""
+    return [
         observe(
             scenario,
             world.sensor,
@@ -343,7 +359,13 @@ def _view_calibrator(scenario, world, n, rng, imaging):
         )
         for qi in q
     ]
-    return flange, obs
+
+
+def _view_calibrator(scenario, world, n, rng, imaging):
+    q, flange = viewpoints(scenario, scenario.calibrator2base, n, rng)
+    dots = geo.apply(scenario.calibrator2base, scenario.layout[:6] + world.dot_offsets)
+    normal = scenario.calibrator2base[:3, 2]
+    return flange, _observe_from(scenario, world, q, dots, normal, rng, imaging)
 
 
 def run_trial(
@@ -395,11 +417,9 @@ def run_trial(
             for o in vobs
         ]
     )
-    p7_true = geo.apply(
-        scenario.calibrator2base, bino.with_virtual(scenario.layout[:6] + world.dot_offsets)
-    )[6]
     lt = scenario.config["station"]["laser_tracker"]
-    p7_standard = float(np.linalg.norm(scenario.layout[6] + scenario.calibrator2base[:3, 3]))
+    # the tracker measures the sphere centres (SMRs in the nests), not the dots
+    p7_standard = float(np.linalg.norm(geo.apply(scenario.calibrator2base, scenario.layout[6])))
     p7_standard += (
         float(_sigma_distance_mm(lt, p7_standard) * rng.standard_normal()) * imaging.noise
     )
@@ -414,7 +434,11 @@ def run_trial(
         .reshape(2, n_val)
         .T
     )
-    regions = [_field_region(scenario, world, k, pre, upd, rng, imaging) for k in range(3)]
+    regions = (
+        [_field_region(scenario, world, k, pre, upd, rng, imaging) for k in range(3)]
+        if field
+        else []
+    )
     return {
         "standard": standard,
         "table2": table2,
@@ -428,8 +452,7 @@ def run_trial(
         },
         "fig13": fig13,
         "fig13_standard": p7_standard,
-        "p7_true_distance": float(np.linalg.norm(p7_true)),
-        "field": regions if field else [],
+        "field": regions,
     }
 
 
@@ -474,25 +497,14 @@ def region_layout(standard_mm) -> np.ndarray:
 def _field_region(scenario, world, k, pre, upd, rng, imaging) -> dict:
     cfg = scenario.config["station"]["field"]
     centre = np.array(cfg["centres_mm"][k], dtype=float)
-    normal = np.array([800.0, 0.0, 1400.0]) - centre  # faces the robot's shoulder
+    normal = np.array(cfg["faces_point_mm"], dtype=float) - centre
     region2base = _plate_frame(centre, normal)
     layout = region_layout(cfg["standard_mm"][k]) + _uniform_disc(
         rng, 6, 1e-3 * scenario.config["calibrator"]["sbr"]["dot_centring_um"] * imaging.noise
     )
     q, flange = viewpoints(scenario, region2base, cfg["n_poses"], rng)
     dots = geo.apply(region2base, layout)
-    obs = [
-        observe(
-            scenario,
-            world.sensor,
-            _true_sensor_pose(scenario, world, qi, rng, imaging.noise),
-            dots,
-            region2base[:3, 2],
-            rng,
-            imaging,
-        )
-        for qi in q
-    ]
+    obs = _observe_from(scenario, world, q, dots, region2base[:3, 2], rng, imaging)
     pts = np.array([o.rect for o in obs])  # (poses, 6, 3)
     lt = scenario.config["station"]["laser_tracker"]
     true_d = np.linalg.norm(layout[:5] - layout[5], axis=1)
@@ -765,22 +777,23 @@ def defocus_shift(scenario: Scenario, depths_mm, tilt_deg: float = 20.0) -> pd.D
             uv, r_px, 4 * delta + 10, scenario.sensor.width, scenario.sensor.height
         )
         sharp = coc.render_dot(k, dist, centre, normal, Imaging.dot_radius(scenario), origin, shape)
+        blurred = coc.defocus(sharp, delta)
         shots = [
             coc.expose(
-                coc.defocus(sharp, delta),
+                blurred,
                 tm,
                 exp["dot_peak_at_100ms"],
                 exp["background_at_100ms"],
                 0.0,
                 math.inf,
                 rng,
+                exp["bits"],
             )
             for tm in exp["times_ms"]
         ]
         fused = coc.fuse_exposures(
             shots, exp["weight_contrast"], exp["weight_exposure"], exp["well_exposed_sigma"]
         )
-        blurred = coc.defocus(sharp, delta)
         row = {"depth_mm": float(z), "coc_radius_px": delta}
         for label, img in (("blur_only", blurred), ("fused", fused)):
             raw = coc.detect_centre(img, origin, **kwargs) - uv
@@ -901,8 +914,9 @@ def sweep_figure(sweep: pd.DataFrame):
     fig, ax = plt.subplots(figsize=(6.4, 3.6))
     for col, label in (("fig13_preliminary", "preliminary"), ("fig13_updated", "updated")):
         ax.plot(sweep["robot_scale"], sweep[col], "o-", label=label)
-    ax.axhline(0.192, color="C0", ls=":", label="paper, preliminary")
-    ax.axhline(0.080, color="C1", ls=":", label="paper, updated")
+    paper = published("station", "fig13_rmse")
+    ax.axhline(paper[0], color="C0", ls=":", label="paper, preliminary")
+    ax.axhline(paper[1], color="C1", ls=":", label="paper, updated")
     ax.set_xlabel("robot error scale (x tolerances of kuka_kr210.toml)")
     ax.set_ylabel("Fig. 13 RMSE (mm, median)")
     ax.legend(fontsize=8)
@@ -927,7 +941,7 @@ def robot_sweep(scenario: Scenario, seed: int, scales, n_trials: int, progress: 
 def layout_table(scenario: Scenario) -> pd.DataFrame:
     """The solved calibrator layout (calibrator frame, mm) with each target's distance to P7,
     the Table 2 standard and the residual."""
-    std = bino.load_toml("calibrator")["standard"]["distance_mm"]
+    std = scenario.config["calibrator"]["standard"]["distance_mm"]
     d = bino.distances_to_p7(scenario.layout)
     rows = []
     for i, name in enumerate(bino.TARGET_NAMES):
@@ -937,6 +951,8 @@ def layout_table(scenario: Scenario) -> pd.DataFrame:
         if j is None:
             row.update(distance_to_p7_mm=0.0, table2_mm=0.0, residual_mm=0.0)
         else:
-            row.update(distance_to_p7_mm=d[j], table2_mm=std[j], residual_mm=d[j] - std[j])
+            row.update(
+                distance_to_p7_mm=d[j], table2_mm=std[j], residual_mm=scenario.layout_residual[j]
+            )
         rows.append(row)
     return pd.DataFrame(rows)

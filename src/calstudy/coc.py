@@ -56,11 +56,13 @@ def coc_radius_mm(d_b, d_a: float, focal_mm: float, f_number: float) -> np.ndarr
     Raises
     ------
     CalibrationError
-        If a distance is not beyond the focal length or f, F are not positive.
+        If a distance is not finite or not beyond the focal length, or f, F are not positive.
     """
     d_b = np.asarray(d_b, dtype=float)
     if not (focal_mm > 0 and f_number > 0):
         raise CalibrationError(f"focal length {focal_mm} mm and F {f_number} must be positive")
+    if not (np.all(np.isfinite(d_b)) and math.isfinite(d_a)):
+        raise CalibrationError(f"object distance {d_b} or focused distance {d_a} is not finite")
     if d_a <= focal_mm or np.any(d_b <= focal_mm):
         raise CalibrationError(
             f"object distances ({np.min(d_b):.4g} mm) and the focused distance ({d_a:.4g} mm) "
@@ -261,7 +263,6 @@ def fuse_exposures(
     weight_contrast: float = 1.0,
     weight_exposure: float = 1.0,
     sigma: float = 0.2,
-    smooth_px: float = 0.0,
 ) -> np.ndarray:
     """Fuse exposures by contrast and well-exposedness weights (Eq. 3).
 
@@ -291,8 +292,6 @@ def fuse_exposures(
         contrast = np.abs(cv2.Laplacian(img, cv2.CV_32F, borderType=cv2.BORDER_REPLICATE))
         exposure = np.exp(-((img - 0.5) ** 2) / (2.0 * sigma**2))
         w = contrast**weight_contrast * exposure**weight_exposure + 1e-12
-        if smooth_px > 0:
-            w = cv2.GaussianBlur(w, (0, 0), smooth_px, borderType=cv2.BORDER_REPLICATE)
         num += w * img
         den += w
     return num / den
@@ -312,6 +311,10 @@ def _check_rectify(image, delta_px: float) -> np.ndarray:
     img = np.asarray(image, dtype=np.float32)
     if img.ndim != 2 or min(img.shape) < 3:
         raise CalibrationError(f"rectification needs a 2-D image of >= 3 x 3 px, got {img.shape}")
+    if not np.isfinite(img.sum()):  # a NaN or inf pixel makes the sum non-finite
+        raise CalibrationError(
+            f"the {img.shape[1]} x {img.shape[0]} px image has NaN or inf pixels"
+        )
     if not (np.isfinite(delta_px) and delta_px >= 1.0 / 3.0):
         raise CalibrationError(
             f"circle-of-confusion radius {delta_px} px is below 1/3 px: the 3-delta window "
@@ -320,36 +323,14 @@ def _check_rectify(image, delta_px: float) -> np.ndarray:
     return img
 
 
-def rectification_offsets(image, delta_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """The least-norm solution of Eq. 9-11 at every pixel, vectorised.
+def rectify_coc(image, delta_px: float, strip_rows: int = 128) -> np.ndarray:
+    """Circle-of-confusion rectification of a whole image (Eq. 8-11, Fig. 5), vectorised.
 
     At pixel ``u``: ``E_u0`` is the mean over the disc of radius ``3 delta`` (``t`` pixels) and
     ``E_0 = t E_u0`` the energy in it; Eq. 9 reads ``[a a] [dx^2 dy^2]^T = E_u - E_u0`` with
     ``a = -E_0 / (4 pi delta^4)``; its Moore-Penrose (least-norm) solution is
-    ``dx^2 = dy^2 = (E_u - E_u0) / (2 a)``.
-
-    Returns
-    -------
-    x : float32 array
-        ``dx^2 = dy^2`` per pixel (px^2), signed: positive where the pixel is darker than its
-        neighbourhood (the outer flank of a bright dot), negative where brighter.
-    mean : float32 array
-        ``E_u0``.
-    """
-    img = _check_rectify(image, delta_px)
-    kernel = _disk(3.0 * delta_px)
-    t = float(kernel.sum())
-    mean = cv2.filter2D(img, cv2.CV_32F, kernel / t, borderType=cv2.BORDER_REPLICATE)
-    # (E_u - E_u0) / (2a) with a = -t E_u0 / (4 pi delta^4), in place
-    coef = np.float32(2.0 * math.pi * delta_px**4 / t)
-    x = np.subtract(mean, img)
-    x *= coef
-    np.divide(x, np.maximum(mean, np.float32(1e-6)), out=x)
-    return x, mean
-
-
-def rectify_coc(image, delta_px: float, strip_rows: int = 128) -> np.ndarray:
-    """Circle-of-confusion rectification of a whole image (Eq. 8-11, Fig. 5), vectorised.
+    ``X = dx^2 = dy^2 = (E_u - E_u0) / (2 a)``, positive where the pixel is darker than its
+    neighbourhood (the outer flank of a bright dot), negative where brighter.
 
     Eq. 11 gives at each pixel ``|dx| = |dy| = sqrt|X|``: how far the pixel's content was
     spread by the blur. The paper does not say in which direction the pixel is moved; the reading
