@@ -391,3 +391,15 @@ def test_bad_parameters_sigmas_and_margins(kr16):
         perturb_robot(plain, np.random.default_rng(0))
     with pytest.raises(CalibrationError, match=r"the robots have 6 and 1 joints"):
         pose_errors(kr16, plain, np.zeros((2, 6)))
+
+
+def test_ik_singular_normal_equations_raise_calibration_error(kr16, monkeypatch):
+    q = np.array([0.3, -0.8, 0.9, 0.2, 0.6, -0.4])
+    target = kr16.fk(q)
+
+    def singular(*args, **kwargs):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(np.linalg, "solve", singular)
+    with pytest.raises(CalibrationError, match="IK did not converge after 1 iterations"):
+        kr16.ik(target, q + 0.1)

@@ -100,7 +100,7 @@ def _ik_any(robot: Robot, flange2base: np.ndarray) -> np.ndarray:
                 q0[3:] = np.radians([a4, a5, a6])
                 try:
                     return robot.ik(flange2base, q0, tol=1e-9)
-                except (CalibrationError, np.linalg.LinAlgError):  # singular at full stretch
+                except CalibrationError:  # unreachable or singular from this start
                     continue
     raise CalibrationError("no IK solution found for a viewpoint; the view is out of reach")
 

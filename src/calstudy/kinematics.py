@@ -357,7 +357,14 @@ class Robot:
             jac = self._ik_jacobian(q, desired)
             jtj, jte = jac.T @ jac, jac.T @ err
             while True:
-                step = -np.linalg.solve(jtj + damping * np.eye(self.nq), jte)
+                try:
+                    step = -np.linalg.solve(jtj + damping * np.eye(self.nq), jte)
+                except np.linalg.LinAlgError:  # numerically singular: damp more, or give up
+                    trial_cost = cost
+                    if damping > 1e12:
+                        break
+                    damping *= 10.0
+                    continue
                 step *= min(1.0, _MAX_IK_STEP / np.abs(step).max())
                 trial_err = self._ik_error(q + step, desired)
                 trial_cost = float(trial_err @ trial_err)
