@@ -29,7 +29,12 @@ def main() -> None:
     points = np.full((len(scn.markers), 3), np.nan)
     for i, p in pts.items():
         points[i] = p
-    kw = dict(fixed_view=recon.reference_view, sigma_px=scn.sigma_px, sigma_mm=scn.marker_sigma_mm)
+    kw = dict(
+        fixed_view=recon.reference_view,
+        sigma_px=scn.sigma_px,
+        sigma_mm=scn.marker_sigma_mm,
+        depth_ref_mm=scn.working_distance_mm,
+    )
     n_obs = sum(v.ids.size for v in used)
     timings = {
         "bundle adjustment, analytic sparse Jacobian": best_seconds(

@@ -385,7 +385,8 @@ def survey_views(scn: Scenario, rng: np.random.Generator, bridges: bool = True) 
 
 
 def survey_markers(scn: Scenario, views: list[mk.View], max_nfev: int = 200):
-    """Global marker coordinates from the survey views (Eq. 5-10)."""
+    """Global marker coordinates from the survey views (Eq. 5-10); the Eq. 10 weight is the
+    marker noise at the working distance, scaled with the square of each marker's depth."""
     return mk.reconstruct_markers(
         scn.rig,
         views,
@@ -394,6 +395,7 @@ def survey_markers(scn: Scenario, views: list[mk.View], max_nfev: int = 200):
         sigma_px=max(scn.sigma_px, 1e-3),
         sigma_mm=max(scn.marker_sigma_mm, 1e-3),
         max_nfev=max_nfev,
+        depth_ref_mm=scn.working_distance_mm,
     )
 
 
@@ -408,6 +410,7 @@ def locate_world(scn: Scenario, view: mk.View, points) -> np.ndarray:
         init,
         sigma_px=max(scn.sigma_px, 1e-3),
         sigma_mm=max(scn.marker_sigma_mm, 1e-3),
+        depth_ref_mm=scn.working_distance_mm,
     )
 
 
