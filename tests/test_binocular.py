@@ -320,3 +320,54 @@ def test_load_scenario_from_own_directory(tmp_path):
     (tmp_path / "calibrator.toml").unlink()
     with pytest.raises(CalibrationError, match=r"calibrator\.toml: no such file"):
         bsim.load_scenario(tmp_path)
+
+
+# ----------------------------------------------------------------------------------------------
+# sweep of the cameras' calibration errors
+
+
+def test_calibration_scale_scales_the_camera_errors_only(scenario):
+    def world(scale):
+        return bsim.draw_world(scenario, np.random.default_rng(4), calibration_scale=scale)
+
+    zero, one, two = world(0.0), world(1.0), world(2.0)
+    nominal = scenario.sensor
+
+    def errors(sensor):
+        out = {n: getattr(sensor, n) - getattr(nominal, n) for n in ("k_left", "dist_left")}
+        out |= {n: getattr(sensor, n) - getattr(nominal, n) for n in ("k_right", "dist_right")}
+        out["translation"] = sensor.translation - nominal.translation
+        out["rotation"] = geo.matrix_to_rotvec(sensor.rotation @ nominal.rotation.T)
+        return out
+
+    e0, e1, e2 = errors(zero.sensor), errors(one.sensor), errors(two.sensor)
+    for name in e1:
+        assert np.abs(e0[name]).max() == 0.0  # scale 0: the cameras of Table 1
+        assert np.abs(e1[name]).max() > 0
+        np.testing.assert_allclose(e2[name], 2 * e1[name], rtol=1e-6, atol=1e-12)
+    # the same draws at every scale: the rest of the world does not change
+    q = np.radians([10.0, -40.0, 30.0, 5.0, 50.0, -20.0])
+    for other in (zero, two):
+        np.testing.assert_array_equal(other.robot.fk(q), one.robot.fk(q))
+        np.testing.assert_array_equal(other.dot_offsets, one.dot_offsets)
+        np.testing.assert_array_equal(other.standard_mm, one.standard_mm)
+    with pytest.raises(CalibrationError, match="calibration_scale"):
+        world(-1.0)
+
+
+def test_calibration_sweep_rows_and_verdicts(scenario):
+    from calstudy.results import VERDICTS
+
+    sweep = bsim.calibration_sweep(scenario, 1, [0.0, 2.0], 2)
+    assert sweep["calibration_scale"].tolist() == [0.0, 2.0]
+    assert (sweep["n_trials"] == 2).all()
+    # larger camera errors, larger distance errors; the modification fits them away
+    assert sweep["t2_without"].iloc[1] > 2 * sweep["t2_without"].iloc[0]
+    assert (sweep["t3_with"] < 0.2 * sweep["t3_without"]).all()
+    for key in ("t2", "t3", "t3_holdout"):
+        assert (sweep[f"{key}_ratio_low"] <= sweep[f"{key}_ratio"]).all()
+        assert (sweep[f"{key}_ratio"] <= sweep[f"{key}_ratio_high"]).all()
+    assert set(sweep["verdict_coc"]) | set(sweep["verdict_observed_error"]) <= set(VERDICTS)
+    assert (sweep["verdict_observed_error"] != "not reproduced").all()
+    with pytest.raises(CalibrationError, match="at least 2"):
+        bsim.calibration_sweep(scenario, 1, [1.0], 1)

@@ -314,9 +314,21 @@ class World:
 
 
 def draw_world(
-    scenario: Scenario, rng, robot_scale: float = 1.0, imaging: Imaging | None = None
+    scenario: Scenario,
+    rng,
+    robot_scale: float = 1.0,
+    imaging: Imaging | None = None,
+    calibration_scale: float = 1.0,
 ) -> World:
-    """Draw the true robot, the true cameras, the SBR dot offsets and the CMM standards."""
+    """Draw the true robot, the true cameras, the SBR dot offsets and the CMM standards.
+
+    ``robot_scale`` multiplies the robot tolerances, ``calibration_scale`` the cameras'
+    calibration uncertainty (``sensor.toml [calibration_uncertainty]``). Scales only change the
+    size of the errors: the same ``rng`` draws the same numbers at any scale, so with one seed
+    the true cameras at scale 2 differ from Table 1 by exactly twice those at scale 1.
+    """
+    if calibration_scale < 0:
+        raise CalibrationError(f"calibration_scale is {calibration_scale}; it must be >= 0")
     imaging = imaging or Imaging()
     tol = scenario.robot.tolerances
     robot = perturb_robot(
@@ -326,8 +338,7 @@ def draw_world(
         tol["sigma_angle_deg"] * robot_scale,
     )
     sigmas = scenario.config["sensor"]["calibration_uncertainty"]
-    if not imaging.noise:
-        sigmas = {k: 0.0 for k in sigmas}
+    sigmas = {k: v * calibration_scale * imaging.noise for k, v in sigmas.items()}
     sensor = scenario.sensor.perturbed(sigmas, rng)
     sbr = scenario.config["calibrator"]["sbr"]
     offsets = _uniform_disc(rng, 6, 1e-3 * sbr["dot_centring_um"] * imaging.noise)
@@ -374,8 +385,12 @@ def run_trial(
     robot_scale: float = 1.0,
     imaging: Imaging | None = None,
     field: bool = True,
+    calibration_scale: float = 1.0,
 ) -> dict:
     """One replication of the paper's experiments (a)-(p) and the field check (Section 4.3).
+
+    ``robot_scale`` and ``calibration_scale`` multiply the robot's and the cameras' errors
+    (:func:`draw_world`); ``field=False`` skips the field check, which is drawn last.
 
     Returns
     -------
@@ -388,7 +403,7 @@ def run_trial(
         per-region dicts.
     """
     imaging = imaging or Imaging()
-    world = draw_world(scenario, rng, robot_scale, imaging)
+    world = draw_world(scenario, rng, robot_scale, imaging, calibration_scale)
     n_cal = scenario.config["station"]["poses"]["n_calibration"]
     flange, obs = _view_calibrator(scenario, world, n_cal, rng, imaging)
     raw8 = bino.with_virtual(np.array([o.raw for o in obs]))
@@ -533,6 +548,7 @@ def monte_carlo(
     stream: int = 0,
     progress: bool = False,
     field: bool = True,
+    calibration_scale: float = 1.0,
 ) -> list[dict]:
     """``n_trials`` replications (:func:`run_trial`), seeded by ``(seed, stream, k)``."""
     if n_trials < 1:
@@ -540,7 +556,9 @@ def monte_carlo(
     out = []
     for k in range(n_trials):
         rng = np.random.default_rng(np.random.SeedSequence([seed, stream, k]))
-        out.append(run_trial(scenario, rng, robot_scale, field=field))
+        out.append(
+            run_trial(scenario, rng, robot_scale, field=field, calibration_scale=calibration_scale)
+        )
         if progress:
             print(f"trial {k + 1}/{n_trials}", end="\r" if k + 1 < n_trials else "\n", flush=True)
     return out
@@ -907,21 +925,59 @@ def summary_figure(summary: pd.DataFrame):
     return fig
 
 
-def sweep_figure(sweep: pd.DataFrame):
-    """Fig. 13 RMSE against the scale of the robot's geometric errors."""
+def sweep_figure(
+    sweep: pd.DataFrame,
+    x: str = "robot_scale",
+    series=(("fig13_preliminary", "preliminary"), ("fig13_updated", "updated")),
+    paper=None,
+    xlabel: str = "robot error scale (x tolerances of kuka_kr210.toml)",
+    ylabel: str = "Fig. 13 RMSE (mm, median)",
+):
+    """Median RMSEs of a sweep against the swept scale ``x``, with the paper's values.
+
+    ``series`` pairs a column of ``sweep`` with its label; ``paper`` pairs each published value
+    with its label (drawn dotted in the colour of the series at the same position). The defaults
+    draw Fig. 13 against the robot error scale (:func:`robot_sweep`).
+    """
     import matplotlib.pyplot as plt
 
+    if paper is None:
+        fig13 = published("station", "fig13_rmse")
+        paper = ((fig13[0], "paper, preliminary"), (fig13[1], "paper, updated"))
     fig, ax = plt.subplots(figsize=(6.4, 3.6))
-    for col, label in (("fig13_preliminary", "preliminary"), ("fig13_updated", "updated")):
-        ax.plot(sweep["robot_scale"], sweep[col], "o-", label=label)
-    paper = published("station", "fig13_rmse")
-    ax.axhline(paper[0], color="C0", ls=":", label="paper, preliminary")
-    ax.axhline(paper[1], color="C1", ls=":", label="paper, updated")
-    ax.set_xlabel("robot error scale (x tolerances of kuka_kr210.toml)")
-    ax.set_ylabel("Fig. 13 RMSE (mm, median)")
+    for col, label in series:
+        ax.plot(sweep[x], sweep[col], "o-", label=label)
+    for i, (value, label) in enumerate(paper):
+        ax.axhline(value, color=f"C{i}", ls=":", label=label)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def calibration_sweep_figure(sweep: pd.DataFrame):
+    """Tables 2 and 3 RMSE against the scale of the cameras' calibration errors
+    (:func:`calibration_sweep`), with the paper's 0.049, 0.041 and 0.034 mm."""
+    t2 = published("calibrator", "table2_rmse")
+    t3 = published("calibrator", "table3_rmse")
+    return sweep_figure(
+        sweep,
+        x="calibration_scale",
+        series=(
+            ("t2_without", "Table 2, without rectification"),
+            ("t2_with", "Table 2, with rectification (= Table 3, without)"),
+            ("t3_with", "Table 3, with modification"),
+            ("t3_holdout_with", "hold-out P1-P6, with modification"),
+        ),
+        paper=(
+            (t2[0], "paper, without rectification"),
+            (t2[1], "paper, with rectification"),
+            (t3[1], "paper, with modification"),
+        ),
+        xlabel="camera calibration error scale (x sensor.toml [calibration_uncertainty])",
+        ylabel="RMSE of distances to P7 (mm, median)",
+    )
 
 
 def robot_sweep(scenario: Scenario, seed: int, scales, n_trials: int, progress: bool = False):
@@ -935,6 +991,78 @@ def robot_sweep(scenario: Scenario, seed: int, scales, n_trials: int, progress: 
         )
         med = m.drop(columns="trial").median()
         rows.append({"robot_scale": float(scale), "n_trials": n_trials, **med.to_dict()})
+    return pd.DataFrame(rows)
+
+
+def calibration_sweep(
+    scenario: Scenario, seed: int, scales, n_trials: int, progress: bool = False
+) -> pd.DataFrame:
+    """Tables 2 and 3 and their verdicts for each scale of the cameras' calibration errors.
+
+    Every scale runs the same ``n_trials`` replications (random stream 200, field check
+    skipped): the trials share their robot, dot offsets, CMM errors, calibration poses and the
+    direction of the camera errors, whose size alone changes (image noise is drawn anew where a
+    region of interest changes size). Scale 0 is a sensor that matches Table 1 exactly.
+
+    Returns
+    -------
+    DataFrame
+        One row per scale: ``calibration_scale``, ``n_trials``, the median of every column of
+        :func:`trial_metrics`; for Table 2 (``t2``), Table 3 (``t3``) and the hold-out check
+        (``t3_holdout``) the median RMSE ratio with / without and its 95 % interval over the
+        trials (``*_ratio``, ``*_ratio_low``, ``*_ratio_high``); the verdicts of
+        ``binocular.coc`` and ``binocular.observed_error`` (``verdict_coc``,
+        ``verdict_observed_error``) by the rule of :func:`claim_rows`.
+
+    Raises
+    ------
+    CalibrationError
+        If ``n_trials`` is below 2 (a verdict needs an interval) or a scale is negative.
+    """
+    from .results import verdict_vs_published
+    from .stats import percentile_interval
+
+    if n_trials < 2:
+        raise CalibrationError(f"n_trials is {n_trials}; a verdict per scale needs at least 2")
+    claims = {
+        "coc": ("t2", published("calibrator", "table2_rmse")),
+        "observed_error": ("t3", published("calibrator", "table3_rmse")),
+    }
+    rows = []
+    for scale in scales:
+        m = trial_metrics(
+            monte_carlo(
+                scenario,
+                seed,
+                n_trials,
+                stream=200,
+                progress=progress,
+                field=False,
+                calibration_scale=float(scale),
+            )
+        )
+        row = {"calibration_scale": float(scale), "n_trials": n_trials}
+        row.update(m.drop(columns="trial").median().to_dict())
+        for key in ("t2", "t3", "t3_holdout"):
+            ratio = m[f"{key}_with"] / m[f"{key}_without"]
+            lo, hi = percentile_interval(ratio)
+            row.update(
+                {
+                    f"{key}_ratio": float(ratio.median()),
+                    f"{key}_ratio_low": lo,
+                    f"{key}_ratio_high": hi,
+                }
+            )
+        for claim, (key, pub) in claims.items():
+            v = verdict_vs_published(
+                pub[1] / pub[0],
+                m[f"{key}_with"].to_numpy(),
+                m[f"{key}_without"].to_numpy(),
+                kind="ratio",
+                direction="lower",
+            )
+            row[f"verdict_{claim}"] = v.verdict
+        rows.append(row)
     return pd.DataFrame(rows)
 
 
