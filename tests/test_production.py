@@ -9,6 +9,7 @@ from test_station import _ideal_station
 
 from calstudy import CalibrationError
 from calstudy import geometry as geo
+from calstudy import kinematics as kin
 from calstudy import production as pr
 from calstudy import station as st
 from calstudy.workpiece import rps_frame_so3
@@ -367,6 +368,63 @@ def test_simulated_run_has_the_paper_layout_and_frame_fixed_coordinates():
     # each program pose puts its feature near the middle of the sensor's field
     p = pr.sensor_pose_check(ps)
     assert np.abs(p[:, :2]).max() < 20.0 and np.abs(p[:, 2] - 250.0).max() < 20.0
+
+
+# ---------------------------------------------------------------------------------------------
+# the sweep of the robot's manufacturing errors
+
+
+def test_robot_error_scale_multiplies_the_drawn_link_errors():
+    nominal = st.make_station(np.random.default_rng(14), robot_errors=False).true.parameters()
+    errors = {
+        scale: st.make_station(np.random.default_rng(14), robot_error_scale=scale).true.parameters()
+        - nominal
+        for scale in (0.0, 1.0, 2.0)
+    }
+    assert np.all(errors[0.0] == 0.0)  # the nominal robot: no kinematic model error
+    assert np.abs(errors[1.0]).max() > 0.1
+    np.testing.assert_allclose(errors[2.0], 2.0 * errors[1.0], atol=1e-12)
+    # the default is the robot of the tolerances file, draw for draw (notebook 01 unchanged)
+    default = kin.perturb_robot(kin.load_robot("kuka_kr16_2"), np.random.default_rng(14))
+    assert (errors[1.0] + nominal).tobytes() == default.parameters().tobytes()
+    with pytest.raises(CalibrationError, match="robot_error_scale is -1.0"):
+        st.make_station(np.random.default_rng(14), robot_error_scale=-1.0)
+
+
+def test_robot_error_sweep_scales_the_systematic_error_of_the_same_stations():
+    sc = pr.default_scenario()
+    sweep = pr.robot_error_sweep(5, 2, sc, [0.0, 1.0, 2.0])
+    assert sweep["robot_error_scale"].tolist() == [0.0, 0.0, 1.0, 1.0, 2.0, 2.0]
+
+    def by_station(col):
+        return sweep.pivot(index="trial", columns="robot_error_scale", values=col).to_numpy()
+
+    # the same stations, their robot errors scaled: the systematic error grows with the factor
+    # and the raw share within +-0.3 mm falls; the compensated share hardly moves
+    assert (np.diff(by_station("systematic_median_mm"), axis=1) > 0).all()
+    assert (np.diff(by_station("within_0p3_uncompensated"), axis=1) < 0).all()
+    assert np.ptp(by_station("within_0p3"), axis=1).max() <= 2.0
+    # factor 1 is the default station of the same generator
+    rng = st.trial_generators(5, 2, 2)[1]
+    system, (table,) = pr.trial_summary(
+        pr.simulate_run(pr.calibrated_station(rng), sc, rng), sc, [sc.n_compensation]
+    )
+    row = sweep[(sweep["robot_error_scale"] == 1.0) & (sweep["trial"] == 1)].iloc[0]
+    assert {k: row[k] for k in system | table} == system | table
+
+
+def test_robot_error_sweep_summary_uses_the_claims_verdicts():
+    parts = []
+    for scale, size in ((1.0, 1.0), (1.5, 3.0)):
+        systematic, trials = _claim_inputs(size, 0.06, 96.0, 30.0, 86.0)
+        parts.append(systematic.merge(trials, on="trial").assign(robot_error_scale=scale))
+    summary = pr.summarise_robot_error_sweep(pd.concat(parts), 10, "nb")
+    assert summary["robot_error_scale"].tolist() == [1.0, 1.5]
+    assert summary["systematic_verdict"].tolist() == ["direction only", "reproduced"]
+    assert summary["deviation_verdict"].tolist() == ["reproduced"] * 2
+    expected = np.median(parts[1]["systematic_median_mm"])
+    assert summary["systematic_median_mm"].iloc[1] == pytest.approx(expected)
+    assert (summary["stations"] == 20).all()
 
 
 def test_table1_from_csv_files_equals_table1_from_arrays(tmp_path):

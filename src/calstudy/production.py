@@ -74,6 +74,8 @@ SWEEP_LABELS = {
     "repeatability_mm": "robot repeatability (+-mm, 3 sigma)",
     "drift_sigma_mm": "drift before follow-up, sigma (mm)",
 }
+#: axis label of the sweep of the robot's manufacturing errors (:func:`robot_error_sweep`)
+ROBOT_ERROR_LABEL = "factor on the robot's kinematic tolerances"
 
 
 def load_production_config() -> dict:
@@ -376,9 +378,16 @@ class ProductionStation:
         return self.station.nominal.fk_many(self.program) @ self.sensor2flange
 
 
-def calibrated_station(rng: np.random.Generator, robot_errors: bool = True) -> ProductionStation:
-    """Draw a station and calibrate it as notebook 01 does (sphere hand-eye, homography chain)."""
-    return calibrate(make_station(rng, robot_errors=robot_errors), rng)
+def calibrated_station(
+    rng: np.random.Generator, robot_errors: bool = True, robot_error_scale: float = 1.0
+) -> ProductionStation:
+    """Draw a station and calibrate it as notebook 01 does (sphere hand-eye, homography chain).
+
+    ``robot_error_scale`` multiplies the robot's kinematic tolerances (see
+    :func:`calstudy.station.make_station`).
+    """
+    station = make_station(rng, robot_errors=robot_errors, robot_error_scale=robot_error_scale)
+    return calibrate(station, rng)
 
 
 def calibrate(st: HybridStation, rng: np.random.Generator) -> ProductionStation:
@@ -920,6 +929,33 @@ def sensitivity_sweep(
     return pd.DataFrame(rows)
 
 
+def robot_error_sweep(
+    seed: int, n_trials: int, scenario: Scenario, scales, stream: int = 2, progress=False
+) -> pd.DataFrame:
+    """The before-compensation and Table 1 figures as the true robot's manufacturing errors scale.
+
+    For each factor of ``scales``, ``n_trials`` stations are drawn with the kinematic tolerances
+    of ``data/robots/kuka_kr16_2.toml`` times the factor, calibrated and run through the paper's
+    protocol with the other assumptions of ``scenario``. Station ``k`` gets the same generator
+    at every factor (stream ``stream`` of ``seed``), so its robot errors keep their direction and
+    only their size changes. Returns one row per factor and station: ``robot_error_scale``,
+    ``trial`` and the figures of :func:`trial_summary` at ``scenario.n_compensation``.
+    """
+    scales = [float(s) for s in scales]
+    if not scales:
+        raise CalibrationError("scales is empty; give at least one factor on the tolerances")
+    start = time.perf_counter()
+    rows = []
+    for scale in scales:
+        for k, rng in enumerate(trial_generators(seed, n_trials, stream)):
+            ps = calibrated_station(rng, robot_error_scale=scale)
+            run = simulate_run(ps, scenario, rng)
+            system, (table,) = trial_summary(run, scenario, [scenario.n_compensation])
+            rows.append({"robot_error_scale": scale, "trial": k} | system | table)
+        log_progress(progress, f"robot tolerances x {scale:g}: {time.perf_counter() - start:.1f} s")
+    return pd.DataFrame(rows)
+
+
 # ---------------------------------------------------------------------------------------------
 # summaries, claims, figures
 
@@ -991,6 +1027,27 @@ def summarise_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
         row = {"parameter": name, "value": value}
         for col in ("within_0p3", "r_above_0p7"):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = _interval(sub[col])
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def summarise_robot_error_sweep(
+    sweep: pd.DataFrame, n_compensation: int, notebook: str
+) -> pd.DataFrame:
+    """Per factor on the robot's tolerances (from :func:`robot_error_sweep`): the systematic size
+    and the two headline shares, each with its 95 % interval over stations and the verdict of its
+    claim computed by :func:`production_claims` on that factor's stations alone, and the median
+    share within +-0.3 mm of the same products uncompensated."""
+    rows = []
+    for scale, sub in sweep.groupby("robot_error_scale", sort=False):
+        claims = production_claims(sub, sub, n_compensation, notebook)
+        row = {"robot_error_scale": scale, "stations": len(sub)}
+        for claim, col in zip(
+            claims, ("systematic_median_mm", "within_0p3", "r_above_0p7"), strict=True
+        ):
+            row |= {col: claim.reproduced, f"{col}_low": claim.ci_low, f"{col}_high": claim.ci_high}
+            row[f"{claim.id.split('.')[1]}_verdict"] = claim.verdict
+        row["within_0p3_uncompensated"] = float(np.median(sub["within_0p3_uncompensated"]))
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -1118,6 +1175,18 @@ def n_sweep_figure(summary: pd.DataFrame):
     return fig
 
 
+def _headline_shares(ax, x, summary: pd.DataFrame) -> None:
+    """Both headline shares of ``summary`` against ``x`` with their 95 % intervals, the published
+    values dashed."""
+    for col, label, pub in (
+        ("within_0p3", "within +-0.3 mm", PUBLISHED_WITHIN_0P3),
+        ("r_above_0p7", "r > 0.7", PUBLISHED_R_ABOVE_0P7),
+    ):
+        line = ax.plot(x, summary[col], "o-", label=label)[0]
+        ax.fill_between(x, summary[f"{col}_low"], summary[f"{col}_high"], alpha=0.2)
+        ax.axhline(pub, color=line.get_color(), ls="--", lw=1, label=f"published {pub} %")
+
+
 def sensitivity_figure(summary: pd.DataFrame, scenario: Scenario):
     """One panel per swept assumption: both headline shares, the published values dashed, the
     default value dotted."""
@@ -1128,13 +1197,7 @@ def sensitivity_figure(summary: pd.DataFrame, scenario: Scenario):
     fig.set_layout_engine("constrained")
     for ax, name in zip(axes[0], names, strict=True):
         sub = summary[summary["parameter"] == name]
-        for col, label, pub in (
-            ("within_0p3", "within +-0.3 mm", PUBLISHED_WITHIN_0P3),
-            ("r_above_0p7", "r > 0.7", PUBLISHED_R_ABOVE_0P7),
-        ):
-            line = ax.plot(sub["value"], sub[col], "o-", label=label)[0]
-            ax.fill_between(sub["value"], sub[f"{col}_low"], sub[f"{col}_high"], alpha=0.2)
-            ax.axhline(pub, color=line.get_color(), ls="--", lw=1, label=f"published {pub} %")
+        _headline_shares(ax, sub["value"], sub)
         ax.axvline(getattr(scenario, name), color="k", ls=":", lw=1)
         ax.set_xlabel(SWEEP_LABELS[name])
         ax.set_ylim(-3, 103)
@@ -1144,6 +1207,50 @@ def sensitivity_figure(summary: pd.DataFrame, scenario: Scenario):
     fig.suptitle(
         "Table 1 headline shares as each assumption moves (dashed: published; dotted: default)"
     )
+    return fig
+
+
+def robot_error_figure(summary: pd.DataFrame, default: float = 1.0):
+    """The sweep of the robot's manufacturing errors (:func:`summarise_robot_error_sweep`):
+    (a) the systematic size before compensation against the published 2-4 mm, each factor
+    labelled with its ``hybrid.systematic`` verdict; (b) the two headline shares after
+    compensation, and the share within +-0.3 mm of the same products uncompensated ("raw").
+    The default factor is dotted."""
+    import matplotlib.pyplot as plt
+
+    fig, (ax_a, ax_b) = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    x = summary["robot_error_scale"]
+    lo, hi = PUBLISHED_SYSTEMATIC_MM
+    mid = (lo + hi) / 2.0
+    ax_a.axhspan(lo, hi, color="0.85", label=f"published {lo:g}-{hi:g} mm")
+    # the magnitude band of the verdict: the middle of the range within the register's factor 1.5
+    for k, edge in enumerate((mid / 1.5, mid * 1.5)):
+        label = f"verdict band {mid / 1.5:g}-{mid * 1.5:g} mm" if k == 0 else None
+        ax_a.axhline(edge, color="0.4", ls="--", lw=1, label=label)
+    y = summary["systematic_median_mm"]
+    ax_a.plot(x, y, "o-", label="median point, median over stations")
+    ax_a.fill_between(
+        x, summary["systematic_median_mm_low"], summary["systematic_median_mm_high"], alpha=0.2
+    )
+    for xi, yi, verdict in zip(x, y, summary["systematic_verdict"], strict=True):
+        ax_a.annotate(
+            verdict, (xi, yi), textcoords="offset points", xytext=(-6, 8), fontsize=7, rotation=30
+        )
+    ax_a.set_ylabel("systematic size before compensation (mm)")
+    ax_a.set_title("(a) hybrid.systematic (95 % interval over stations)")
+    ax_a.legend(fontsize=8, loc="upper left")
+    _headline_shares(ax_b, x, summary)
+    ax_b.plot(
+        x, summary["within_0p3_uncompensated"], "s:", color="0.4", label="within +-0.3 mm, raw"
+    )
+    ax_b.set_ylim(-3, 103)
+    ax_b.set_ylabel("share of the vectors (%)")
+    ax_b.set_title("(b) Table 1 headline shares after compensation")
+    ax_b.legend(fontsize=8, loc="lower left")
+    for ax in (ax_a, ax_b):
+        ax.axvline(default, color="k", ls=":", lw=1)
+        ax.set_xlabel(ROBOT_ERROR_LABEL)
+        ax.grid(alpha=0.3)
     return fig
 
 

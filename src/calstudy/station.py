@@ -268,6 +268,7 @@ def make_station(
     sigma_point_mm: float | None = None,
     pixel_sigma: float | None = None,
     repeatability_mm: float | None = None,
+    robot_error_scale: float = 1.0,
 ) -> HybridStation:
     """Draw a station: the true robot, the made target, the CMM value, the panel placement.
 
@@ -280,11 +281,27 @@ def make_station(
     sigma_point_mm, pixel_sigma, repeatability_mm
         Override the laser stripe-point noise, the hole-centre pixel noise and the robot
         repeatability of ``station.toml``.
+    robot_error_scale
+        Factor (>= 0) on the kinematic tolerances of ``data/robots/kuka_kr16_2.toml`` when the
+        true robot is drawn: its link parameters are the nominal ones plus ``robot_error_scale``
+        times the errors drawn at the file's tolerances. The draws are the same for every
+        factor, so 0 gives the nominal robot and leaves every other draw of the station as it
+        is. Ignored when ``robot_errors`` is False.
     """
+    if not (np.isfinite(robot_error_scale) and robot_error_scale >= 0):
+        raise CalibrationError(
+            f"robot_error_scale is {robot_error_scale!r}; expected a finite factor >= 0"
+        )
     cfg = load_config()
     nominal = load_robot("kuka_kr16_2")
+    tol = nominal.tolerances
     true = (
-        perturb_robot(nominal, rng)
+        perturb_robot(
+            nominal,
+            rng,
+            sigma_length_mm=robot_error_scale * tol["sigma_length_mm"],
+            sigma_angle_deg=robot_error_scale * tol["sigma_angle_deg"],
+        )
         if robot_errors
         else nominal.with_parameters(nominal.parameters())
     )
