@@ -274,6 +274,7 @@ def _claim_inputs(size_mm, scatter_mm, within, uncompensated, r_above):
             "within_0p3_uncompensated": uncompensated + rng.normal(0, 0.5, n),
             "r_above_0p7": r_above + rng.normal(0, 0.5, n),
             "beyond_0p5": 0.0,
+            "n_vectors": 174,
             "n_fixed": 6,
         }
     )
@@ -492,3 +493,29 @@ def test_notebook02_runs_on_user_csvs(tmp_path):
     table = pd.read_csv(tmp_path / "out" / notebook.stem / "table1_station.csv")
     expected = pr.station_table1(run, pr.default_scenario().n_compensation)
     assert table["count"].tolist() == expected["count"].tolist()
+
+
+def _trials(dev_counts, corr_counts, n_fixed):
+    rows = []
+    for t, (d, c, f) in enumerate(zip(dev_counts, corr_counts, n_fixed, strict=True)):
+        row = {"trial": t, "n_compensation": 10, "n_vectors": sum(d), "n_fixed": f}
+        row |= {f"deviation_bin{k}": d[k] for k in range(5)}
+        row |= {f"correlation_bin{k}": c[k] for k in range(5)}
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def test_table1_shares_are_of_the_station_coordinates_not_a_fixed_174():
+    # a 10-point station: 30 coordinates, 6 of them fixed by the frame
+    trials = _trials([(20, 6, 2, 1, 1)] * 3, [(15, 5, 2, 1, 1)] * 3, [6] * 3)
+    deviation, correlation = pr.table1(trials, 10)
+    assert deviation["percent_median"].tolist() == pytest.approx(
+        [100 * c / 30 for c in (20, 6, 2, 1, 1)]
+    )
+    assert correlation["percent_median"].iloc[-1] == pytest.approx(20.0)
+
+
+def test_table1_rejects_trials_with_different_coordinate_counts():
+    trials = _trials([(20, 6, 2, 1, 1), (20, 6, 2, 1, 2)], [(15, 5, 2, 1, 1)] * 2, [6, 6])
+    with pytest.raises(CalibrationError, match="disagree on the number of coordinates"):
+        pr.table1(trials, 10)

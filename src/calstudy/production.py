@@ -852,7 +852,7 @@ def trial_summary(run: dict, scenario: Scenario, n_values) -> tuple[dict, list[d
         a = analyse_run(run, int(n))
         row = {"n_compensation": int(n)}
         row |= {k: a[k] for k in ("within_0p3", "beyond_0p5", "within_0p3_uncompensated")}
-        row |= {k: a[k] for k in ("single_within_0p3", "r_above_0p7", "n_fixed")}
+        row |= {k: a[k] for k in ("single_within_0p3", "r_above_0p7", "n_vectors", "n_fixed")}
         row |= {f"deviation_bin{k}": int(v) for k, v in enumerate(a["deviation_counts"])}
         row |= {f"correlation_bin{k}": int(v) for k, v in enumerate(a["correlation_counts"])}
         rows.append(row)
@@ -966,14 +966,23 @@ def _interval(v) -> tuple[float, float, float]:
     return float(np.median(v)), lo, hi
 
 
-def table1(trials: pd.DataFrame, n_compensation: int, n_vectors: int = 174) -> tuple:
+def _n_vectors(sub: pd.DataFrame) -> int:
+    """Number of deviation coordinates of the trials in ``sub`` (174 for the paper's 58 points)."""
+    n = sub["n_vectors"].to_numpy(int)
+    if n.size == 0 or np.any(n != n[0]):
+        raise CalibrationError(f"trials disagree on the number of coordinates: {sorted(set(n))}")
+    return int(n[0])
+
+
+def table1(trials: pd.DataFrame, n_compensation: int) -> tuple:
     """Table 1, both halves, over the trials at ``n_compensation``: per bin the median count,
     the median share (%) with its 95 % interval over trials, and the published count and share.
 
     The correlation half has one more row, the coordinates where ``r`` is undefined (fixed by
-    the frame); its shares are of all ``n_vectors`` coordinates.
+    the frame); its shares are of all coordinates (174 for the paper's 58 points).
     """
     sub = trials[trials["n_compensation"] == n_compensation]
+    n_vectors = _n_vectors(sub)
     halves = []
     for prefix, labels, counts, percent in (
         ("deviation", DEVIATION_BINS, PUBLISHED_DEVIATION_COUNTS, PUBLISHED_DEVIATION_PERCENT),
@@ -1108,8 +1117,8 @@ def production_claims(
     )
     v = replace(
         v,
-        note=f"{v.note}; share of the {174 - int(np.median(sub['n_fixed']))} coordinates where r "
-        "is defined",
+        note=f"{v.note}; share of the {_n_vectors(sub) - int(np.median(sub['n_fixed']))} "
+        "coordinates where r is defined",
     )
     rows.append(v.row("hybrid.correlation", f"{PUBLISHED_R_ABOVE_0P7}", "%", notebook))
     return rows
@@ -1159,14 +1168,7 @@ def n_sweep_figure(summary: pd.DataFrame):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
-    n = summary["n_compensation"]
-    for col, label, pub in (
-        ("within_0p3", "deviation within +-0.3 mm", PUBLISHED_WITHIN_0P3),
-        ("r_above_0p7", "correlation above 0.7", PUBLISHED_R_ABOVE_0P7),
-    ):
-        line = ax.plot(n, summary[col], "o-", label=label)[0]
-        ax.fill_between(n, summary[f"{col}_low"], summary[f"{col}_high"], alpha=0.2)
-        ax.axhline(pub, color=line.get_color(), ls="--", lw=1, label=f"published {pub} %")
+    _headline_shares(ax, summary["n_compensation"], summary)
     ax.set_xlabel("products in the offset estimate (n of Eq. 24)")
     ax.set_ylabel("share of the vectors (%)")
     ax.set_title("Table 1 headline shares against n (median, 95 % interval over stations)")
