@@ -866,7 +866,7 @@ def claim_rows(metrics: pd.DataFrame, notebook: str) -> list:
     return rows
 
 
-def shift_figure(table: pd.DataFrame):
+def shift_figure(table: pd.DataFrame, scenario: Scenario):
     """Detected-centre shift against depth, without and with rectification."""
     import matplotlib.pyplot as plt
 
@@ -882,7 +882,8 @@ def shift_figure(table: pd.DataFrame):
     ax2 = ax.twinx()
     ax2.plot(table["depth_mm"], table["coc_radius_px"], "k:")
     ax2.set_ylabel("circle-of-confusion radius, dotted (px)")
-    ax.set_xlabel("dot depth (mm); focused at 850 mm")
+    focus = scenario.config["sensor"]["optics"]["focus_distance_mm"]
+    ax.set_xlabel(f"dot depth (mm); focused at {focus:g} mm")
     ax.set_ylabel("centre shift (px)")
     ax.set_title("Defocus shift of a detected dot centre (noise-free)")
     ax.legend(loc="upper center", fontsize=8)
@@ -930,7 +931,7 @@ def sweep_figure(
     x: str = "robot_scale",
     series=(("fig13_preliminary", "preliminary"), ("fig13_updated", "updated")),
     paper=None,
-    xlabel: str = "robot error scale (x tolerances of kuka_kr210.toml)",
+    xlabel: str = "robot error scale (x tolerances of the robot's file)",
     ylabel: str = "Fig. 13 RMSE (mm, median)",
 ):
     """Median RMSEs of a sweep against the swept scale ``x``, with the paper's values.
@@ -954,6 +955,12 @@ def sweep_figure(
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def robot_sweep_figure(sweep: pd.DataFrame, scenario: Scenario):
+    """Fig. 13 RMSEs against the robot error scale (:func:`robot_sweep`) of ``scenario``'s robot."""
+    model = scenario.config["station"]["robot"]["model"]
+    return sweep_figure(sweep, xlabel=f"robot error scale (x tolerances of {model}.toml)")
 
 
 def calibration_sweep_figure(sweep: pd.DataFrame):

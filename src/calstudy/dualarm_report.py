@@ -39,14 +39,15 @@ def icp_summary(icp: pd.DataFrame, published: dict) -> pd.DataFrame:
     for (arm, sphere), g in icp_per_trial(icp).groupby(["arm", "sphere"]):
         ratio = g["after_mm"] / g["before_mm"]
         b, a = pub[(int(arm), sphere)]
+        low, high = _interval(g["after_mm"])
         rows.append(
             {
                 "arm": arm,
                 "sphere": sphere,
                 "before_mm": g["before_mm"].mean(),
                 "after_mm": g["after_mm"].mean(),
-                "after_ci_low": _interval(g["after_mm"])[0],
-                "after_ci_high": _interval(g["after_mm"])[1],
+                "after_ci_low": low,
+                "after_ci_high": high,
                 "ratio": ratio.median(),
                 "published_before_mm": b,
                 "published_after_mm": a,
