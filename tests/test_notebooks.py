@@ -15,6 +15,7 @@ The contract every ``notebooks/NN_<paper>_<topic>.ipynb`` follows:
 from __future__ import annotations
 
 import ast
+import json
 from pathlib import Path
 
 import nbformat
@@ -60,6 +61,17 @@ def read(path: Path) -> nbformat.NotebookNode:
 
 def parameter_cells(nb) -> list:
     return [c for c in nb.cells if "parameters" in c.get("metadata", {}).get("tags", [])]
+
+
+def parameter_names(cell) -> set[str]:
+    """Names assigned in a ``parameters`` cell."""
+    return {
+        t.id
+        for node in ast.parse(cell.source).body
+        if isinstance(node, ast.Assign | ast.AnnAssign)
+        for t in (node.targets if isinstance(node, ast.Assign) else [node.target])
+        if isinstance(t, ast.Name)
+    }
 
 
 def ci_parameters(stem: str) -> dict:
@@ -110,13 +122,7 @@ def test_one_parameters_cell(path):
     assert len(cells) == 1, f"{path.name} has {len(cells)} cells tagged 'parameters'; expected 1"
     cell = cells[0]
     assert cell.cell_type == "code"
-    names = {
-        t.id
-        for node in ast.parse(cell.source).body
-        if isinstance(node, ast.Assign | ast.AnnAssign)
-        for t in (node.targets if isinstance(node, ast.Assign) else [node.target])
-        if isinstance(t, ast.Name)
-    }
+    names = parameter_names(cell)
     assert {"seed", "results_dir"} <= names, f"{path.name} parameters assign only {names}"
 
 
@@ -187,6 +193,11 @@ def test_runs_with_ci_parameters(path, tmp_path):
     out = run(path, params, tmp_path)
     assert snapshot(RESULTS_DIR / path.stem) == committed, "the run wrote to results/ itself"
     assert (out / "run.json").is_file() and (out / "claims.csv").is_file()
+    # run.json records what produced the results: every parameter but where they went and
+    # whether progress was shown
+    recorded = set(json.loads((out / "run.json").read_text())["parameters"])
+    wanted = parameter_names(parameter_cells(read(path))[0]) - {"results_dir", "progress"}
+    assert wanted <= recorded, f"run.json lacks the parameters {sorted(wanted - recorded)}"
     claims = read_claims(out / "claims.csv")
     assert set(claims["verdict"]) <= set(VERDICTS)
     assert set(claims["id"]) <= set(claim_ids())

@@ -21,6 +21,7 @@ from calstudy.results import (
     ClaimRow,
     aggregate_claims,
     claim_ids,
+    notebook_writers,
     read_claims,
     source_digest,
     verdict_direction,
@@ -135,6 +136,20 @@ def test_write_figure_deterministic_and_closed(tmp_path):
     assert data == b.read_bytes()
     assert b"Software" not in data and b"matplotlib" not in data.lower()
     assert leftovers(tmp_path) == []
+
+
+def test_notebook_writers_write_into_the_folder_and_show_the_saved_file(tmp_path, monkeypatch):
+    shown = []
+    monkeypatch.setattr("IPython.display.display", shown.append)
+    save_table, show_figure = notebook_writers(tmp_path / "nb")
+    df = sample_table()
+    assert save_table(df, "t") is df
+    assert (tmp_path / "nb" / "t.csv").read_bytes() == write_table(
+        df, tmp_path / "t.csv"
+    ).read_bytes()
+    path = show_figure(make_figure(), "f")
+    assert path == tmp_path / "nb" / "f.png"
+    assert shown[0].data == path.read_bytes()
 
 
 def test_write_figure_is_atomic(tmp_path, monkeypatch):

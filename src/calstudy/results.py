@@ -149,6 +149,29 @@ def write_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     return Path(path)
 
 
+def notebook_writers(out_dir: str | Path):
+    """The two writers every notebook uses, bound to its result folder ``out_dir``.
+
+    Returns ``(save_table, show_figure)``: ``save_table(df, name)`` writes ``out_dir/name.csv``
+    (:func:`write_table`) and returns ``df``; ``show_figure(fig, name)`` writes
+    ``out_dir/name.png`` (:func:`write_figure`) and displays the saved file.
+    """
+    out = Path(out_dir)
+
+    def save_table(df: pd.DataFrame, name: str) -> pd.DataFrame:
+        write_table(df, out / f"{name}.csv")
+        return df
+
+    def show_figure(fig, name: str) -> Path:
+        from IPython.display import Image, display
+
+        path = write_figure(fig, out / f"{name}.png")
+        display(Image(filename=str(path)))
+        return path
+
+    return save_table, show_figure
+
+
 # ----------------------------------------------------------------------------------------------
 # run.json
 
