@@ -216,9 +216,14 @@ def test_survey_with_a_poor_pnp_start_converges(scenario):
     rng = np.random.default_rng(38)
     for arm in (1, 2):
         da.simulate_handeye(scenario, arm, rng)
-    recon = da.survey_markers(scenario, da.survey_views(scenario, rng))
+    views = da.survey_views(scenario, rng)
+    recon = da.survey_markers(scenario, views)
     assert recon.bundle.rms_px < 0.2
     assert da.marker_error(scenario, recon.bundle.points) < 0.1
+    row = report.survey_table(scenario, views, recon).iloc[0]
+    assert row["images"] == len(views) >= row["images used (>= 4 markers)"] > 0
+    assert row["clusters"] == len(recon.clusters)
+    assert row["RMS reprojection (px)"] == recon.bundle.rms_px
 
 
 def test_bundle_adjustment_rejects_bad_weights(scenario):

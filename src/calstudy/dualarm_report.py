@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .dualarm import SPHERES
+from .dualarm import SPHERES, Scenario, marker_error
 from .paths import data_path
 from .results import ClaimRow, verdict_vs_published
 from .stats import percentile_interval
@@ -24,6 +24,23 @@ def load_published(path: str | Path | None = None) -> dict:
 def _interval(x) -> tuple[float, float]:
     x = np.asarray(x, dtype=float)
     return percentile_interval(x) if x.size >= 2 else (float(x[0]), float(x[0]))
+
+
+def survey_table(scn: Scenario, views: list, recon) -> pd.DataFrame:
+    """One row on a marker survey (:func:`calstudy.dualarm.survey_markers` of ``views``): images
+    taken and used, clusters of the image graph, bundle-adjustment residuals and the RMS distance
+    of the markers from Table A1."""
+    return pd.DataFrame(
+        {
+            "images": [len(views)],
+            "images used (>= 4 markers)": [len(recon.used_views)],
+            "clusters": [len(recon.clusters)],
+            "cluster centres": [" ".join(str(c.centre) for c in recon.clusters)],
+            "RMS reprojection (px)": [recon.bundle.rms_px],
+            "RMS Euclidean residual (mm)": [recon.bundle.rms_mm],
+            "markers vs Table A1, RMS (mm)": [marker_error(scn, recon.bundle.points)],
+        }
+    )
 
 
 def icp_per_trial(icp: pd.DataFrame) -> pd.DataFrame:
