@@ -25,7 +25,7 @@ STAMP := $(VENV)/.installed
 
 NOTEBOOKS := $(sort $(wildcard notebooks/[0-9][0-9]_*.ipynb))
 EXECUTED := $(patsubst notebooks/%.ipynb,book/notebooks/%.ipynb,$(NOTEBOOKS))
-LIBRARY := $(sort $(wildcard src/calstudy/*.py))
+LIBRARY := $(sort $(shell find src/calstudy -name '*.py' -not -path '*/__pycache__/*'))
 DATA := $(sort $(shell find data -type f -not -name '.*' -not -path '*/__pycache__/*' 2>/dev/null))
 RESULTS := $(sort $(shell find results -mindepth 2 -type f -not -name '.*' 2>/dev/null))
 BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
@@ -59,11 +59,11 @@ book/notebooks/%.ipynb: notebooks/%.ipynb $(LIBRARY) $(DATA) $(STAMP)
 	$(BIN)/papermill --cwd notebooks --progress-bar $< $(@D)/.tmp-$*.ipynb
 	mv $(@D)/.tmp-$*.ipynb $@
 
-results/claims.csv: $(EXECUTED) src/calstudy/results.py | $(STAMP)
-	$(BIN)/python -c "from calstudy.results import aggregate_claims; aggregate_claims()"
+results/claims.csv: $(EXECUTED) src/calstudy/io/results.py | $(STAMP)
+	$(BIN)/python -c "from calstudy.io.results import aggregate_claims; aggregate_claims()"
 
-book/claims.md: results/claims.csv data/claims.csv src/calstudy/book.py | $(STAMP)
-	$(BIN)/python -m calstudy.book claims $@
+book/claims.md: results/claims.csv data/claims.csv src/calstudy/io/book.py | $(STAMP)
+	$(BIN)/python -m calstudy.io.book claims $@
 
 # Result files found at start-up; a notebook may stop writing one during this run.
 $(RESULTS): ;
@@ -74,12 +74,14 @@ $(BOOK_STAMP): $(BOOK_SOURCES) $(EXECUTED) $(RESULTS) | $(STAMP)
 
 book: $(BOOK_STAMP) ## build the book (same as reproduce)
 
-test: $(STAMP) ## ruff, then pytest (unit tests, notebook runs, reproducibility of results/)
+test: $(STAMP) ## ruff, the import layers, then pytest (unit tests, notebook runs, reproducibility)
 	$(BIN)/ruff check src tests notebooks benchmarks
+	$(BIN)/lint-imports
 	$(BIN)/pytest
 
-lint: $(STAMP) ## ruff check of src, tests, notebooks and benchmarks
+lint: $(STAMP) ## ruff check of src, tests, notebooks and benchmarks; the import layers
 	$(BIN)/ruff check src tests notebooks benchmarks
+	$(BIN)/lint-imports
 
 bench: $(STAMP) ## time the speed budgets of the issues (prints; writes nothing)
 	@for b in $(sort $(wildcard benchmarks/bench_*.py)); do echo "== $$b"; $(BIN)/python $$b; done

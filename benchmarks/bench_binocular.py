@@ -1,6 +1,7 @@
 """Speed of the circle-of-confusion rectification on a full 7904 x 6004 frame (budget 2 s).
 
-Times ``calstudy.coc.rectify_coc`` (vectorised, float32, OpenCV filters) on a synthetic full
+Times ``calstudy.models.optics.rectify_coc`` (vectorised, float32, OpenCV filters) on a synthetic
+full
 frame of blurred dots, best of several repeats, and the per-pixel loop of the paper's flowchart
 (``rectify_coc_reference``) on a crop, scaled to the full frame. The circle-of-confusion radius is
 that of Eq. 4 for a dot at 900 mm with the optics of ``data/binocular/sensor.toml``.
@@ -12,8 +13,8 @@ import cv2
 import numpy as np
 from timing import best_seconds
 
-from calstudy import binocular_sim as sim
-from calstudy import coc
+from calstudy.models import optics as coc
+from calstudy.papers.binocular import binocular_sim as sim
 
 BUDGET_S = 2.0
 REPEATS = 3

@@ -2,7 +2,8 @@
 
 Builds one survey of the 14 markers of Table A1 with the default noise (24 stereo images), splices
 the clusters and prints the best of several repeats (wall clock) of
-``calstudy.markers.bundle_adjust`` from that start, with the analytic sparse Jacobian (what the
+``calstudy.estimators.sfm.bundle_adjust`` from that start, with the analytic sparse Jacobian (what
+the
 notebook uses) and with finite differences on ``jac_sparsity``, and of the whole reconstruction
 (graph, clusters, PnP, splice and bundle adjustment).
 """
@@ -12,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 from timing import best_seconds
 
-from calstudy import dualarm as da
-from calstudy import markers as mk
+from calstudy.estimators import sfm as mk
+from calstudy.papers.dualarm import dualarm as da
 
 BUDGET_S = 2.0
 REPEATS = 5

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from timing import best_ms
 
-from calstudy import production as pr
+from calstudy.papers.hybrid import production as pr
 
 BUDGET_S = 90.0
 REPEATS = 5

@@ -1,6 +1,7 @@
 """Time one selfcal identification: 24 sphere-centre measurements, 30 parameters (budget 50 ms).
 
-Prints the best of several repeats (wall clock) of ``calstudy.selfcal.identify`` from the good
+Prints the best of several repeats (wall clock) of ``calstudy.papers.selfcal.selfcal.identify``
+from the good
 initial estimate and from the very poor one, and of one model evaluation with its Jacobian.
 """
 
@@ -9,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from timing import best_ms
 
-from calstudy import selfcal as sc
+from calstudy.papers.selfcal import selfcal as sc
 
 BUDGET_MS = 50.0
 REPEATS = 20

@@ -1,0 +1,1 @@
+"""Shared mathematics: errors, geometry, estimation, statistics, paths."""

@@ -1,0 +1,305 @@
+"""Rigid transforms as 4 x 4 numpy arrays, and the checks every estimator runs on its input.
+
+Conventions (see DESIGN): a transform is named for what it maps, ``sensor2flange`` takes points
+in the sensor frame to the flange frame, ``p_flange = sensor2flange @ p_sensor``. Millimetres and
+radians throughout. Rotations are converted with :mod:`scipy.spatial.transform` and rigid motions
+with :mod:`pinocchio` where a library already does the job.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial.transform import Rotation
+
+from calstudy.core.errors import CalibrationError
+
+ORTHONORMAL_TOL = 1e-6
+
+
+# ----------------------------------------------------------------------------------------------
+# checks
+
+
+def check_finite(name: str, array) -> np.ndarray:
+    """Return ``array`` as float array; raise if it holds NaN or infinity (naming the first)."""
+    a = np.asarray(array, dtype=float)
+    bad = ~np.isfinite(a)
+    if bad.any():
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise CalibrationError(
+            f"{name} holds a non-finite value ({float(a[idx])!r}) at index {idx}"
+        )
+    return a
+
+
+def check_shape(name: str, array, shape: tuple) -> np.ndarray:
+    """Return ``array`` as a finite float array of ``shape``; ``None`` entries match any length.
+
+    Raises
+    ------
+    CalibrationError
+        If the number of axes or a fixed length differs, or a value is not finite.
+    """
+    a = np.asarray(array, dtype=float)
+    ok = a.ndim == len(shape) and all(
+        s is None or s == n for s, n in zip(shape, a.shape, strict=True)
+    )
+    if not ok:
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise CalibrationError(f"{name} has shape {a.shape}; expected {want}")
+    return check_finite(name, a)
+
+
+def check_rotation(name: str, rotation, tol: float = ORTHONORMAL_TOL) -> np.ndarray:
+    """Return ``rotation`` (3 x 3 or N x 3 x 3) after checking it is a proper rotation.
+
+    Raises
+    ------
+    CalibrationError
+        If ``R^T R`` differs from the identity by more than ``tol`` or ``det R`` is not +1.
+    """
+    r = np.asarray(rotation, dtype=float)
+    if r.shape[-2:] != (3, 3):
+        raise CalibrationError(f"{name} has shape {r.shape}; expected (3, 3) or (N, 3, 3)")
+    check_finite(name, r)
+    gram = np.einsum("...ji,...jk->...ik", r, r) - np.eye(3)
+    dev = np.abs(gram).reshape(-1, 9).max(axis=1)
+    det = np.linalg.det(r.reshape(-1, 3, 3))
+    worst = int(np.argmax(np.maximum(dev, np.abs(det - 1.0))))
+    if dev[worst] > tol:
+        raise CalibrationError(
+            f"{name} is not orthonormal (max |R^T R - I| = {dev[worst]:.3g} at item {worst}, "
+            f"tolerance {tol:g})"
+        )
+    if abs(det[worst] - 1.0) > tol:
+        raise CalibrationError(f"{name} is a reflection (det = {det[worst]:.6g} at item {worst})")
+    return r
+
+
+def check_transform(name: str, transform, tol: float = ORTHONORMAL_TOL) -> np.ndarray:
+    """Return ``transform`` (4 x 4 or N x 4 x 4) after checking shape, bottom row and rotation."""
+    t = np.asarray(transform, dtype=float)
+    if t.shape[-2:] != (4, 4):
+        raise CalibrationError(f"{name} has shape {t.shape}; expected (4, 4) or (N, 4, 4)")
+    check_finite(name, t)
+    bottom = np.abs(t[..., 3, :] - np.array([0.0, 0.0, 0.0, 1.0])).max()
+    if bottom > tol:
+        raise CalibrationError(f"{name} has bottom row different from [0 0 0 1] (by {bottom:.3g})")
+    check_rotation(name + " rotation", t[..., :3, :3], tol)
+    return t
+
+
+# ----------------------------------------------------------------------------------------------
+# construction and algebra
+
+
+def skew(v) -> np.ndarray:
+    """Cross-product matrices ``[v]x`` with ``[v]x w = v x w``, batched: (..., 3) -> (..., 3, 3)."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def make_transform(rotation, translation) -> np.ndarray:
+    """Build 4 x 4 transforms from rotations ``(..., 3, 3)`` and translations ``(..., 3)`` in mm."""
+    r = np.asarray(rotation, dtype=float)
+    t = np.asarray(translation, dtype=float)
+    shape = np.broadcast_shapes(r.shape[:-2], t.shape[:-1])
+    out = np.zeros(shape + (4, 4))
+    out[..., :3, :3] = r
+    out[..., :3, 3] = t
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def invert(transform) -> np.ndarray:
+    """Inverse of rigid transforms ``(..., 4, 4)``, using ``R^T`` rather than a general inverse."""
+    t = np.asarray(transform, dtype=float)
+    rt = np.swapaxes(t[..., :3, :3], -1, -2)
+    return make_transform(rt, -np.einsum("...ij,...j->...i", rt, t[..., :3, 3]))
+
+
+def apply(transform, points) -> np.ndarray:
+    """Map points ``(..., 3)`` by a transform ``(4, 4)``: ``R p + t``."""
+    t = np.asarray(transform, dtype=float)
+    p = np.asarray(points, dtype=float)
+    return p @ t[:3, :3].T + t[:3, 3]
+
+
+def rotvec_to_matrix(rotvec) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (axis x angle, rad)."""
+    rv = np.asarray(rotvec, dtype=float)
+    return Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(rv.shape[:-1] + (3, 3))
+
+
+def matrix_to_rotvec(rotation) -> np.ndarray:
+    """Rotation vectors ``(..., 3)`` of rotation matrices ``(..., 3, 3)``."""
+    r = np.asarray(rotation, dtype=float)
+    return Rotation.from_matrix(r.reshape(-1, 3, 3)).as_rotvec().reshape(r.shape[:-2] + (3,))
+
+
+def pose_from_vector(vec) -> np.ndarray:
+    """Transform from a 6-vector ``[tx, ty, tz, rx, ry, rz]`` (mm, rotation vector in rad)."""
+    v = np.asarray(vec, dtype=float)
+    return make_transform(rotvec_to_matrix(v[..., 3:]), v[..., :3])
+
+
+def pose_to_vector(transform) -> np.ndarray:
+    """Inverse of :func:`pose_from_vector`."""
+    t = np.asarray(transform, dtype=float)
+    return np.concatenate([t[..., :3, 3], matrix_to_rotvec(t[..., :3, :3])], axis=-1)
+
+
+def exp6(twist) -> np.ndarray:
+    """SE(3) exponential of a twist ``[v, w]`` (Pinocchio's ``exp6``), as a 4 x 4 array."""
+    return pin.exp6(np.asarray(twist, dtype=float)).homogeneous
+
+
+def log6(transform) -> np.ndarray:
+    """SE(3) logarithm ``[v, w]`` of a 4 x 4 transform (Pinocchio's ``log6``)."""
+    t = np.asarray(transform, dtype=float)
+    return np.asarray(pin.log6(pin.SE3(t[:3, :3], t[:3, 3])).vector)
+
+
+def to_se3(transform) -> pin.SE3:
+    """A 4 x 4 array as a ``pinocchio.SE3``."""
+    t = np.asarray(transform, dtype=float)
+    return pin.SE3(t[:3, :3].copy(), t[:3, 3].copy())
+
+
+def euler_zyx_to_matrix(a, b, c) -> np.ndarray:
+    """Rotation ``Rz(a) Ry(b) Rx(c)`` from angles in degrees (the KUKA A, B, C convention)."""
+    angles = np.stack(np.broadcast_arrays(a, b, c), axis=-1)
+    flat = angles.reshape(-1, 3)
+    mats = Rotation.from_euler("ZYX", flat, degrees=True).as_matrix()
+    return mats.reshape(angles.shape[:-1] + (3, 3))
+
+
+def matrix_to_euler_zyx(rotation) -> np.ndarray:
+    """Angles ``(A, B, C)`` in degrees with ``R = Rz(A) Ry(B) Rx(C)``; inverse of the above."""
+    r = np.asarray(rotation, dtype=float)
+    out = Rotation.from_matrix(r.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True)
+    return out.reshape(r.shape[:-2] + (3,))
+
+
+def project_to_so3(matrix) -> np.ndarray:
+    """Nearest rotation (Frobenius norm) to a 3 x 3 matrix, by SVD with a determinant fix."""
+    u, _, vt = np.linalg.svd(np.asarray(matrix, dtype=float))
+    d = np.sign(np.linalg.det(u @ vt))
+    return u @ np.diag([1.0, 1.0, d]) @ vt
+
+
+# ----------------------------------------------------------------------------------------------
+# errors and random draws
+
+
+def rotation_angle(rotation) -> np.ndarray:
+    """Angle in rad of rotations ``(..., 3, 3)``, robust near 0 and pi."""
+    r = np.asarray(rotation, dtype=float)
+    return np.linalg.norm(matrix_to_rotvec(r), axis=-1)
+
+
+def rotation_error(estimate, truth) -> np.ndarray:
+    """Angle in rad of ``R_truth^T R_est`` for rotations or transforms ``(..., 3|4, 3|4)``."""
+    e = np.asarray(estimate, dtype=float)[..., :3, :3]
+    t = np.asarray(truth, dtype=float)[..., :3, :3]
+    return rotation_angle(np.swapaxes(t, -1, -2) @ e)
+
+
+def translation_error(estimate, truth) -> np.ndarray:
+    """Euclidean distance in mm between the translations of two transforms ``(..., 4, 4)``."""
+    e = np.asarray(estimate, dtype=float)
+    t = np.asarray(truth, dtype=float)
+    return np.linalg.norm(e[..., :3, 3] - t[..., :3, 3], axis=-1)
+
+
+def random_rotation(rng: np.random.Generator, size: int | None = None) -> np.ndarray:
+    """Uniformly distributed rotations, ``(3, 3)`` or ``(size, 3, 3)``."""
+    return Rotation.random(size, random_state=rng).as_matrix()
+
+
+def perturb(transform, sigma_rot: float, sigma_trans: float, rng: np.random.Generator):
+    """Right-multiply by a small random motion: rotation vector ~ N(0, sigma_rot^2 I) in rad,
+    translation ~ N(0, sigma_trans^2 I) in mm. Works on ``(4, 4)`` or ``(N, 4, 4)``."""
+    t = np.asarray(transform, dtype=float)
+    lead = t.shape[:-2]
+    d = make_transform(
+        rotvec_to_matrix(rng.normal(0.0, sigma_rot, lead + (3,))),
+        rng.normal(0.0, sigma_trans, lead + (3,)),
+    )
+    return t @ d
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera-to-world transform of a camera at ``eye`` with its optical (+z) axis on ``target``.
+
+    The camera x axis is horizontal (perpendicular to ``up``); if the viewing direction is parallel
+    to ``up``, the world x axis is used as the reference instead.
+    """
+    eye = np.asarray(eye, dtype=float)
+    z = np.asarray(target, dtype=float) - eye
+    norm = np.linalg.norm(z)
+    if norm == 0:
+        raise CalibrationError("look_at: eye and target coincide (distance 0 mm)")
+    z = z / norm
+    x = np.cross(z, np.asarray(up, dtype=float))
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.cross(z, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return make_transform(np.stack([x, y, z], axis=1), eye)
+
+
+# ----------------------------------------------------------------------------------------------
+# point sets
+
+#: Relative size of the smallest singular value (to the largest) below which a point set is
+#: treated as exactly degenerate (collinear or coplanar). It catches exact degeneracy and
+#: round-off; a nearly degenerate noisy set passes and gives a poorly determined answer.
+RANK_RTOL = 1e-9
+
+
+
+
+
+def check_points(
+    name: str, array, dim: int, at_least: int, what: str, noun: str = "points"
+) -> np.ndarray:
+    """Check an ``(N, dim)`` finite array with ``N >= at_least``."""
+    a = check_shape(name, array, (None, dim))
+    if a.shape[0] < at_least:
+        raise CalibrationError(f"{what} needs at least {at_least} {noun}; got {a.shape[0]}")
+    return a
+
+
+def check_same_length(name_a: str, a: np.ndarray, name_b: str, b: np.ndarray) -> None:
+    if a.shape[0] != b.shape[0]:
+        raise CalibrationError(
+            f"{name_a} has {a.shape[0]} rows but {name_b} has {b.shape[0]}; they must pair up"
+        )
+
+
+def singular_values(centred: np.ndarray) -> np.ndarray:
+    return np.linalg.svd(centred, compute_uv=False)
+
+
+def format_values(values) -> str:
+    return ", ".join(f"{v:.3g}" for v in values)
+
+
+def is_rank_deficient(s: np.ndarray, rank: int) -> bool:
+    """True if fewer than ``rank`` singular values are significant."""
+    return s.size < rank or s[0] == 0.0 or s[rank - 1] <= RANK_RTOL * s[0]
+
+
+def check_not_collinear(name: str, points: np.ndarray) -> None:
+    """Raise if the rows of ``points`` lie on one line (centred rank < 2)."""
+    s = singular_values(points - points.mean(axis=0))
+    if is_rank_deficient(s, 2):
+        raise CalibrationError(
+            f"the {points.shape[0]} {name} are collinear (singular values {format_values(s)})"
+        )

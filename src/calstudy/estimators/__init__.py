@@ -1,0 +1,2 @@
+"""Estimators: fitting, hand-eye, workpiece frames, ICP, structure from motion, binocular
+corrections."""

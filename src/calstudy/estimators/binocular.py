@@ -1,0 +1,479 @@
+"""Binocular sensor, multi-target calibrator, observed-error modification and hand-eye update.
+
+The geometric half of the `binocular` paper (Sections 2 and 3.2); the imaging half (circle of
+confusion, fusion, rectification, ellipse centres) is :mod:`calstudy.models.optics`.
+
+- :class:`StereoSensor`: two distorted pinhole cameras (Table 1); projection by
+  ``cv2.projectPoints``, triangulation (Eq. 1) by ``cv2.undistortPointsIter`` and
+  ``cv2.triangulatePoints`` with a check that the two rays meet.
+- :func:`solve_calibrator_layout`: a 3D layout of targets P1-P6 and the virtual P7, P8 consistent
+  with the standard distances of Table 2.
+- :func:`modify_observed_error`: the distance-constraint adjustment of Eq. 23-25 (least norm).
+- :func:`preliminary_handeye`: AX = XB (Eq. 13) with a check of the rotation axes.
+- :func:`correct_transformation`: the transformation error correction of Eq. 14-22.
+
+Frames: the sensor frame is the left camera frame. ``sensor2flange`` is the paper's ``H_gc``,
+``flange2base`` its ``H_g``. Millimetres and radians.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from calstudy.core import geometry as geo
+from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import data_path
+from calstudy.estimators.fitting import fit_rigid
+from calstudy.estimators.handeye import OPENCV_METHODS, opencv_handeye
+from calstudy.models.optics import UNDISTORT_CRITERIA
+
+#: Indices (0-based) of the physical targets averaged into the virtual P7 and P8 (Section 3.2).
+P7_FROM = (1, 2, 4)
+P8_FROM = (0, 3, 5)
+TARGET_NAMES = ("P1", "P2", "P3", "P4", "P5", "P6", "P7", "P8")
+
+
+def load_toml(name: str, directory=None) -> dict:
+    """Read ``<directory>/<name>.toml`` (default directory: ``data/binocular``)."""
+    path = (
+        data_path("binocular", f"{name}.toml")
+        if directory is None
+        else Path(directory) / f"{name}.toml"
+    )
+    if not path.is_file():
+        raise CalibrationError(f"{path}: no such file; the binocular station needs {name}.toml")
+    with path.open("rb") as handle:
+        return tomllib.load(handle)
+
+
+# ----------------------------------------------------------------------------------------------
+# the sensor
+
+
+@dataclass(frozen=True)
+class StereoSensor:
+    """Two cameras with OpenCV distortion; ``p_right = R p_left + t`` (the extrinsic of Table 1).
+
+    Attributes
+    ----------
+    k_left, k_right : (3, 3) arrays
+        Camera matrices, px.
+    dist_left, dist_right : (4,) arrays
+        ``k1 k2 p1 p2`` (Eq. 6).
+    rotation : (3, 3) array
+        ``R`` of left2right.
+    translation : (3,) array
+        ``t`` of left2right, mm.
+    width, height : int
+        Image size, px.
+    """
+
+    k_left: np.ndarray
+    dist_left: np.ndarray
+    k_right: np.ndarray
+    dist_right: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    width: int
+    height: int
+
+    @classmethod
+    def from_table(cls, table: dict | None = None) -> StereoSensor:
+        """The sensor of ``data/binocular/sensor.toml`` (Table 1), rotation re-orthonormalised."""
+        table = load_toml("sensor") if table is None else table
+
+        def k(cam: dict) -> np.ndarray:
+            return np.array([[cam["fx"], 0, cam["cx"]], [0, cam["fy"], cam["cy"]], [0, 0, 1.0]])
+
+        ext = table["extrinsic"]
+        return cls(
+            k(table["left"]),
+            np.array(table["left"]["dist"], dtype=float),
+            k(table["right"]),
+            np.array(table["right"]["dist"], dtype=float),
+            geo.project_to_so3(np.array(ext["rotation"], dtype=float)),
+            np.array(ext["translation_mm"], dtype=float),
+            int(table["image"]["width"]),
+            int(table["image"]["height"]),
+        )
+
+    @property
+    def left2right(self) -> np.ndarray:
+        """``(4, 4)`` transform from the left to the right camera frame."""
+        return geo.make_transform(self.rotation, self.translation)
+
+    def cameras(self):
+        """``[(K, dist, sensor2camera), ...]`` for the left and right camera."""
+        return [
+            (self.k_left, self.dist_left, np.eye(4)),
+            (self.k_right, self.dist_right, self.left2right),
+        ]
+
+    def project(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """Image points ``(N, 2)`` of sensor-frame points ``(N, 3)`` in the left and right image."""
+        p = geo.check_finite("points", points).reshape(-1, 3)
+        out = []
+        for k, dist, s2c in self.cameras():
+            rvec = cv2.Rodrigues(s2c[:3, :3])[0]
+            uv, _ = cv2.projectPoints(p, rvec, s2c[:3, 3].copy(), k, dist)
+            out.append(uv.reshape(-1, 2))
+        return out[0], out[1]
+
+    def normalise(self, uv, side: str) -> np.ndarray:
+        """Undistorted normalised coordinates ``(N, 2)`` of image points of one camera.
+
+        ``side`` is ``"left"`` or ``"right"``.
+        """
+        if side not in ("left", "right"):
+            raise CalibrationError(f"camera side is {side!r}; expected 'left' or 'right'")
+        k, dist = (
+            (self.k_left, self.dist_left) if side == "left" else (self.k_right, self.dist_right)
+        )
+        pts = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
+        return cv2.undistortPointsIter(pts, k, dist, None, None, UNDISTORT_CRITERIA).reshape(-1, 2)
+
+    def triangulate(self, uv_left, uv_right, tol_mm: float = 0.5) -> np.ndarray:
+        """Sensor-frame points ``(N, 3)`` from matched image points (Eq. 1), undistorted first.
+
+        ``cv2.triangulatePoints`` (linear, on normalised coordinates). The distance between
+        the two back-projected rays at their closest approach is checked against ``tol_mm``.
+
+        Raises
+        ------
+        CalibrationError
+            If the arrays differ in shape or are not finite, or a pair of rays misses by more
+            than ``tol_mm`` (a wrong match or a wrong calibration).
+        """
+        a = geo.check_finite("left image points", uv_left).reshape(-1, 2)
+        b = geo.check_finite("right image points", uv_right).reshape(-1, 2)
+        if a.shape != b.shape or a.shape[0] == 0:
+            raise CalibrationError(f"left {a.shape} and right {b.shape} points must match, N >= 1")
+        xl, xr = self.normalise(a, "left"), self.normalise(b, "right")
+        p1 = np.hstack([np.eye(3), np.zeros((3, 1))])
+        p2 = np.hstack([self.rotation, self.translation[:, None]])
+        hom = cv2.triangulatePoints(p1, p2, xl.T.copy(), xr.T.copy())
+        points = (hom[:3] / hom[3]).T
+        gap = ray_gap(xl, xr, self.rotation, self.translation)
+        worst = int(np.argmax(gap))
+        if gap[worst] > tol_mm:
+            raise CalibrationError(
+                f"rays of point {worst} miss each other by {gap[worst]:.3g} mm "
+                f"(tolerance {tol_mm:g} mm): wrong match or calibration"
+            )
+        return points
+
+    def perturbed(self, sigmas: dict, rng: np.random.Generator) -> StereoSensor:
+        """A sensor whose parameters differ from this one by normal calibration errors.
+
+        ``sigmas`` holds ``focal_px``, ``principal_point_px``, ``k1``,
+        ``extrinsic_rotation_rad`` and ``extrinsic_translation_mm`` (standard deviations).
+        """
+
+        def k(m: np.ndarray) -> np.ndarray:
+            m = m.copy()
+            m[[0, 1], [0, 1]] += rng.normal(0.0, sigmas["focal_px"], 2)
+            m[[0, 1], [2, 2]] += rng.normal(0.0, sigmas["principal_point_px"], 2)
+            return m
+
+        def d(v: np.ndarray) -> np.ndarray:
+            v = v.copy()
+            v[0] += rng.normal(0.0, sigmas["k1"])
+            return v
+
+        rot = geo.rotvec_to_matrix(rng.normal(0.0, sigmas["extrinsic_rotation_rad"], 3))
+        return replace(
+            self,
+            k_left=k(self.k_left),
+            dist_left=d(self.dist_left),
+            k_right=k(self.k_right),
+            dist_right=d(self.dist_right),
+            rotation=rot @ self.rotation,
+            translation=self.translation + rng.normal(0.0, sigmas["extrinsic_translation_mm"], 3),
+        )
+
+    def aim_point(self, distance_mm: float) -> np.ndarray:
+        """Sensor-frame point ``distance_mm`` from the baseline midpoint, where both optical axes
+        point best (along the line from the midpoint to the axes' closest approach)."""
+        c_left, d_left = np.zeros(3), np.array([0.0, 0.0, 1.0])
+        c_right = -self.rotation.T @ self.translation
+        d_right = self.rotation.T @ np.array([0.0, 0.0, 1.0])
+        w = c_left - c_right
+        b = d_left @ d_right
+        s = (b * (d_right @ w) - (d_left @ w)) / (1 - b**2)
+        u = ((d_right @ w) - b * (d_left @ w)) / (1 - b**2)
+        meet = 0.5 * (c_left + s * d_left + c_right + u * d_right)
+        mid = 0.5 * (c_left + c_right)
+        direction = (meet - mid) / np.linalg.norm(meet - mid)
+        return mid + distance_mm * direction
+
+
+def ray_gap(x_left, x_right, rotation, translation) -> np.ndarray:
+    """Closest distance (mm) between the rays of normalised points ``(N, 2)`` of both cameras."""
+    d1 = np.column_stack([x_left, np.ones(len(x_left))])
+    d2 = np.column_stack([x_right, np.ones(len(x_right))]) @ rotation  # R^T d, row-wise
+    c2 = -rotation.T @ translation
+    n = np.cross(d1, d2)
+    norm = np.linalg.norm(n, axis=1)
+    if np.any(norm < 1e-12):
+        raise CalibrationError("a left and a right ray are parallel: no intersection")
+    return np.abs(n @ c2) / norm
+
+
+# ----------------------------------------------------------------------------------------------
+# the calibrator
+
+
+def with_virtual(points) -> np.ndarray:
+    """P1-P6 ``(..., 6, 3)`` extended by the virtual P7 (centroid of P2, P3, P5) and P8 (of P1,
+    P4, P6): ``(..., 8, 3)``."""
+    p = np.asarray(points, dtype=float)
+    if p.shape[-2:] != (6, 3):
+        raise CalibrationError(f"the calibrator has 6 physical targets; got points {p.shape}")
+    p7 = p[..., P7_FROM, :].mean(axis=-2, keepdims=True)
+    p8 = p[..., P8_FROM, :].mean(axis=-2, keepdims=True)
+    return np.concatenate([p, p7, p8], axis=-2)
+
+
+def distances_to_p7(points8) -> np.ndarray:
+    """Distances P1P7 ... P6P7 and P8P7 (Table 2's rows) of ``(..., 8, 3)`` points."""
+    p = np.asarray(points8, dtype=float)
+    rows = [0, 1, 2, 3, 4, 5, 7]
+    return np.linalg.norm(p[..., rows, :] - p[..., 6:7, :], axis=-1)
+
+
+def solve_calibrator_layout(distances_mm, start_angle_deg) -> tuple[np.ndarray, np.ndarray]:
+    """A planar layout of P1-P6 consistent with Table 2's standard distances to P7.
+
+    Pk lies on the circle of radius ``distances_mm[k]`` about P7 (the origin) in the plate plane
+    ``z = 0``; the six angles are found by least squares (from ``start_angle_deg``) so that P7
+    is the centroid of P2, P3, P5 and ``|P8 - P7|`` equals the seventh distance.
+
+    Parameters
+    ----------
+    distances_mm : (7,) array_like
+        P1P7 ... P6P7, P8P7.
+    start_angle_deg : (6,) array_like
+        Initial angles of P1-P6.
+
+    Returns
+    -------
+    points : (8, 3) array
+        P1-P8 in the calibrator frame (P7 at the origin, plate normal +z).
+    residual : (7,) array
+        Distances of the layout minus the standard ones, mm.
+    """
+    d = np.asarray(distances_mm, dtype=float)
+    if d.shape != (7,) or not np.all(np.isfinite(d)) or np.any(d <= 0):
+        raise CalibrationError(f"need 7 positive distances to P7, got {d}")
+    radii = d[:6]
+
+    def layout(angles: np.ndarray) -> np.ndarray:
+        return np.column_stack([radii * np.cos(angles), radii * np.sin(angles), np.zeros(6)])
+
+    def residuals(angles: np.ndarray) -> np.ndarray:
+        p = layout(angles)
+        p7 = p[list(P7_FROM)].mean(axis=0)
+        p8 = p[list(P8_FROM)].mean(axis=0)
+        return np.concatenate([p7[:2], [np.linalg.norm(p8 - p7) - d[6]]])
+
+    sol = least_squares(residuals, np.radians(start_angle_deg), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    p = layout(sol.x)
+    p -= p[list(P7_FROM)].mean(axis=0)
+    points = with_virtual(p)
+    return points, distances_to_p7(points) - d
+
+
+def all_pairs(n: int) -> np.ndarray:
+    """Index pairs ``(k, l)``, ``k < l``, of ``n`` targets: ``(n (n - 1) / 2, 2)``."""
+    return np.array(list(itertools.combinations(range(n), 2)), dtype=int)
+
+
+# ----------------------------------------------------------------------------------------------
+# observed-error modification (Eq. 23-25)
+
+
+def modify_observed_error(
+    points, pairs, standard_mm, rcond: float = 1e-3
+) -> tuple[np.ndarray, np.ndarray]:
+    """Modify measured target coordinates with the calibrator's standard distances (Eq. 23-25).
+
+    Eq. 24 linearises each distance about the measured coordinates; Eq. 25 stacks the rows
+    ``[a b g -a -b -g]`` (direction cosines) against ``L_std - L_meas``. Its Moore-Penrose
+    least-norm solution (``numpy.linalg.pinv``) is the modification, added to the points.
+
+    The calibrator is (nearly) planar: moving a target across the plate plane changes the
+    distances only to second order, so the coefficient matrix has singular values of the order of
+    the measured points' out-of-plane scatter over their spacing (about 1e-4). A pseudo-inverse that
+    kept them would turn millimetre-scale out-of-plane moves out of micrometre distance errors;
+    singular values below ``rcond`` times the largest are therefore treated as zero (the
+    least-norm solution on the well-determined subspace).
+
+    Parameters
+    ----------
+    points : (m, 3) array
+        Measured target centres (sensor frame), mm.
+    pairs : (M, 2) int array
+        Index pairs whose standard distance is known.
+    standard_mm : (M,) array
+        Standard (CMM) distances of the pairs.
+
+    rcond : float, default 1e-3
+        Relative cut-off of the pseudo-inverse's singular values.
+
+    Returns
+    -------
+    modified : (m, 3) array
+        ``points`` plus the modification.
+    delta : (m, 3) array
+        The modification (the observed errors, with the sign that removes them).
+
+    Raises
+    ------
+    CalibrationError
+        If fewer than 8 distances are given (the redundancy Eq. 25 needs), shapes disagree, a
+        pair repeats a target or indexes a missing one, or two targets coincide.
+    """
+    p = geo.check_finite("points", points)
+    pr = np.asarray(pairs, dtype=int)
+    std = geo.check_finite("standard distances", standard_mm)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise CalibrationError(f"points must be (m, 3), got {p.shape}")
+    if pr.ndim != 2 or pr.shape[1] != 2 or std.shape != (pr.shape[0],):
+        raise CalibrationError(f"pairs {pr.shape} and distances {std.shape} must be (M, 2), (M,)")
+    if pr.shape[0] < 8:
+        raise CalibrationError(
+            f"{pr.shape[0]} calibrator distances given; Eq. 25 needs at least 8 for redundancy"
+        )
+    if np.any(pr[:, 0] == pr[:, 1]) or pr.min() < 0 or pr.max() >= p.shape[0]:
+        raise CalibrationError(f"pairs must join two different targets among {p.shape[0]}")
+    diff = p[pr[:, 0]] - p[pr[:, 1]]
+    length = np.linalg.norm(diff, axis=1)
+    if np.any(length < 1e-9):
+        raise CalibrationError("two targets of a pair coincide (distance 0 mm)")
+    cosines = diff / length[:, None]
+    a = np.zeros((pr.shape[0], p.size))
+    rows = np.arange(pr.shape[0])
+    for axis in range(3):
+        a[rows, 3 * pr[:, 0] + axis] = cosines[:, axis]
+        a[rows, 3 * pr[:, 1] + axis] = -cosines[:, axis]
+    delta = (np.linalg.pinv(a, rcond=rcond) @ (std - length)).reshape(p.shape)
+    return p + delta, delta
+
+
+# ----------------------------------------------------------------------------------------------
+# hand-eye (Eq. 13-22)
+
+
+def motion_axes(flange2base) -> tuple[np.ndarray, np.ndarray]:
+    """Unit rotation axes ``(N - 1, 3)`` and angles (rad) of the moves from pose 0 to the others."""
+    g = geo.check_transform("flange poses", flange2base)
+    rel = np.einsum("ij,njk->nik", g[0, :3, :3].T, g[1:, :3, :3])
+    rv = geo.matrix_to_rotvec(rel)
+    angle = np.linalg.norm(rv, axis=1)
+    return rv / np.maximum(angle, 1e-300)[:, None], angle
+
+
+def check_rotation_axes(flange2base, min_angle_rad: float = 1e-3, min_axis_angle_rad: float = 1e-2):
+    """Raise unless the robot moves contain two rotations about non-parallel axes (AX = XB).
+
+    Raises
+    ------
+    CalibrationError
+        Fewer than 2 moves rotate by ``min_angle_rad``, or all their axes lie within
+        ``min_axis_angle_rad`` of one line.
+    """
+    axes, angle = motion_axes(flange2base)
+    used = axes[angle > min_angle_rad]
+    if used.shape[0] < 2:
+        raise CalibrationError(
+            f"{used.shape[0]} of the {angle.size} moves rotate by more than {min_angle_rad:g} rad; "
+            "AX = XB needs at least 2 rotations about non-parallel axes"
+        )
+    spread = max(math.asin(min(1.0, float(np.linalg.norm(np.cross(used[0], a))))) for a in used[1:])
+    if spread < min_axis_angle_rad:
+        raise CalibrationError(
+            f"the rotation axes of the {used.shape[0]} moves are parallel (largest angle between "
+            f"them {spread:.3g} rad); add a move about another axis"
+        )
+
+
+def calibrator_pose(layout_points, measured_points) -> np.ndarray:
+    """``calibrator2sensor`` by Kabsch (``fitting.fit_rigid``), layout to measured points."""
+    return fit_rigid(layout_points, measured_points)
+
+
+def preliminary_handeye(flange2base, calibrator2sensor, method: str = "Park") -> np.ndarray:
+    """The preliminary ``sensor2flange`` from AX = XB (Eq. 13) by a closed-form solver.
+
+    The paper cites Shiu and Ahmad's formulation; OpenCV does not implement that solver, so the
+    closed-form solvers of ``cv2.calibrateHandEye`` stand in (Park-Martin by default), after a
+    check that the moves rotate about at least two non-parallel axes.
+    """
+    if method not in OPENCV_METHODS:
+        raise CalibrationError(f"unknown method {method!r}; use one of {list(OPENCV_METHODS)}")
+    check_rotation_axes(flange2base)
+    return opencv_handeye(flange2base, calibrator2sensor, method)
+
+
+def correct_transformation(
+    flange2base, sensor2flange, measured, modified
+) -> tuple[np.ndarray, np.ndarray]:
+    """Transformation error correction (Eq. 14-22): update ``sensor2flange`` by a small motion.
+
+    A fixed target seen in poses ``i`` and ``j`` must map to the same base point. With the
+    preliminary ``H_gc``, ``X_b^i = H_g^i H_gc X_c^i`` (Eq. 14). Writing the update as
+    ``H_gc (I + nu)`` with ``nu X = sigma + omega x X`` (Eq. 17) gives, for every target and pose
+    pair, Eq. 21: ``V = U d_eta`` with ``V = X_b^i - X_b^j + R_bc^i dX^i - R_bc^j dX^j``,
+    ``U = R_bc^j P_j - R_bc^i P_i`` and ``P = [I, -[X^R]_x]`` (Eq. 19) at the modified
+    coordinates ``X^R``. ``d_eta = (sigma, omega)`` is the Moore-Penrose least-norm solution
+    (Eq. 22). The update is applied as the rigid motion ``exp(d_eta)`` (equal to ``I + nu`` to
+    first order and keeping the matrix a rigid transform).
+
+    Parameters
+    ----------
+    flange2base : (N, 4, 4) array
+        Flange poses reported by the robot, N >= 2.
+    sensor2flange : (4, 4) array
+        Preliminary ``H_gc``.
+    measured, modified : (N, m, 3) arrays
+        Target centres in the sensor frame as measured and after the observed-error
+        modification (the same array twice if there is none).
+
+    Returns
+    -------
+    updated : (4, 4) array
+        Updated ``sensor2flange``.
+    d_eta : (6,) array
+        ``(sigma_x, sigma_y, sigma_z, omega_x, omega_y, omega_z)``, mm and rad.
+    """
+    g = geo.check_transform("flange poses", flange2base)
+    h = geo.check_transform("sensor2flange", sensor2flange)
+    xc = geo.check_finite("measured points", measured)
+    xr = geo.check_finite("modified points", modified)
+    if g.ndim != 3 or g.shape[0] < 2 or xc.shape != xr.shape or xc.shape[:1] != g.shape[:1]:
+        raise CalibrationError(
+            f"need N >= 2 flange poses {g.shape} and points (N, m, 3) {xc.shape}, {xr.shape}"
+        )
+    sensor2base = g @ h
+    rot = sensor2base[:, :3, :3]
+    xb = np.einsum("nij,nmj->nmi", rot, xc) + sensor2base[:, None, :3, 3]
+    dx_b = np.einsum("nij,nmj->nmi", rot, xr - xc)
+    skew = geo.skew(xr)
+    p = np.concatenate([np.broadcast_to(np.eye(3), skew.shape), -skew], axis=-1)  # Eq. 19
+    rp = np.einsum("nij,nmjk->nmik", rot, p)
+    rows_u, rows_v = [], []
+    for i, j in itertools.combinations(range(g.shape[0]), 2):
+        rows_v.append((xb[i] - xb[j] + dx_b[i] - dx_b[j]).reshape(-1))
+        rows_u.append((rp[j] - rp[i]).reshape(-1, 6))
+    u = np.concatenate(rows_u)
+    v = np.concatenate(rows_v)
+    d_eta = np.linalg.pinv(u) @ v
+    return h @ geo.exp6(d_eta), d_eta

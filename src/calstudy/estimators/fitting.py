@@ -1,0 +1,385 @@
+"""Closed-form fits: rotations and rigid motions (SVD), circles and spheres (linear least squares),
+plane homographies and camera poses.
+
+Every function checks its input (shape, finite values, enough points, degenerate geometry) and
+raises :class:`calstudy.CalibrationError` with the number that shows the problem. Millimetres and
+pixels; a pose ``target2cam`` maps target points to the camera frame,
+``p_cam = target2cam @ p_target``.
+
+Paper references are to ``hybrid`` (``papers/000_fc1e98135301fecc.txt``): Eq. 10-11 (rotation by
+SVD) and Eq. 16-19 (homography and the pose it gives).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.estimation import condition_number
+from calstudy.core.geometry import (
+    check_not_collinear,
+    check_points,
+    check_same_length,
+    check_shape,
+    format_values,
+    is_rank_deficient,
+    make_transform,
+    project_to_so3,
+    singular_values,
+)
+
+#: Condition number of the (centred, scaled) sphere-fit matrix above which the points are
+#: treated as coplanar.
+SPHERE_COND_MAX = 1e9
+
+
+# ----------------------------------------------------------------------------------------------
+# rotations and rigid motions
+
+
+def fit_rotation(v_from, v_to, center: bool = True) -> np.ndarray:
+    """Rotation ``R`` minimising ``sum |R v_from_i - v_to_i|^2`` by SVD (hybrid Eq. 10-11).
+
+    With the paper's notation ``R_F P_1 = P_0``: ``v_from`` holds the columns of ``P_1`` (sphere
+    centre differences in the sensor frame) and ``v_to`` those of ``P_0``. The cross-covariance
+    ``K = (P_0 - C_0)(P_1 - C_1)^T = U S V^T`` gives ``R = U diag(1, 1, det(U V^T)) V^T``; the
+    determinant fix, which the paper leaves out, keeps ``R`` a rotation rather than a
+    reflection when the data are noisy or planar.
+
+    Parameters
+    ----------
+    v_from, v_to : array_like, shape (N, 3)
+        Paired vectors (any unit, the same for both), row ``i`` of ``v_from`` maps to row ``i``
+        of ``v_to``.
+    center : bool
+        Subtract the means ``C_1``, ``C_0`` first, as the paper's Eq. 11 does. With
+        ``center=False`` the vectors are used as they are (a pure rotation fit, like
+        :meth:`scipy.spatial.transform.Rotation.align_vectors`).
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+        The rotation taking ``v_from`` to ``v_to`` (``from2to``).
+
+    Raises
+    ------
+    CalibrationError
+        On wrong shapes, non-finite values, ``N < 2``, or if either (centred) set spans fewer
+        than 2 directions, since the rotation about that direction is then undetermined.
+    """
+    a = check_points("v_from", v_from, 3, 2, "fit_rotation", "vectors")
+    b = check_shape("v_to", v_to, (None, 3))
+    check_same_length("v_from", a, "v_to", b)
+    if center:
+        a = a - a.mean(axis=0)
+        b = b - b.mean(axis=0)
+    for name, vectors in (("v_from", a), ("v_to", b)):
+        s = singular_values(vectors)
+        if is_rank_deficient(s, 2):
+            raise CalibrationError(
+                f"difference vectors are collinear (singular values {format_values(s)} of {name}); "
+                "use "
+                "at least 3 non-collinear translations"
+            )
+    u, _, vt = np.linalg.svd(b.T @ a)
+    d = np.sign(np.linalg.det(u @ vt))
+    return u @ np.diag([1.0, 1.0, d]) @ vt
+
+
+def fit_rigid(p_from, p_to) -> np.ndarray:
+    """Rigid transform ``from2to`` minimising ``sum |R p_from_i + t - p_to_i|^2`` (Kabsch).
+
+    Parameters
+    ----------
+    p_from, p_to : array_like, shape (N, 3)
+        Paired points in mm, ``p_from`` in the frame "from", ``p_to`` the same points in "to".
+        ``N >= 3`` and not all on one line.
+
+    Returns
+    -------
+    numpy.ndarray, shape (4, 4)
+        ``from2to`` with ``p_to ≈ from2to @ p_from``.
+
+    Raises
+    ------
+    CalibrationError
+        On wrong shapes, non-finite values, fewer than 3 points or collinear points.
+    """
+    a = check_points("p_from", p_from, 3, 3, "fit_rigid")
+    b = check_shape("p_to", p_to, (None, 3))
+    check_same_length("p_from", a, "p_to", b)
+    check_not_collinear("p_from points", a)
+    check_not_collinear("p_to points", b)
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    r = fit_rotation(a - ca, b - cb, center=False)
+    return make_transform(r, cb - r @ ca)
+
+
+def fit_sphere(points) -> tuple[np.ndarray, float, float]:
+    """Sphere through 3-D points by linear least squares (``selfcal`` Eq. 7-8).
+
+    Solves ``x^2 + y^2 + z^2 = 2 a x + 2 b y + 2 c z + d``; centre ``(a, b, c)``, radius
+    ``sqrt(d + a^2 + b^2 + c^2)``. The points are centred and scaled to unit RMS distance before
+    the fit, so the returned condition number describes the geometry of the point set (how much
+    of the sphere it covers), not the units or the position of the sphere.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, 3)
+        ``N >= 4`` points in mm, not all in one plane.
+
+    Returns
+    -------
+    centre : numpy.ndarray, shape (3,)
+        In mm, in the frame of ``points``.
+    radius : float
+        In mm.
+    cond : float
+        Condition number of the centred, scaled ``N x 4`` design matrix.
+
+    Raises
+    ------
+    CalibrationError
+        On wrong shapes, non-finite values, fewer than 4 points, or (nearly) coplanar points
+        (condition number above :data:`SPHERE_COND_MAX`).
+    """
+    p = check_points("points", points, 3, 4, "sphere fit")
+    mean = p.mean(axis=0)
+    q = p - mean
+    scale = np.sqrt((q**2).sum(axis=1).mean())
+    if scale == 0.0:
+        raise CalibrationError(f"the {p.shape[0]} points of the sphere fit all coincide")
+    q = q / scale
+    design = np.column_stack([2.0 * q, np.ones(len(q))])
+    cond = condition_number(design)
+    if cond > SPHERE_COND_MAX:
+        raise CalibrationError(
+            f"the {p.shape[0]} points are coplanar (condition number {cond:.3g} of the sphere "
+            "fit); a sphere needs at least 4 points not in one plane"
+        )
+    sol, *_ = np.linalg.lstsq(design, (q**2).sum(axis=1), rcond=None)
+    centre_q = sol[:3]
+    radius = np.sqrt(sol[3] + centre_q @ centre_q) * scale
+    return mean + centre_q * scale, float(radius), cond
+
+
+# ----------------------------------------------------------------------------------------------
+# homography and camera pose
+
+
+def _check_camera_matrix(k) -> np.ndarray:
+    """Check a 3 x 3 intrinsic matrix: upper triangular, ``fx, fy > 0``, ``K[2, 2] = 1``."""
+    k = check_shape("K", k, (3, 3))
+    lower = np.abs(k[[1, 2, 2], [0, 0, 1]])
+    if lower.max() > 1e-12 * np.abs(k).max():
+        raise CalibrationError(
+            "K is not upper triangular (K[1,0], K[2,0], K[2,1] = "
+            f"{format_values(k[[1, 2, 2], [0, 0, 1]])})"
+        )
+    if not (k[0, 0] > 0 and k[1, 1] > 0 and abs(k[2, 2] - 1.0) < 1e-12):
+        raise CalibrationError(
+            f"K is not an invertible camera matrix (diagonal {format_values(np.diag(k))}; expected "
+            "fx > 0, fy > 0, 1)"
+        )
+    return k
+
+
+def _homography_residuals(h8, xy, uv):
+    h = np.append(h8, 1.0).reshape(3, 3)
+    q = np.column_stack([xy, np.ones(len(xy))]) @ h.T
+    return (q[:, :2] / q[:, 2:] - uv).ravel()
+
+
+def _homography_jacobian(h8, xy, uv):
+    h = np.append(h8, 1.0).reshape(3, 3)
+    x1 = np.column_stack([xy, np.ones(len(xy))])
+    q = x1 @ h.T
+    w = q[:, 2:]
+    proj = q[:, :2] / w
+    jac = np.zeros((len(xy), 2, 8))
+    jac[:, 0, 0:3] = x1 / w
+    jac[:, 1, 3:6] = x1 / w
+    jac[:, :, 6:8] = -proj[:, :, None] * (xy / w)[:, None, :]
+    return jac.reshape(-1, 8)
+
+
+def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
+    """Homography ``H`` from target-plane points to image points, ``s [u v 1] = H [x y 1]``.
+
+    Computed by ``cv2.findHomography(method=0)`` (normalised DLT over all points, then OpenCV's
+    Levenberg-Marquardt on the reprojection error). OpenCV stops that refinement after 10
+    iterations at single-precision tolerances (noise-free reprojection error about 1e-5 px), so
+    with ``refine=True`` :func:`scipy.optimize.least_squares` continues the same minimisation (sum
+    of squared pixel reprojection errors, ``H[2, 2] = 1``) to double precision. This is the
+    maximum-likelihood homography for i.i.d. Gaussian pixel noise (hybrid Eq. 18, 20).
+
+    Parameters
+    ----------
+    plane_xy : array_like, shape (N, 2)
+        Points on the target plane in mm (``z = 0`` of the target frame), ``N >= 4``, not all
+        on a line.
+    image_uv : array_like, shape (N, 2)
+        Their image coordinates in px.
+    refine : bool
+        Continue OpenCV's refinement to convergence (see above).
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+        ``H`` normalised so that ``H[2, 2] = 1``.
+
+    Raises
+    ------
+    CalibrationError
+        On wrong shapes, non-finite values, fewer than 4 points, collinear plane or image points,
+        or if OpenCV finds no homography.
+    """
+    xy = check_shape("plane_xy", plane_xy, (None, 2))
+    uv = check_shape("image_uv", image_uv, (None, 2))
+    check_same_length("plane_xy", xy, "image_uv", uv)
+    if xy.shape[0] < 4:
+        raise CalibrationError(f"homography needs at least 4 points; got {xy.shape[0]}")
+    check_not_collinear("points", xy)
+    check_not_collinear("image points", uv)
+    h, _ = cv2.findHomography(xy, uv, method=0)
+    if h is None or h.shape != (3, 3) or not np.isfinite(h).all() or abs(h[2, 2]) < 1e-12:
+        raise CalibrationError(
+            f"cv2.findHomography found no homography for the {xy.shape[0]} points (degenerate "
+            "configuration, e.g. 3 of 4 points on a line)"
+        )
+    h = h / h[2, 2]
+    if refine:
+        res = least_squares(
+            _homography_residuals,
+            h.ravel()[:8],
+            jac=_homography_jacobian,
+            args=(xy, uv),
+            method="lm",
+            xtol=1e-15,
+            ftol=1e-15,
+            gtol=1e-15,
+        )
+        h = np.append(res.x, 1.0).reshape(3, 3)
+    return h
+
+
+def homography_to_pose(h, k) -> np.ndarray:
+    """Pose ``target2cam`` of a planar target from its homography (hybrid Eq. 19).
+
+    With ``M = K^-1 H = [m1 m2 m3]`` and ``gamma = 1 / |m1|``: ``r1 = gamma m1``,
+    ``r2 = gamma m2``, ``r3 = r1 x r2``, ``t = gamma m3``. The sign rule of the paper makes the
+    target lie in front of the camera: if ``t_z < 0``, ``gamma`` changes sign. The paper takes
+    ``[r1 r2 r3]`` as the rotation; under noise ``r1`` and ``r2`` are neither unit nor
+    orthogonal, so (a step the paper leaves unsaid) the matrix is replaced by the nearest
+    rotation in the Frobenius norm (SVD, :func:`calstudy.core.geometry.project_to_so3`), as Zhang
+    (2000) does. ``t`` keeps the paper's scale ``gamma = 1/|m1|``.
+
+    Parameters
+    ----------
+    h : array_like, shape (3, 3)
+        Homography from the target plane (mm) to the image (px), any scale and sign.
+    k : array_like, shape (3, 3)
+        Camera intrinsic matrix ``[[fx, skew, cx], [0, fy, cy], [0, 0, 1]]`` in px.
+
+    Returns
+    -------
+    numpy.ndarray, shape (4, 4)
+        ``target2cam``: target frame (plane ``z = 0``) to camera frame, translation in mm.
+
+    Raises
+    ------
+    CalibrationError
+        If ``H`` has a wrong shape or non-finite values, ``K`` is not an upper-triangular
+        invertible camera matrix, or ``H`` is singular in a way that gives no pose.
+    """
+    hm = check_shape("H", h, (3, 3))
+    km = _check_camera_matrix(k)
+    m = np.linalg.solve(km, hm)
+    norm1 = np.linalg.norm(m[:, 0])
+    if norm1 == 0.0 or np.linalg.norm(m[:, 1]) == 0.0:
+        raise CalibrationError(
+            f"H is singular: |K^-1 h1| = {norm1:.3g}, |K^-1 h2| = {np.linalg.norm(m[:, 1]):.3g}"
+        )
+    gamma = 1.0 / norm1
+    if m[2, 2] == 0.0:
+        raise CalibrationError("H gives a target origin in the camera's focal plane (t_z = 0 mm)")
+    if gamma * m[2, 2] < 0:
+        gamma = -gamma
+    r1, r2, t = gamma * m[:, 0], gamma * m[:, 1], gamma * m[:, 2]
+    rot = project_to_so3(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    return make_transform(rot, t)
+
+
+def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.ndarray:
+    """Pose ``target2cam`` from 3-D/2-D correspondences by ``cv2.solvePnP`` (iterative).
+
+    ``flags=cv2.SOLVEPNP_ITERATIVE`` minimises the sum of squared reprojection errors by
+    Levenberg-Marquardt: the maximum-likelihood pose for i.i.d. Gaussian pixel noise. Its
+    stopping rule leaves about 1e-7 mm of a noise-free pose, so with ``refine=True``
+    ``cv2.solvePnPRefineLM`` continues the same minimisation with a tolerance of 1e-16. OpenCV's
+    camera model has no skew: ``K[0, 1]`` must be 0.
+
+    Parameters
+    ----------
+    object_points : array_like, shape (N, 3)
+        Points in the target frame, mm. ``N >= 4`` for a planar target, ``N >= 6`` otherwise
+        (OpenCV's initialisation), not all on a line.
+    image_uv : array_like, shape (N, 2)
+        Their image coordinates, px.
+    k : array_like, shape (3, 3)
+        Camera intrinsic matrix.
+    dist : array_like or None
+        OpenCV distortion coefficients (4, 5, 8, 12 or 14 values), or None for none.
+    refine : bool
+        Continue OpenCV's refinement to convergence (see above).
+
+    Returns
+    -------
+    numpy.ndarray, shape (4, 4)
+        ``target2cam``.
+
+    Raises
+    ------
+    CalibrationError
+        On wrong shapes, non-finite values, too few or collinear points, skew in ``K`` or if
+        OpenCV fails.
+    """
+    obj = check_shape("object_points", object_points, (None, 3))
+    uv = check_shape("image_uv", image_uv, (None, 2))
+    check_same_length("object_points", obj, "image_uv", uv)
+    km = _check_camera_matrix(k)
+    if km[0, 1] != 0.0:
+        raise CalibrationError(f"OpenCV's camera model has no skew; K[0,1] = {km[0, 1]:.3g}")
+    n = obj.shape[0]
+    if n < 4:
+        raise CalibrationError(f"solve_pnp needs at least 4 points; got {n}")
+    check_not_collinear("object points", obj)
+    s = singular_values(obj - obj.mean(axis=0))
+    if not is_rank_deficient(s, 3) and n < 6:
+        raise CalibrationError(
+            f"non-planar object points need at least 6 points for SOLVEPNP_ITERATIVE; got {n}"
+        )
+    d = None if dist is None else check_shape("dist", np.ravel(dist), (None,))
+    try:
+        ok, rvec, tvec = cv2.solvePnP(obj, uv, km, d, flags=cv2.SOLVEPNP_ITERATIVE)
+    except cv2.error as exc:
+        raise CalibrationError(f"cv2.solvePnP failed on {n} points: {exc}") from exc
+    if not ok:
+        raise CalibrationError(f"cv2.solvePnP found no pose for the {n} points")
+    if refine:
+        criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-16)
+        rvec, tvec = cv2.solvePnPRefineLM(obj, uv, km, d, rvec, tvec, criteria=criteria)
+    rot, _ = cv2.Rodrigues(rvec)
+    return make_transform(rot, tvec.ravel())
+
+
+__all__ = [
+    "fit_homography",
+    "fit_rigid",
+    "fit_rotation",
+    "fit_sphere",
+    "homography_to_pose",
+    "solve_pnp",
+]

@@ -1,0 +1,515 @@
+"""Hand-eye calibration: the fixed-sphere method, AX = XB baselines, the stationary-sensor chain.
+
+The fixed-sphere method (hybrid paper, section 3.1, Eq. 6-14) uses one point fixed in the robot
+base frame, the centre of a standard sphere, measured by the flange-mounted sensor from many robot
+poses. With the flange pose ``flange2base = [R_0 | T_0]`` and the measured centre ``X_F`` in the
+sensor frame, every measurement satisfies ``X_B = R_0 (R_F X_F + T_F) + T_0`` (Eq. 7).
+
+* Pure translations (fixed ``R_0``) give ``R_F`` by SVD (Eq. 9-11).
+* Pose changes then give ``T_F`` by linear least squares (Eq. 12-14).
+* :func:`sphere_handeye_ml` refines ``R_F, T_F`` and ``X_B`` jointly on all measurements,
+  weighting by the sensor's noise: the maximum-likelihood estimate, whose covariance at the true
+  parameters is the Cramer-Rao bound.
+
+:func:`opencv_handeye` wraps ``cv2.calibrateHandEye`` (Tsai, Park, Horaud, Andreff, Daniilidis),
+which needs the full pose of a target in the sensor frame rather than a point.
+
+:func:`stationary_sensor_to_base` is Eq. 23: a stationary camera located in the robot base frame
+from one robot pose and two images of a two-sided target.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import pinocchio as pin
+
+from calstudy.core import geometry as geo
+from calstudy.core.errors import CalibrationError
+from calstudy.core.estimation import Estimate, condition_number, levenberg_marquardt
+from calstudy.estimators.fitting import fit_rotation
+
+#: largest orientation spread (rad) accepted among moves that should be pure translations
+PURE_TRANSLATION_TOL = np.deg2rad(0.01)
+#: condition number of Eq. 13's matrix above which T_F is declared undetermined
+MAX_CONDITION = 1e6
+
+OPENCV_METHODS = {
+    "Tsai": cv2.CALIB_HAND_EYE_TSAI,
+    "Park": cv2.CALIB_HAND_EYE_PARK,
+    "Horaud": cv2.CALIB_HAND_EYE_HORAUD,
+    "Andreff": cv2.CALIB_HAND_EYE_ANDREFF,
+    "Daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS,
+}
+
+
+def _check_measurements(name: str, flange2base, centres) -> tuple[np.ndarray, np.ndarray]:
+    poses = geo.check_transform(f"{name} flange poses", flange2base)
+    if poses.ndim != 3:
+        raise CalibrationError(f"{name} flange poses have shape {poses.shape}; expected (N, 4, 4)")
+    pts = geo.check_shape(f"{name} sphere centres", centres, (poses.shape[0], 3))
+    return poses, pts
+
+
+def rotation_from_translations(flange2base, centres, center: bool = True) -> np.ndarray:
+    """Sensor-to-flange rotation ``R_F`` from pure robot translations (Eq. 9-11).
+
+    Parameters
+    ----------
+    flange2base : (n, 4, 4) array
+        Flange poses in the robot base frame (mm); all with the same orientation.
+    centres : (n, 3) array
+        The fixed sphere centre measured in the sensor frame at each pose (mm).
+    center : bool
+        Subtract the centroids of the difference vectors as Eq. 11 does (the paper's method).
+        Without centring (orthogonal Procrustes) three non-collinear positions suffice.
+
+    Returns
+    -------
+    (3, 3) array
+        ``R_F`` of ``sensor2flange``.
+
+    Raises
+    ------
+    CalibrationError
+        If the orientations differ, if there are too few moves or they are collinear.
+    """
+    poses, x_f = _check_measurements("translation", flange2base, centres)
+    n = poses.shape[0]
+    need = 4 if center else 3
+    if n < need:
+        raise CalibrationError(
+            f"rotation from translations needs at least {need} positions; got {n}"
+        )
+    r0 = poses[0, :3, :3]
+    spread = geo.rotation_error(poses[:, :3, :3], r0)
+    if spread.max() > PURE_TRANSLATION_TOL:
+        worst = int(np.argmax(spread))
+        raise CalibrationError(
+            f"moves are not pure translations: orientation of move {worst} differs from move 0 "
+            f"by {np.rad2deg(spread[worst]):.4f} deg (tolerance "
+            f"{np.rad2deg(PURE_TRANSLATION_TOL):.4f} deg)"
+        )
+    p1 = x_f[0] - x_f[1:]  # Eq. 10, rows are X_F1 - X_Fi
+    p0 = (poses[1:, :3, 3] - poses[0, :3, 3]) @ r0  # rows are R_0^T (T_0i - T_01)
+    spread_pts = (poses[1:, :3, 3] - poses[1:, :3, 3].mean(axis=0)) if center else p0
+    sv = np.linalg.svd(spread_pts, compute_uv=False)
+    if sv.size < 2 or sv[1] <= 1e-9 * max(sv[0], 1.0):
+        raise CalibrationError(
+            "fewer than 3 non-collinear translations: the translation vectors span one line "
+            f"(singular values {', '.join(f'{s:.3g}' for s in sv)} mm); "
+            "add a translation off that line"
+        )
+    return fit_rotation(p1, p0, center=center)
+
+
+def translation_from_rotations(flange2base, centres, rotation) -> tuple[np.ndarray, float]:
+    """Sensor-to-flange translation ``T_F`` from pose changes, given ``R_F`` (Eq. 12-14).
+
+    Every pose is differenced with the first one (Eq. 13, read with ``X_Fi`` in row ``i``; the
+    printed equation repeats ``X_F2``) and the stacked system ``A T_F = B`` is solved by least
+    squares (Eq. 14).
+
+    Parameters
+    ----------
+    flange2base : (m, 4, 4) array
+        Flange poses with different orientations (mm).
+    centres : (m, 3) array
+        Sphere centre in the sensor frame at each pose (mm).
+    rotation : (3, 3) array
+        ``R_F`` from :func:`rotation_from_translations`.
+
+    Returns
+    -------
+    t_f : (3,) array
+        ``T_F`` in mm.
+    condition_number : float
+        Condition number of ``A``.
+
+    Raises
+    ------
+    CalibrationError
+        If all moves are pure translations (``T_F`` undefined) or the rotation axes are all
+        parallel (``A`` rank deficient; the condition number is given).
+    """
+    poses, x_f = _check_measurements("rotation", flange2base, centres)
+    r_f = geo.check_rotation("R_F", rotation)
+    m = poses.shape[0]
+    if m < 3:
+        raise CalibrationError(f"T_F needs at least 3 poses with different orientations; got {m}")
+    r = poses[:, :3, :3]
+    t = poses[:, :3, 3]
+    turn = geo.rotation_error(r[1:], r[0])
+    if turn.max() < 1e-9:
+        raise CalibrationError(
+            f"T_F is undefined: the {m} moves are pure translations "
+            f"(largest rotation between poses {np.rad2deg(turn.max()):.3g} deg); "
+            "add moves that change the flange orientation"
+        )
+    a = (r[1:] - r[0]).reshape(-1, 3)
+    world = np.einsum("nij,jk,nk->ni", r, r_f, x_f)  # R_0i R_F X_Fi
+    b = (world[0] - world[1:] + t[0] - t[1:]).reshape(-1)
+    cond = condition_number(a)
+    if cond > MAX_CONDITION:
+        raise CalibrationError(
+            f"rotation axes of the {m - 1} moves are parallel (condition number {cond:.3g}); "
+            "add a move about another axis"
+        )
+    t_f, *_ = np.linalg.lstsq(a, b, rcond=None)
+    return t_f, cond
+
+
+def sphere_handeye(
+    trans_flange2base, trans_centres, rot_flange2base, rot_centres, center: bool = True
+) -> Estimate:
+    """The paper's two-step fixed-sphere hand-eye calibration (Eq. 6-14).
+
+    Parameters
+    ----------
+    trans_flange2base, trans_centres : (n, 4, 4), (n, 3) arrays
+        Pure translations (same flange orientation) and the measured centres (mm).
+    rot_flange2base, rot_centres : (m, 4, 4), (m, 3) arrays
+        Pose changes and the measured centres (mm).
+    center : bool
+        Centre the difference vectors as Eq. 11 does.
+
+    Returns
+    -------
+    Estimate
+        ``value`` is ``sensor2flange`` (4 x 4); ``params`` is ``[T_F, rotvec(R_F)]``;
+        ``condition_number`` that of Eq. 13; no covariance (closed form).
+    """
+    r_f = rotation_from_translations(trans_flange2base, trans_centres, center=center)
+    t_f, cond = translation_from_rotations(rot_flange2base, rot_centres, r_f)
+    sensor2flange = geo.make_transform(r_f, t_f)
+    return Estimate(
+        value=sensor2flange,
+        params=geo.pose_to_vector(sensor2flange),
+        condition_number=cond,
+        method="sphere (Eq. 6-14)",
+        names=["tx", "ty", "tz", "rx", "ry", "rz"],
+    )
+
+
+def sphere_centre_in_base(flange2base, centres, sensor2flange) -> np.ndarray:
+    """Mean of ``R_0 (R_F X_F + T_F) + T_0`` over the measurements: the sphere centre in base."""
+    poses, x_f = _check_measurements("all", flange2base, centres)
+    chain = poses @ geo.check_transform("sensor2flange", sensor2flange)
+    return (np.einsum("nij,nj->ni", chain[:, :3, :3], x_f) + chain[:, :3, 3]).mean(axis=0)
+
+
+@dataclass
+class _SphereProblem:
+    poses: np.ndarray
+    x_f: np.ndarray
+    sigma: np.ndarray
+    base: np.ndarray  # rotation around which the correction is parametrised
+
+    def unpack(self, x):
+        rot = self.base @ geo.rotvec_to_matrix(x[3:6])
+        return geo.make_transform(rot, x[:3]), x[6:9]
+
+    def residuals(self, x):
+        s2f, x_b = self.unpack(x)
+        # predicted centre in the sensor frame: inv(flange2base @ sensor2flange) @ X_B
+        chain = self.poses @ s2f
+        rt = np.swapaxes(chain[:, :3, :3], 1, 2)
+        pred = np.einsum("nij,nj->ni", rt, x_b - chain[:, :3, 3])
+        return ((pred - self.x_f) / self.sigma).ravel()
+
+    def jacobian(self, x):
+        s2f, x_b = self.unpack(x)
+        r_f, t_f = s2f[:3, :3], s2f[:3, 3]
+        r0 = self.poses[:, :3, :3]
+        # q = R_0^T (X_B - T_0) - T_F is the centre in the flange frame; pred = R_F^T q
+        q = np.einsum("nji,nj->ni", r0, x_b - self.poses[:, :3, 3]) - t_f
+        n = q.shape[0]
+        jac = np.zeros((n, 3, 9))
+        jac[:, :, 0:3] = -r_f.T
+        # R_F = base exp(delta); exp(delta + e) = exp(delta) exp(Jr(delta) e), so
+        # d(R_F^T q)/d(delta) = [R_F^T q]_x Jr(delta), Jr the right Jacobian of SO(3)
+        pred = q @ r_f
+        jac[:, :, 3:6] = geo.skew(pred) @ pin.Jexp3(np.asarray(x[3:6], dtype=float))
+        jac[:, :, 6:9] = np.einsum("ji,njk->nik", r_f, r0.transpose(0, 2, 1))
+        return (jac / self.sigma[None, :, None]).reshape(n * 3, 9)
+
+
+def sphere_handeye_ml(flange2base, centres, sensor_sigma, initial: np.ndarray) -> Estimate:
+    """Maximum-likelihood fixed-sphere hand-eye: ``R_F, T_F, X_B`` from all measurements jointly.
+
+    Minimises the whitened differences between the measured and the predicted sphere centres in
+    the sensor frame, ``(X_F - R_F^T (R_0^T (X_B - T_0) - T_F)) / sigma``, by Levenberg-Marquardt
+    with an analytic Jacobian. With Gaussian sensor noise of known ``sigma`` this is the
+    maximum-likelihood estimate, and the covariance at the true parameters is the Cramer-Rao bound.
+
+    Parameters
+    ----------
+    flange2base : (N, 4, 4) array
+        All flange poses (translations and pose changes), mm.
+    centres : (N, 3) array
+        Measured sphere centres in the sensor frame, mm.
+    sensor_sigma : float or (3,) array
+        Standard deviation of a measured centre along the sensor axes, mm.
+    initial : (4, 4) array
+        Starting ``sensor2flange`` (for example :func:`sphere_handeye`).
+
+    Returns
+    -------
+    Estimate
+        ``value`` is ``sensor2flange``; ``params`` ``[T_F (3), delta (3), X_B (3)]`` with ``delta``
+        the rotation correction of ``R_F`` about ``initial`` in the sensor frame; ``covariance``
+        ``(J^T J)^-1`` of these parameters (whitened residuals, sigma = 1).
+
+    Raises
+    ------
+    CalibrationError
+        On bad shapes, fewer than 3 poses, or if LM does not converge.
+    """
+    poses, x_f = _check_measurements("ML", flange2base, centres)
+    init = geo.check_transform("initial sensor2flange", initial)
+    sigma = np.broadcast_to(np.asarray(sensor_sigma, dtype=float), (3,)).copy()
+    if np.any(sigma <= 0) or not np.all(np.isfinite(sigma)):
+        raise CalibrationError(f"sensor sigma must be positive and finite; got {sigma}")
+    if poses.shape[0] < 3:
+        raise CalibrationError(f"ML hand-eye needs at least 3 poses; got {poses.shape[0]}")
+    problem = _SphereProblem(poses, x_f, sigma, init[:3, :3])
+    x_b0 = sphere_centre_in_base(poses, x_f, init)
+    x0 = np.concatenate([init[:3, 3], np.zeros(3), x_b0])
+    est = levenberg_marquardt(
+        problem.residuals,
+        x0,
+        jac=problem.jacobian,
+        sigma=1.0,
+        names=["tx", "ty", "tz", "dx", "dy", "dz", "Xb", "Yb", "Zb"],
+        label="ML sphere hand-eye",
+        to_value=lambda x: problem.unpack(x)[0],
+    )
+    return est
+
+
+def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x_b) -> np.ndarray:
+    """Cramer-Rao bound of ``[T_F, delta, X_B]`` for the fixed-sphere problem at the truth.
+
+    Parameters are as in :func:`sphere_handeye_ml`, with the true ``sensor2flange`` and the true
+    sphere centre ``x_b`` in base. Returns the ``(9, 9)`` covariance ``(J^T J)^-1`` of the
+    whitened problem; ``sqrt(trace)`` of its blocks is the smallest RMS error any unbiased
+    estimator can reach from these poses and this noise.
+    """
+    poses, x_f = _check_measurements("CRB", flange2base, centres_true)
+    t = geo.check_transform("sensor2flange", sensor2flange)
+    sigma = np.broadcast_to(np.asarray(sensor_sigma, dtype=float), (3,)).copy()
+    problem = _SphereProblem(poses, x_f, sigma, t[:3, :3])
+    x = np.concatenate([t[:3, 3], np.zeros(3), np.asarray(x_b, dtype=float)])
+    jac = problem.jacobian(x)
+    return np.linalg.pinv(jac.T @ jac)
+
+
+def opencv_handeye(flange2base, target2sensor, method: str) -> np.ndarray:
+    """``sensor2flange`` by ``cv2.calibrateHandEye`` (AX = XB) with a named method.
+
+    Parameters
+    ----------
+    flange2base : (N, 4, 4) array
+        Flange poses in the base frame, mm.
+    target2sensor : (N, 4, 4) array
+        Pose of a fixed target in the sensor frame at each robot pose, mm.
+    method : str
+        One of ``"Tsai"``, ``"Park"``, ``"Horaud"``, ``"Andreff"``, ``"Daniilidis"``.
+
+    Returns
+    -------
+    (4, 4) array
+        ``sensor2flange``.
+
+    Raises
+    ------
+    CalibrationError
+        For an unknown method, fewer than 3 poses, bad shapes, or a non-finite OpenCV result.
+    """
+    if method not in OPENCV_METHODS:
+        raise CalibrationError(
+            f"unknown hand-eye method {method!r}; use one of {list(OPENCV_METHODS)}"
+        )
+    g2b = geo.check_transform("flange poses", flange2base)
+    t2c = geo.check_transform("target poses", target2sensor)
+    if g2b.ndim != 3 or g2b.shape != t2c.shape:
+        raise CalibrationError(
+            f"flange poses {g2b.shape} and target poses {t2c.shape} must both be (N, 4, 4)"
+        )
+    if g2b.shape[0] < 3:
+        raise CalibrationError(f"AX = XB needs at least 3 poses; got {g2b.shape[0]}")
+    rot, trans = cv2.calibrateHandEye(
+        list(g2b[:, :3, :3]),
+        list(g2b[:, :3, 3:]),
+        list(t2c[:, :3, :3]),
+        list(t2c[:, :3, 3:]),
+        method=OPENCV_METHODS[method],
+    )
+    out = geo.make_transform(rot, trans.ravel())
+    if not np.all(np.isfinite(out)):
+        raise CalibrationError(f"OpenCV {method} hand-eye returned a non-finite result")
+    return out
+
+
+def stationary_sensor_to_base(
+    flange2base, sensor2flange, front2flexcam, back2statcam, back2front
+) -> np.ndarray:
+    """Pose of a stationary camera in the robot base frame by Eq. 23.
+
+    ``statcam2base = flange2base @ sensor2flange @ front2flexcam @ inv(back2statcam @ front2back)``
+    which, with ``front2back = inv(back2front)``, is
+    ``flange2base @ sensor2flange @ front2flexcam @ back2front @ inv(back2statcam)``.
+
+    Parameters
+    ----------
+    flange2base : (4, 4) array
+        Flange pose reported by the robot (forward kinematics), mm.
+    sensor2flange : (4, 4) array
+        Hand-eye of the flexible sensor; its camera frame is taken as the sensor frame.
+    front2flexcam : (4, 4) array
+        Front face of the target in the flexible sensor's camera frame (from its image).
+    back2statcam : (4, 4) array
+        Back face of the target in the stationary camera frame (from its image).
+    back2front : (4, 4) array
+        Back face to front face of the target (pre-calibrated on a CMM).
+
+    Returns
+    -------
+    (4, 4) array
+        ``statcam2base``.
+    """
+    mats = [
+        geo.check_transform(name, m)
+        for name, m in [
+            ("flange2base", flange2base),
+            ("sensor2flange", sensor2flange),
+            ("front2flexcam", front2flexcam),
+            ("back2statcam", back2statcam),
+            ("back2front", back2front),
+        ]
+    ]
+    f2b, s2f, front2cam, back2cam, b2f = mats
+    return f2b @ s2f @ front2cam @ b2f @ geo.invert(back2cam)
+
+
+#: columns of a user's fixed-sphere measurement file, in order
+SPHERE_CSV_COLUMNS = ("id", "group", "x", "y", "z", "a", "b", "c", "sx", "sy", "sz")
+SPHERE_CSV_GROUPS = ("translation", "rotation")
+
+
+@dataclass
+class SphereMeasurements:
+    """Fixed-sphere hand-eye measurements: flange poses and sphere centres, split by group.
+
+    Attributes
+    ----------
+    ids : (N,) int array
+    group : (N,) str array, ``"translation"`` or ``"rotation"``
+    flange2base : (N, 4, 4) array, mm
+    centres : (N, 3) array, sphere centre in the sensor frame, mm
+    """
+
+    ids: np.ndarray
+    group: np.ndarray
+    flange2base: np.ndarray
+    centres: np.ndarray
+
+    def select(self, group: str) -> tuple[np.ndarray, np.ndarray]:
+        """Flange poses and centres of one group."""
+        mask = self.group == group
+        return self.flange2base[mask], self.centres[mask]
+
+    def to_frame(self):
+        """The measurements as a DataFrame in the CSV schema (KUKA A, B, C angles in degrees)."""
+        import pandas as pd
+
+        abc = geo.matrix_to_euler_zyx(self.flange2base[:, :3, :3])
+        xyz = self.flange2base[:, :3, 3]
+        return pd.DataFrame(
+            {
+                "id": self.ids,
+                "group": self.group,
+                "x": xyz[:, 0],
+                "y": xyz[:, 1],
+                "z": xyz[:, 2],
+                "a": abc[:, 0],
+                "b": abc[:, 1],
+                "c": abc[:, 2],
+                "sx": self.centres[:, 0],
+                "sy": self.centres[:, 1],
+                "sz": self.centres[:, 2],
+            }
+        )
+
+
+def read_sphere_measurements(path) -> SphereMeasurements:
+    """Read a user's fixed-sphere measurements from CSV (schema in the README).
+
+    One row per measurement with columns ``id, group, x, y, z, a, b, c, sx, sy, sz``: ``group`` is
+    ``translation`` (flange orientation unchanged) or ``rotation``; ``x, y, z`` (mm) and
+    ``a, b, c`` (deg, ``R = Rz(a) Ry(b) Rx(c)``, the KUKA convention) are the flange pose read
+    from the robot controller; ``sx, sy, sz`` (mm) the sphere centre measured in the sensor frame.
+
+    Raises
+    ------
+    CalibrationError
+        For a missing column, an empty file, or a cell that is empty, not a number or not finite,
+        naming the row (1-based, counting the header as row 1) and the column; for an unknown
+        group or a duplicated id.
+    """
+    import csv
+
+    with open(path, newline="") as handle:
+        reader = csv.DictReader(handle)
+        header = [h.strip() for h in (reader.fieldnames or [])]
+        missing = [c for c in SPHERE_CSV_COLUMNS if c not in header]
+        if missing:
+            raise CalibrationError(f"{path}: missing column(s) {', '.join(missing)}")
+        rows = list(reader)
+    if not rows:
+        raise CalibrationError(f"{path}: no measurement rows")
+    numeric = [c for c in SPHERE_CSV_COLUMNS if c != "group"]
+    values = np.zeros((len(rows), len(numeric)))
+    groups = []
+    for i, row in enumerate(rows):
+        line = i + 2
+        row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
+        for j, col in enumerate(numeric):
+            text = row.get(col, "")
+            try:
+                values[i, j] = float(text)
+            except ValueError:
+                raise CalibrationError(
+                    f"{path}: row {line}, column {col!r}: {text!r} is not a number"
+                ) from None
+            if not np.isfinite(values[i, j]):
+                raise CalibrationError(
+                    f"{path}: row {line}, column {col!r}: {text!r} is not finite"
+                )
+        if row["group"] not in SPHERE_CSV_GROUPS:
+            raise CalibrationError(
+                f"{path}: row {line}, column 'group': {row['group']!r} is not one of "
+                f"{', '.join(SPHERE_CSV_GROUPS)}"
+            )
+        groups.append(row["group"])
+    ids = values[:, 0]
+    if np.any(ids != np.round(ids)):
+        bad = int(np.argmax(ids != np.round(ids)))
+        raise CalibrationError(f"{path}: row {bad + 2}, column 'id': {ids[bad]} is not an integer")
+    uniq, counts = np.unique(ids, return_counts=True)
+    if np.any(counts > 1):
+        raise CalibrationError(f"{path}: id {int(uniq[counts > 1][0])} appears more than once")
+    rot = geo.euler_zyx_to_matrix(values[:, 4], values[:, 5], values[:, 6])
+    return SphereMeasurements(
+        ids=ids.astype(int),
+        group=np.array(groups),
+        flange2base=geo.make_transform(rot, values[:, 1:4]),
+        centres=values[:, 7:10],
+    )
+
+
+def write_sphere_measurements(measurements: SphereMeasurements, path) -> None:
+    """Write measurements in the CSV schema of :func:`read_sphere_measurements` (full precision)."""
+    measurements.to_frame().to_csv(path, index=False, float_format="%.10f")

@@ -1,0 +1,152 @@
+"""The workpiece frame from three datum features by the 3-2-1 rule (hybrid paper, section 2.2).
+
+Sensor A measures a slot (its y and z fix the workpiece), sensor B a hole (x, y, z), sensor C a
+point on a plane (z): six coordinates for six degrees of freedom. With the datum points measured in
+the robot base frame, ``P_B``, and their CAD coordinates in the workpiece frame, ``P_W``, the
+transform ``base2work = [R | T]`` satisfies the six equations of Eq. 3.
+
+Two solvers:
+
+* :func:`rps_frame_penalty`, the paper's: the twelve entries of ``[R | T]`` by Levenberg-Marquardt
+  on Eq. 5, ``E = sum F_i^2 + M sum f_i^2`` with the orthogonality conditions ``f_i`` of Eq. 4
+  weighted by the penalty factor ``M``.
+* :func:`rps_frame_so3`, the constrained solution: six parameters (translation and rotation
+  vector), so ``R`` is a rotation by construction, solving Eq. 3 alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calstudy.core import geometry as geo
+from calstudy.core.errors import CalibrationError
+from calstudy.core.estimation import Estimate, levenberg_marquardt
+
+#: (datum index, workpiece axis) of the six equations F1..F6 of Eq. 3: A:y,z  B:x,y,z  C:z
+RPS_EQUATIONS = ((0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 2))
+DATUM_NAMES = ("A (slot)", "B (hole)", "C (plane)")
+
+
+def check_datums(datums_base, datums_work) -> tuple[np.ndarray, np.ndarray]:
+    p_b = geo.check_shape("datums in base", datums_base, (3, 3))
+    p_w = geo.check_shape("datums in workpiece (CAD)", datums_work, (3, 3))
+    # A and B fix the line of rotation about z and y; C must lie off that line for rotation about x
+    ab = p_w[1] - p_w[0]
+    ac = p_w[2] - p_w[0]
+    ab_yz = np.linalg.norm(ab)
+    if ab_yz < 1e-6:
+        raise CalibrationError(
+            "datums A and B coincide in the CAD frame; the 3-2-1 rule needs a line"
+        )
+    off = np.linalg.norm(np.cross(ab, ac)) / ab_yz
+    if off < 1.0:
+        raise CalibrationError(
+            f"datum C lies {off:.3g} mm from the line through A and B; the rotation about that "
+            "line is undetermined (move C at least 1 mm off the line)"
+        )
+    return p_b, p_w
+
+
+def rps_equations(base2work, datums_base, datums_work) -> np.ndarray:
+    """The six residuals ``F1..F6`` of Eq. 3 (mm) for a 3 x 4 or 4 x 4 ``[R | T]``."""
+    m = np.asarray(base2work, dtype=float)
+    mapped = datums_base @ m[:3, :3].T + m[:3, 3]
+    return np.array([mapped[i, ax] - datums_work[i, ax] for i, ax in RPS_EQUATIONS])
+
+
+def orthogonality(rotation) -> np.ndarray:
+    """The six conditions ``f1..f6`` of Eq. 4 (column norms minus one, row dot products)."""
+    r = np.asarray(rotation, dtype=float)
+    return np.array(
+        [
+            r[:, 0] @ r[:, 0] - 1.0,
+            r[:, 1] @ r[:, 1] - 1.0,
+            r[:, 2] @ r[:, 2] - 1.0,
+            r[0] @ r[1],
+            r[0] @ r[2],
+            r[1] @ r[2],
+        ]
+    )
+
+
+def rps_frame_penalty(
+    datums_base, datums_work, initial, penalty: float = 1e4, max_nfev: int = 2000
+) -> Estimate:
+    """``base2work`` by Levenberg-Marquardt on Eq. 5 with orthogonality penalty ``M``.
+
+    Parameters
+    ----------
+    datums_base : (3, 3) array
+        Measured datum points A (slot), B (hole), C (plane) in the robot base frame, mm.
+    datums_work : (3, 3) array
+        The same datums in the workpiece frame (CAD), mm. Only the coordinates of Eq. 3 are used.
+    initial : (4, 4) array
+        Starting ``base2work`` (the nominal placement of the part on the fixture).
+    penalty : float
+        The penalty factor ``M`` (mm^2 per unit of squared orthogonality defect).
+    max_nfev : int
+        Evaluation budget of the solver.
+
+    Returns
+    -------
+    Estimate
+        ``value`` the 4 x 4 ``[R | T]`` as solved (``R`` orthonormal only as far as the penalty
+        enforces it); ``params`` the 12 entries (R row-major, then T); covariance from the
+        Jacobian with the residual scale estimated; ``condition_number`` of the Jacobian.
+
+    Raises
+    ------
+    CalibrationError
+        On bad input, a non-positive penalty, non-convergence, or a reflection (det R < 0).
+    """
+    p_b, p_w = check_datums(datums_base, datums_work)
+    init = geo.check_transform("initial base2work", initial)
+    if not np.isfinite(penalty) or penalty <= 0:
+        raise CalibrationError(f"penalty factor M must be positive and finite; got {penalty}")
+    weight = np.sqrt(penalty)
+
+    def unpack(x):
+        return geo.make_transform(x[:9].reshape(3, 3), x[9:])
+
+    def residuals(x):
+        r = x[:9].reshape(3, 3)
+        return np.concatenate([rps_equations(unpack(x), p_b, p_w), weight * orthogonality(r)])
+
+    x0 = np.concatenate([init[:3, :3].ravel(), init[:3, 3]])
+    est = levenberg_marquardt(
+        residuals,
+        x0,
+        names=[f"r{i}{j}" for i in range(1, 4) for j in range(1, 4)] + ["t1", "t2", "t3"],
+        max_nfev=max_nfev,
+        label=f"RPS penalty LM (M = {penalty:g})",
+        to_value=unpack,
+        sigma=1.0,
+    )
+    det = np.linalg.det(est.value[:3, :3])
+    if det < 0:
+        raise CalibrationError(f"the penalty solution is a reflection (det R = {det:.4f})")
+    return est
+
+
+def rps_frame_so3(datums_base, datums_work, initial) -> Estimate:
+    """``base2work`` with ``R`` constrained to SO(3): six parameters, six equations (Eq. 3).
+
+    Parameters are as in :func:`rps_frame_penalty`. ``params`` is ``[T, rotvec]`` of the
+    correction ``base2work = [R_init exp(w) | T]``; the covariance is that of unit-variance
+    datum coordinates (scale it by the datum measurement variance).
+    """
+    p_b, p_w = check_datums(datums_base, datums_work)
+    init = geo.check_transform("initial base2work", initial)
+
+    def unpack(x):
+        return geo.make_transform(init[:3, :3] @ geo.rotvec_to_matrix(x[3:]), x[:3])
+
+    est = levenberg_marquardt(
+        lambda x: rps_equations(unpack(x), p_b, p_w),
+        np.concatenate([init[:3, 3], np.zeros(3)]),
+        names=["t1", "t2", "t3", "w1", "w2", "w3"],
+        label="RPS on SO(3)",
+        to_value=unpack,
+        sigma=1.0,
+    )
+    return est

@@ -1,0 +1,1 @@
+"""Files: results writers, run records, book pages."""

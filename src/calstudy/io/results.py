@@ -1,0 +1,379 @@
+"""Writing results: tables, figures, run records and claim verdicts, each file atomically.
+
+Every file is written to a temporary name in its destination folder and renamed over the target
+with :func:`os.replace`, so an interrupted run leaves either the old file or the new one, never
+half a table. Outputs are byte-deterministic: the same inputs give the same bytes (fixed float
+format, PNG without a software stamp, ``run.json`` without commit hash or time stamps).
+
+Verdicts follow the rule of the claims register (reproduced / direction only / not reproduced /
+not testable) and are computed from Monte Carlo samples by :func:`verdict_vs_published` and
+:func:`verdict_vs_ml`; notebooks never type a verdict in.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib.metadata
+import json
+import os
+import platform
+import tempfile
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from calstudy.claims import CLAIM_COLUMNS, VERDICTS, ClaimRow, claim_ids
+from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
+
+NOTEBOOKS_DIR = REPO_ROOT / "notebooks"
+SOURCE_DIR = Path(__file__).resolve().parents[1]
+FLOAT_FORMAT = "%.6g"
+
+#: Distributions whose versions ``run.json`` records (the pinned runtime dependencies).
+PINNED_PACKAGES = (
+    "numpy",
+    "scipy",
+    "pandas",
+    "matplotlib",
+    "opencv-python-headless",
+    "pin",
+    "statsmodels",
+)
+
+_CLAIM_TEXT_COLUMNS = ("id", "published", "unit", "verdict", "notebook", "note")
+_CLAIM_FLOAT_COLUMNS = ("reproduced", "ci_low", "ci_high")
+
+
+# ----------------------------------------------------------------------------------------------
+# atomic files
+
+
+def _atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        write(tmp)
+        # mkstemp creates 0600; results are ordinary readable files
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_table(df: pd.DataFrame, path: str | Path) -> Path:
+    """Write ``df`` as CSV (no index, floats as ``%.6g``, ``\\n`` line ends), atomically.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        The table; its columns become the header.
+    path : str or pathlib.Path
+        Destination ``.csv`` file; missing parent folders are created.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    CalibrationError
+        If ``df`` is not a DataFrame.
+    """
+    if not isinstance(df, pd.DataFrame):
+        raise CalibrationError(f"write_table needs a pandas DataFrame, got {type(df).__name__}")
+    return _atomic_write(
+        path,
+        lambda tmp: df.to_csv(tmp, index=False, float_format=FLOAT_FORMAT, lineterminator="\n"),
+    )
+
+
+def write_figure(fig, path: str | Path, dpi: int = 120) -> Path:
+    """Save ``fig`` as PNG with the Agg renderer, atomically, then close it.
+
+    The PNG carries no software or time stamp (``metadata={"Software": None}``), so the same
+    figure gives the same bytes. Because the figure is closed, a notebook shows the saved file:
+    ``display(Image(filename=write_figure(fig, out / "name.png")))``.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure to save.
+    path : str or pathlib.Path
+        Destination ``.png`` file; missing parent folders are created.
+    dpi : int, default 120
+        Resolution.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
+    import matplotlib.pyplot as plt
+
+    try:
+        _atomic_write(
+            path,
+            lambda tmp: fig.savefig(
+                tmp, format="png", dpi=dpi, metadata={"Software": None}, backend="agg"
+            ),
+        )
+    finally:
+        plt.close(fig)
+    return Path(path)
+
+
+def notebook_writers(out_dir: str | Path):
+    """The two writers every notebook uses, bound to its result folder ``out_dir``.
+
+    Returns ``(save_table, show_figure)``: ``save_table(df, name)`` writes ``out_dir/name.csv``
+    (:func:`write_table`) and returns ``df``; ``show_figure(fig, name)`` writes
+    ``out_dir/name.png`` (:func:`write_figure`) and displays the saved file.
+    """
+    out = Path(out_dir)
+
+    def save_table(df: pd.DataFrame, name: str) -> pd.DataFrame:
+        write_table(df, out / f"{name}.csv")
+        return df
+
+    def show_figure(fig, name: str) -> Path:
+        from IPython.display import Image, display
+
+        path = write_figure(fig, out / f"{name}.png")
+        display(Image(filename=str(path)))
+        return path
+
+    return save_table, show_figure
+
+
+# ----------------------------------------------------------------------------------------------
+# run.json
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def _resolve_notebook(notebook: str | Path) -> Path:
+    path = Path(notebook)
+    if not path.is_absolute() and not path.exists():
+        path = NOTEBOOKS_DIR / path
+    if not path.is_file():
+        raise FileNotFoundError(f"notebook not found: {notebook}")
+    return path.resolve()
+
+
+def _label(path: Path) -> str:
+    try:
+        return path.resolve().relative_to(REPO_ROOT).as_posix()
+    except ValueError:
+        return path.name
+
+
+def source_files(notebook: str | Path | None = None) -> list[Path]:
+    """Files whose bytes define a run: ``src/calstudy/**/*.py``, ``data/**`` and the notebook.
+
+    Hidden files and ``__pycache__`` folders under ``data/`` are skipped. The list is sorted by
+    the path relative to the repository.
+    """
+    files = [p for p in SOURCE_DIR.rglob("*.py") if "__pycache__" not in p.parts]
+    if DATA_DIR.is_dir():
+        files += [
+            p
+            for p in DATA_DIR.rglob("*")
+            if p.is_file()
+            and not any(part.startswith(".") or part == "__pycache__" for part in p.parts)
+        ]
+    if notebook is not None:
+        files.append(_resolve_notebook(notebook))
+    return sorted(files, key=_label)
+
+
+def source_digest(notebook: str | Path | None = None) -> str:
+    """SHA-256 over the relative path and the bytes of every file of :func:`source_files`."""
+    h = hashlib.sha256()
+    for path in source_files(notebook):
+        content = path.read_bytes()
+        h.update(_label(path).encode() + b"\0" + len(content).to_bytes(8, "big"))
+        h.update(content)
+    return "sha256:" + h.hexdigest()
+
+
+def package_versions() -> dict[str, str]:
+    """Installed versions of :data:`PINNED_PACKAGES` (``"not installed"`` where missing)."""
+    out = {}
+    for name in PINNED_PACKAGES:
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def write_run_json(
+    out_dir: str | Path,
+    parameters: Mapping,
+    seed: int,
+    notebook: str | Path | None = None,
+) -> Path:
+    """Write ``out_dir/run.json``: what produced the results in ``out_dir``, atomically.
+
+    Recorded: the parameters, the seed, the versions of the pinned packages, the Python
+    version, the notebook name and ``source_digest`` (see :func:`source_digest`). No git commit
+    and no time stamp: results are committed in the same commit as the code, and two runs of the
+    same code must give the same bytes.
+
+    Parameters
+    ----------
+    out_dir : str or pathlib.Path
+        Result folder (created if missing).
+    parameters : mapping
+        The notebook parameters; values must be JSON serialisable (numpy scalars and arrays and
+        paths are converted).
+    seed : int
+        Seed of the run's ``numpy.random.Generator``.
+    notebook : str or pathlib.Path, optional
+        The notebook that ran; a bare name is looked up in ``notebooks/``. Its bytes enter the
+        digest.
+
+    Returns
+    -------
+    pathlib.Path
+        Path of ``run.json``.
+
+    Raises
+    ------
+    CalibrationError
+        If ``seed`` is not an integer or a parameter cannot be written as JSON.
+    FileNotFoundError
+        If ``notebook`` is given and not found.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+        raise CalibrationError(f"seed is {seed!r} ({type(seed).__name__}); expected an integer")
+    record = {
+        "notebook": None if notebook is None else _resolve_notebook(notebook).stem,
+        "parameters": dict(parameters),
+        "python": platform.python_version(),
+        "seed": int(seed),
+        "source_digest": source_digest(notebook),
+        "source_files": len(source_files(notebook)),
+        "versions": package_versions(),
+    }
+    try:
+        text = json.dumps(record, indent=2, sort_keys=True, default=_json_default) + "\n"
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(f"run.json parameters cannot be written as JSON: {exc}") from exc
+    return _atomic_write(Path(out_dir) / "run.json", lambda tmp: tmp.write_text(text))
+
+
+def write_claims(
+    out_dir: str | Path, rows: Iterable[ClaimRow], register: str | Path | None = None
+) -> Path:
+    """Write ``out_dir/claims.csv`` from claim rows, after checking them, atomically.
+
+    Parameters
+    ----------
+    out_dir : str or pathlib.Path
+        Result folder of the notebook (created if missing).
+    rows : iterable of ClaimRow
+        The verdicts the notebook computed.
+    register : str or pathlib.Path, optional
+        Claims register to check ids against; default ``data/claims.csv``.
+
+    Returns
+    -------
+    pathlib.Path
+        Path of the written ``claims.csv``.
+
+    Raises
+    ------
+    CalibrationError
+        If there are no rows, a verdict is not one of :data:`VERDICTS`, an id is not in the
+        register or appears twice, or the notebook name is empty.
+    """
+    rows = list(rows)
+    if not rows:
+        raise CalibrationError("no claim rows to write (0 rows)")
+    known = set(claim_ids(register))
+    seen: set[str] = set()
+    for row in rows:
+        if not isinstance(row, ClaimRow):
+            raise CalibrationError(f"claim row is a {type(row).__name__}; expected ClaimRow")
+        if row.verdict not in VERDICTS:
+            raise CalibrationError(
+                f"verdict {row.verdict!r} of claim {row.id!r} is not one of {', '.join(VERDICTS)}"
+            )
+        if row.id not in known:
+            raise CalibrationError(
+                f"claim id {row.id!r} is not in the claims register ({len(known)} ids)"
+            )
+        if row.id in seen:
+            raise CalibrationError(f"claim id {row.id!r} appears twice")
+        if not row.notebook:
+            raise CalibrationError(f"claim {row.id!r} names no notebook")
+        seen.add(row.id)
+    df = pd.DataFrame([dataclasses.asdict(r) for r in rows], columns=list(CLAIM_COLUMNS))
+    return write_table(df, Path(out_dir) / "claims.csv")
+
+
+def read_claims(path: str | Path) -> pd.DataFrame:
+    """Read a claims table written by :func:`write_claims` (text stays text, blanks are NaN)."""
+    return pd.read_csv(
+        path,
+        dtype={c: str for c in _CLAIM_TEXT_COLUMNS},
+        keep_default_na=False,
+        na_values={c: [""] for c in _CLAIM_FLOAT_COLUMNS},
+    )
+
+
+def aggregate_claims(results_root: str | Path | None = None) -> pd.DataFrame:
+    """Collect every ``<root>/*/claims.csv`` into ``<root>/claims.csv``, sorted by id.
+
+    Only computed rows are written; claims no notebook has computed yet are absent (the book
+    shows them as pending).
+
+    Parameters
+    ----------
+    results_root : str or pathlib.Path, optional
+        Folder holding one sub-folder per notebook; default ``results/``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The aggregated table (columns :data:`CLAIM_COLUMNS`).
+
+    Raises
+    ------
+    CalibrationError
+        If two notebooks report the same claim id.
+    """
+    root = RESULTS_DIR if results_root in (None, "") else Path(results_root)
+    frames = [read_claims(p) for p in sorted(root.glob("*/claims.csv"))]
+    if frames:
+        df = pd.concat(frames, ignore_index=True)[list(CLAIM_COLUMNS)]
+    else:
+        df = pd.DataFrame({c: pd.Series(dtype=float) for c in CLAIM_COLUMNS})
+    dup = df["id"][df["id"].duplicated()]
+    if len(dup):
+        first = dup.iloc[0]
+        where = ", ".join(df.loc[df["id"] == first, "notebook"])
+        raise CalibrationError(f"claim id {first!r} is reported by more than one notebook: {where}")
+    df = df.sort_values("id", kind="stable").reset_index(drop=True)
+    write_table(df, root / "claims.csv")
+    return df

@@ -1,0 +1,1 @@
+"""Models of the physical world: robots, sensors, optics, targets."""

@@ -1,0 +1,183 @@
+"""Calibration targets: the standard sphere and the two-sided 5 x 7 hole target of ``hybrid``.
+
+Dimensions the paper does not give are documented assumptions (each field says why). Lengths in
+mm. A target's points are given in its own frame; a pose such as ``front2cam`` maps them to a
+sensor, ``p_cam = front2cam @ p_front``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.geometry import check_shape, invert, make_transform
+
+#: Rotation by pi about x: the back frame's axes in the front frame (x kept, y and z reversed).
+_RX_PI = np.diag([1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True, eq=False)
+class Sphere:
+    """A standard (reference) sphere.
+
+    Attributes
+    ----------
+    radius_mm : float
+        Radius in mm. Assumption: 12.7 mm, i.e. a 25.4 mm (1 inch) diameter sphere. The paper
+        (hybrid 4.2) only says the sphere is very hard, has low thermal expansion and serves the
+        robot's thermal compensation; 25.4 mm is a stock size of ceramic reference spheres and
+        fits within the stripe of a robot-mounted line-laser sensor.
+    centre : numpy.ndarray, shape (3,)
+        Centre in mm in the frame the sphere is placed in (for the hand-eye study, the robot
+        base frame).
+    """
+
+    radius_mm: float = 12.7
+    centre: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.radius_mm) and self.radius_mm > 0):
+            raise CalibrationError(f"sphere radius must be positive; got {self.radius_mm} mm")
+        object.__setattr__(self, "centre", check_shape("centre", self.centre, (3,)))
+
+
+@dataclass(frozen=True, eq=False)
+class ManufacturedHoleTarget:
+    """One made hole target: true hole centres and the true back-to-front transform.
+
+    Attributes
+    ----------
+    front_points : numpy.ndarray, shape (rows * cols, 3)
+        True hole centres on the front face, in the front frame (``z = 0``), mm.
+    back_points : numpy.ndarray, shape (rows * cols, 3)
+        True centres of the same holes on the back face, in the back frame (``z = 0``), mm.
+    back2front : numpy.ndarray, shape (4, 4)
+        True transform from the back frame to the front frame;
+        ``back2front @ back_points[k]`` is the exit of hole ``k`` seen from the front frame.
+    """
+
+    front_points: np.ndarray
+    back_points: np.ndarray
+    back2front: np.ndarray
+
+
+@dataclass(frozen=True)
+class HoleTarget:
+    """The two-sided planar target of hybrid 3.2.2: ``rows x cols`` through-holes in a plate.
+
+    Frames. The *front frame* has its origin at the centre of the hole grid on the front face,
+    x along a row (increasing column index), y along a column (increasing row index), z normal
+    to the face pointing out of the front face. The *back frame* has its origin at the grid
+    centre on the back face, x along the front x and z pointing out of the back face, so it is
+    the front frame rotated by pi about x and moved by the thickness along -z_front. Holes are
+    numbered row by row: ``k = row * cols + col``; the same ``k`` is the same physical hole on
+    both faces.
+
+    Attributes
+    ----------
+    rows, cols : int
+        Holes per column and per row; the paper's target has 5 x 7.
+    pitch_mm : float
+        Centre distance of neighbouring holes. Assumption: 10 mm (the paper gives only the
+        5 x 7 count); it makes a 40 x 60 mm grid, which fits the field of view of an
+        inspection sensor at its working distance.
+    thickness_mm : float
+        Plate thickness. Assumption: 8 mm, a stiff aluminium plate of that size.
+    hole_tolerance_mm : float
+        Machining accuracy of the hole positions, 0.05 mm (hybrid 3.2.2). Read as: every hole
+        centre lies uniformly within +-tolerance of its CAD position in x and in y.
+    """
+
+    rows: int = 5
+    cols: int = 7
+    pitch_mm: float = 10.0
+    thickness_mm: float = 8.0
+    hole_tolerance_mm: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.rows < 2 or self.cols < 2 or self.rows * self.cols < 4:
+            raise CalibrationError(
+                f"hole target needs at least 2 x 2 holes; got {self.rows} x {self.cols}"
+            )
+        for name in ("pitch_mm", "thickness_mm"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise CalibrationError(f"hole target {name} must be positive; got {value}")
+        tol = self.hole_tolerance_mm
+        if not (np.isfinite(tol) and 0 <= tol < self.pitch_mm / 2):
+            raise CalibrationError(
+                f"hole_tolerance_mm must be in [0, pitch/2); got {tol} (pitch {self.pitch_mm})"
+            )
+
+    @property
+    def n_holes(self) -> int:
+        """Number of holes, ``rows * cols``."""
+        return self.rows * self.cols
+
+    def _grid_xy(self) -> np.ndarray:
+        col, row = np.meshgrid(np.arange(self.cols), np.arange(self.rows))
+        x = (col.ravel() - (self.cols - 1) / 2) * self.pitch_mm
+        y = (row.ravel() - (self.rows - 1) / 2) * self.pitch_mm
+        return np.column_stack([x, y])
+
+    def front_points(self) -> np.ndarray:
+        """Nominal (CAD) hole centres in the front frame, shape ``(rows * cols, 3)``, mm, z = 0."""
+        return np.column_stack([self._grid_xy(), np.zeros(self.n_holes)])
+
+    def back_points(self) -> np.ndarray:
+        """Nominal hole centres in the back frame, shape ``(rows * cols, 3)``, mm, z = 0.
+
+        The same holes as :meth:`front_points` (same order); y is mirrored because the back
+        frame is turned over about x.
+        """
+        return self.front_points() @ _RX_PI
+
+    def back2front(self) -> np.ndarray:
+        """Nominal transform from the back frame to the front frame, shape (4, 4)."""
+        return make_transform(_RX_PI, [0.0, 0.0, -self.thickness_mm])
+
+    def front2back(self) -> np.ndarray:
+        """Inverse of :meth:`back2front`."""
+        return invert(self.back2front())
+
+    def manufactured(self, rng: np.random.Generator) -> ManufacturedHoleTarget:
+        """Draw one physical target: true hole centres and the true back-to-front transform.
+
+        Model (an assumption; the paper states only the 0.05 mm accuracy):
+
+        - Each hole is a straight through-hole. Its centre on the front face is its CAD
+          position plus an error uniform in ``[-tol, tol]`` in x and in y, independent per hole
+          and axis (``tol = hole_tolerance_mm``).
+        - All holes are drilled in one set-up along one common axis that may be slightly off
+          the plate normal (perpendicularity error): hole ``k`` leaves the back face at its front
+          centre plus one common in-plane offset ``d``, uniform in ``[-tol, tol]`` in x and y.
+          The faces are parallel and the plate has its nominal thickness.
+        - The front frame is the reference (it is the CAD frame of the front face). The back
+          frame is defined by the back hole pattern: its origin is the centre of the nominal
+          grid shifted by ``d``, its axes those of the nominal back frame. So the true
+          ``back2front`` is the nominal one with its translation moved by ``d``, and the back
+          centres in the back frame carry the same per-hole errors (y mirrored) as the front.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            Source of the machining errors.
+
+        Returns
+        -------
+        ManufacturedHoleTarget
+        """
+        tol = self.hole_tolerance_mm
+        error = np.column_stack([rng.uniform(-tol, tol, (self.n_holes, 2)), np.zeros(self.n_holes)])
+        offset = np.append(rng.uniform(-tol, tol, 2), 0.0)
+        front = self.front_points() + error
+        back2front = self.back2front()
+        back2front[:3, 3] += offset
+        exits_front = front + offset + np.array([0.0, 0.0, -self.thickness_mm])
+        back = (exits_front - back2front[:3, 3]) @ back2front[:3, :3]
+        return ManufacturedHoleTarget(front, back, back2front)
+
+
+__all__ = ["HoleTarget", "ManufacturedHoleTarget", "Sphere"]

@@ -1,0 +1,1 @@
+"""The binocular hand-eye correction paper."""

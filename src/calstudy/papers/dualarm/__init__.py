@@ -1,0 +1,1 @@
+"""The dual-arm coded-marker global calibration paper."""

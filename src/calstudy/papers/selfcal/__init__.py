@@ -1,0 +1,1 @@
+"""The one-step self-calibration paper."""

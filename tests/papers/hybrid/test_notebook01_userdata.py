@@ -1,0 +1,41 @@
+"""Notebook 01 calibrates from a user's CSV when one is given, and says so."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import papermill as pm
+import pytest
+from support import ci_parameters
+
+from calstudy.estimators import handeye as he
+from calstudy.papers.hybrid import station as st
+
+ROOT = Path(__file__).resolve().parents[1]
+NOTEBOOK = ROOT / "notebooks" / "01_hybrid_global_calibration.ipynb"
+
+
+@pytest.mark.slow
+def test_notebook01_runs_on_user_csv(tmp_path):
+    rng = np.random.default_rng(11)
+    station = st.make_station(rng)
+    meas, _ = st.simulate_sphere_measurements(station, 4, 6, rng)
+    csv = tmp_path / "my_cell.csv"
+    he.write_sphere_measurements(meas, csv)
+    params = ci_parameters(NOTEBOOK.stem)
+    params |= {"measurements_csv": str(csv), "results_dir": str(tmp_path / "out")}
+    out_nb = tmp_path / "out.ipynb"
+    pm.execute_notebook(
+        str(NOTEBOOK), str(out_nb), parameters=params, cwd=str(NOTEBOOK.parent), progress_bar=False
+    )
+    text = json.dumps(json.loads(out_nb.read_text()))
+    assert f"calibrated from: user measurements from {csv} (10 rows)" in text
+    table = pd.read_csv(
+        tmp_path / "out" / "01_hybrid_global_calibration" / "handeye_calibration.csv"
+    )
+    assert "truth" not in table.columns
+    expected = he.sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
+    np.testing.assert_allclose(
+        table["paper_method"].to_numpy()[:3], expected[:3, 3], rtol=2e-6, atol=1e-6
+    )

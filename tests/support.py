@@ -1,0 +1,66 @@
+"""Helpers shared by several test modules (on pytest's ``pythonpath``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from calstudy.core.paths import REPO_ROOT
+from calstudy.models.targets import ManufacturedHoleTarget
+from calstudy.papers.hybrid import station as st
+
+NOTEBOOK_DIR = REPO_ROOT / "notebooks"
+CI_PARAMS = NOTEBOOK_DIR / "ci-params.yml"
+
+# The kernel papermill starts inherits these (the Makefile exports the same values).
+REPRODUCIBLE_ENV = {
+    "MPLBACKEND": "Agg",
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "PYTHONHASHSEED": "0",
+    "JUPYTER_PREFER_ENV_PATH": "1",
+}
+
+
+def ci_parameters(stem: str) -> dict:
+    """The small CI values of notebook ``stem``: its own mapping in ``notebooks/ci-params.yml``."""
+    if not CI_PARAMS.is_file():
+        pytest.fail("notebooks/ci-params.yml is missing; it holds the small CI parameter values")
+    data = yaml.safe_load(CI_PARAMS.read_text()) or {}
+    stray = sorted(k for k, v in data.items() if not isinstance(v, dict))
+    if stray:
+        pytest.fail(f"ci-params.yml has top-level values {stray}; put them under a notebook stem")
+    if stem not in data:
+        pytest.fail(f"ci-params.yml has no mapping for {stem}")
+    return dict(data[stem])
+
+def run(path: Path, parameters: dict, tmp_path: Path) -> Path:
+    """Execute ``path`` with papermill as ``make reproduce`` does; return its results folder."""
+    import papermill
+
+    papermill.execute_notebook(
+        str(path),
+        str(tmp_path / path.name),
+        parameters=parameters,
+        cwd=str(NOTEBOOK_DIR),
+        progress_bar=False,
+    )
+    return Path(parameters["results_dir"]) / path.stem
+
+
+def ideal_station(seed=0, robot_errors=False):
+    """A hybrid station with every noise source off and a perfectly made target."""
+    rng = np.random.default_rng(seed)
+    s = st.make_station(
+        rng, robot_errors=robot_errors, sigma_point_mm=0.0, pixel_sigma=0.0, repeatability_mm=0.0
+    )
+    perfect = ManufacturedHoleTarget(
+        front_points=s.target.front_points(),
+        back_points=s.target.back_points(),
+        back2front=s.target.back2front(),
+    )
+    return st.with_overrides(s, target_made=perfect, back2front_cmm=s.target.back2front()), rng
