@@ -153,3 +153,15 @@ def bootstrap_interval(
         )
     lo, hi = np.quantile(values, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
     return float(estimate[0]), float(lo), float(hi)
+
+
+def median_and_spread(samples, level: float = 0.95) -> tuple[float, float, float]:
+    """Median of ``samples`` and their central ``level`` percentile interval (a spread over
+    trials, not a confidence interval of the median: that is
+    :func:`calstudy.core.verdicts.median_interval`).
+
+    One sample gives ``(x, x, x)``. Raises :class:`CalibrationError` on no or non-finite values.
+    """
+    a = _finite_samples("samples", samples, min_count=1).reshape(-1)
+    lo, hi = percentile_interval(a, level) if a.size >= 2 else (float(a[0]), float(a[0]))
+    return float(np.median(a)), lo, hi
