@@ -147,9 +147,8 @@ def test_notebook_writers_write_into_the_folder_and_show_the_saved_file(tmp_path
     assert (tmp_path / "nb" / "t.csv").read_bytes() == write_table(
         df, tmp_path / "t.csv"
     ).read_bytes()
-    path = show_figure(make_figure(), "f")
-    assert path == tmp_path / "nb" / "f.png"
-    assert shown[0].data == path.read_bytes()
+    assert show_figure(make_figure(), "f") is None  # a cell ending with it shows no path
+    assert shown[0].data == (tmp_path / "nb" / "f.png").read_bytes()
 
 
 def test_write_figure_is_atomic(tmp_path, monkeypatch):

@@ -138,7 +138,8 @@ def notebook_writers(out_dir: str | Path):
 
     Returns ``(save_table, show_figure)``: ``save_table(df, name)`` writes ``out_dir/name.csv``
     (:func:`write_table`) and returns ``df``; ``show_figure(fig, name)`` writes
-    ``out_dir/name.png`` (:func:`write_figure`) and displays the saved file.
+    ``out_dir/name.png`` (:func:`write_figure`) and displays the saved file; it returns None,
+    so a notebook cell that ends with it shows the figure and no file path.
     """
     out = Path(out_dir)
 
@@ -146,12 +147,11 @@ def notebook_writers(out_dir: str | Path):
         write_table(df, out / f"{name}.csv")
         return df
 
-    def show_figure(fig, name: str) -> Path:
+    def show_figure(fig, name: str) -> None:
         from IPython.display import Image, display
 
         path = write_figure(fig, out / f"{name}.png")
         display(Image(filename=str(path)))
-        return path
 
     return save_table, show_figure
 
