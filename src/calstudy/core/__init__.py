@@ -1,0 +1,1 @@
+"""Core layer of calstudy: errors, geometry, estimation, statistics, randomness, Monte Carlo."""
