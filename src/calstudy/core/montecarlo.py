@@ -1,0 +1,813 @@
+"""Monte Carlo engine: trials over sweep points, the same rows whatever runs them.
+
+An :class:`Experiment` names a trial function, the scenario it reads, a number of trials and the
+sweep points; :func:`run` calls ``trial(scenario, rng, **point)`` for every (point, trial) pair
+and returns the rows as one :class:`pandas.DataFrame`, with the point's keys and the ``trial``
+index added to each row.
+
+Reproducibility
+---------------
+Each trial draws from its own generator, derived from (seed, experiment name, sweep point, trial
+index) alone (see :func:`trial_rng`), and the rows are sorted by (point order, trial, row order
+within the trial). Serial runs, ``n_jobs`` worker processes and a Dask cluster therefore give
+byte-identical tables, whatever order the trials finish in.
+
+Cache
+-----
+With ``cache_dir``, every finished trial's rows are pickled at once (temporary file, then
+:func:`os.replace`) to::
+
+    cache_dir/<experiment>/<point-slug>/<key>/trial-<trial:06d>.pkl
+
+``<point-slug>`` is a readable form of the point (``sigma=0.05``, ``_`` for the single point
+``{}``); ``<key>`` is the first 16 hex digits of the SHA-256 of the canonical JSON of the seed,
+the experiment name, the point, the trial function (module and qualified name) and the scenario
+fingerprint; ``<key>/key.json`` holds that JSON. A later run reuses a stored trial only if all of
+these match, so an interrupted run resumes, a larger ``n_trials`` computes only the new trials
+and a smaller one returns the first trials. Changing the *code* of a trial function does not
+change its fingerprint: delete the cache, or put a version in ``Experiment.scenario_key``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import enum
+import hashlib
+import json
+import operator
+import os
+import pickle
+import re
+import shutil
+import sys
+import time
+import traceback
+import warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path, PurePath
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from calstudy.core.errors import CalibrationError
+
+try:  # optional: caps BLAS threads of libraries already loaded in a process
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover - depends on the environment
+    threadpool_limits = None
+
+__all__ = ["Experiment", "run", "run_many", "staged_dir", "trial_rng"]
+
+#: Version of the cache file layout and key; bump it when either changes.
+CACHE_FORMAT = 1
+_PICKLE_PROTOCOL = 4
+_NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+_SCALARS = (type(None), bool, int, float, str, np.bool_, np.integer, np.floating)
+
+Rows = list[dict[str, Any]]
+# (point index, trial index, rows or None, exception or None)
+Outcome = tuple[int, int, Rows | None, BaseException | None]
+
+
+# ----------------------------------------------------------------------------------------------
+# the experiment
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A Monte Carlo experiment: ``n_trials`` calls of ``trial`` at each sweep point.
+
+    Parameters
+    ----------
+    name : str
+        Short identifier, e.g. ``"handeye"`` or ``"noise_sweep"``: letters, digits, ``_``, ``.``
+        and ``-``, starting with a letter or digit. It keys the random streams and names the
+        cache folder.
+    trial : callable
+        ``trial(scenario, rng, **point) -> dict | list[dict]``, a module-level function (workers
+        import it by name). Each dict is one row: column name to scalar value. It must draw
+        only from ``rng`` (a :class:`numpy.random.Generator`).
+    scenario : object
+        Whatever the trial reads (a dataclass, typically); picklable.
+    n_trials : int
+        Trials per sweep point, at least 1.
+    points : sequence of mappings, optional
+        Sweep points, each a mapping of keyword arguments of ``trial`` to scalar values (None,
+        bool, int, float, str or a NumPy scalar). All points have the same keys; none is
+        repeated. The default ``({},)`` is a single point without arguments.
+    scenario_key : str, optional
+        The scenario's cache fingerprint. By default it is the SHA-256 of a canonical JSON form
+        of ``scenario`` (dataclass fields, mappings, sequences, array bytes); give a key when the
+        scenario holds objects without a stable form (the cache then refuses to guess).
+
+    Raises
+    ------
+    CalibrationError
+        If any argument breaks the rules above.
+    """
+
+    name: str
+    trial: Callable[..., Mapping[str, Any] | Sequence[Mapping[str, Any]]]
+    scenario: Any
+    n_trials: int
+    points: Sequence[Mapping[str, Any]] = ({},)
+    scenario_key: str | None = None
+
+    def __post_init__(self) -> None:
+        _check_name(self.name)
+        if not callable(self.trial):
+            raise CalibrationError(
+                f"experiment {self.name!r}: trial must be callable, got {type(self.trial).__name__}"
+            )
+        object.__setattr__(self, "n_trials", _check_count(self.n_trials, self.name))
+        object.__setattr__(self, "points", _check_points(self.points, self.name))
+        if self.scenario_key is not None and not isinstance(self.scenario_key, str):
+            raise CalibrationError(
+                f"experiment {self.name!r}: scenario_key must be a str or None, "
+                f"got {type(self.scenario_key).__name__}"
+            )
+
+
+def _check_name(name: object) -> str:
+    if not isinstance(name, str) or not _NAME_PATTERN.fullmatch(name):
+        raise CalibrationError(
+            f"experiment name must be a non-empty string of letters, digits, '_', '.' and '-' "
+            f"starting with a letter or digit, got {name!r}"
+        )
+    return name
+
+
+def _check_count(n_trials: object, name: str) -> int:
+    if isinstance(n_trials, bool | np.bool_) or not isinstance(n_trials, int | np.integer):
+        raise CalibrationError(
+            f"experiment {name!r}: n_trials must be an integer, got {n_trials!r}"
+        )
+    if n_trials < 1:
+        raise CalibrationError(f"experiment {name!r}: n_trials must be at least 1, got {n_trials}")
+    return int(n_trials)
+
+
+def _check_points(points: object, name: str) -> tuple[dict[str, Any], ...]:
+    if isinstance(points, Mapping):
+        raise CalibrationError(
+            f"experiment {name!r}: points must be a sequence of mappings, got one mapping "
+            f"{dict(points)!r}; wrap it in a list"
+        )
+    if isinstance(points, str | bytes) or not isinstance(points, Sequence) or not points:
+        raise CalibrationError(
+            f"experiment {name!r}: points must be a non-empty sequence of mappings, got {points!r}"
+        )
+    checked: list[dict[str, Any]] = []
+    seen: dict[str, int] = {}
+    for i, point in enumerate(points):
+        if not isinstance(point, Mapping):
+            raise CalibrationError(
+                f"experiment {name!r}: points[{i}] must be a mapping, got {type(point).__name__}"
+            )
+        point = dict(point)
+        if "trial" in point:
+            raise CalibrationError(
+                f"experiment {name!r}: points[{i}] has the key 'trial', which the engine uses for "
+                "the trial index; rename it"
+            )
+        if checked and point.keys() != checked[0].keys():
+            raise CalibrationError(
+                f"experiment {name!r}: points[{i}] has keys {sorted(point)}, points[0] has "
+                f"{sorted(checked[0])}; every sweep point needs the same keys"
+            )
+        key = _point_json(point)
+        if key in seen:
+            raise CalibrationError(
+                f"experiment {name!r}: points[{i}] repeats points[{seen[key]}] ({point!r})"
+            )
+        seen[key] = i
+        checked.append(point)
+    return tuple(checked)
+
+
+# ----------------------------------------------------------------------------------------------
+# random streams
+
+
+def trial_rng(
+    seed: int, experiment: str, point: Mapping[str, Any], trial: int
+) -> np.random.Generator:
+    """The generator that the engine hands to one trial, to reproduce it by hand.
+
+    The stream is ``Generator(PCG64(SeedSequence(entropy=seed, spawn_key=key)))`` with ``key``
+    the 8 little-endian uint32 words of the SHA-256 of the UTF-8 ``experiment``, then the 8
+    words of the SHA-256 of ``json.dumps(point, sort_keys=True, separators=(",", ":"))``
+    (NumPy scalars first turned into Python ones; floats are written as their shortest
+    round-trip repr, so ``1`` and ``1.0`` are different points), then ``trial``. It depends on
+    nothing else: not on the worker, the order of trials, Python's ``hash`` or other points.
+
+    Parameters
+    ----------
+    seed : int
+        The run's seed, >= 0.
+    experiment : str
+        The experiment name.
+    point : mapping
+        The sweep point, ``{}`` for an experiment without sweep.
+    trial : int
+        Trial index, >= 0.
+
+    Returns
+    -------
+    numpy.random.Generator
+        A fresh PCG64 generator.
+
+    Raises
+    ------
+    CalibrationError
+        On a negative or non-integer seed or trial, a bad name or a point value that is not a
+        scalar.
+
+    Examples
+    --------
+    >>> rng = trial_rng(7, "noise_sweep", {"sigma": 0.05}, 3)
+    """
+    seed = _check_index(seed, "seed")
+    _check_name(experiment)
+    if not isinstance(point, Mapping):
+        raise CalibrationError(f"point must be a mapping, got {type(point).__name__}")
+    prefix = _spawn_prefix(experiment, _point_json(point))
+    return _rng(seed, prefix, _check_index(trial, "trial"))
+
+
+def _check_index(value: object, what: str) -> int:
+    if isinstance(value, bool | np.bool_):
+        raise CalibrationError(f"{what} must be a non-negative integer, got {value!r}")
+    try:
+        index = operator.index(value)
+    except TypeError:
+        raise CalibrationError(f"{what} must be a non-negative integer, got {value!r}") from None
+    if index < 0:
+        raise CalibrationError(f"{what} must be a non-negative integer, got {index}")
+    return index
+
+
+def _words(text: str) -> tuple[int, ...]:
+    digest = hashlib.sha256(text.encode("utf-8")).digest()
+    return tuple(int.from_bytes(digest[i : i + 4], "little") for i in range(0, 32, 4))
+
+
+def _spawn_prefix(experiment: str, point_json: str) -> tuple[int, ...]:
+    return (*_words(experiment), *_words(point_json))
+
+
+def _rng(seed: int, prefix: tuple[int, ...], trial: int) -> np.random.Generator:
+    # PCG64 named explicitly: default_rng's bit generator may change between NumPy versions
+    sequence = np.random.SeedSequence(entropy=seed, spawn_key=(*prefix, trial))
+    return np.random.Generator(np.random.PCG64(sequence))
+
+
+def _point_json(point: Mapping[str, Any]) -> str:
+    canonical = {}
+    for key, value in point.items():
+        if not isinstance(key, str):
+            raise CalibrationError(f"sweep point keys must be str, got {key!r}")
+        if not isinstance(value, _SCALARS):
+            raise CalibrationError(
+                f"sweep point value {key}={value!r} is a {type(value).__name__}; use a scalar "
+                "(None, bool, int, float, str) and let the trial look the object up in the scenario"
+            )
+        canonical[key] = value.item() if isinstance(value, np.generic) else value
+    return json.dumps(canonical, sort_keys=True, separators=(",", ":"))
+
+
+def _label(point: Mapping[str, Any]) -> str:
+    return " ".join(f"{key}={value}" for key, value in point.items())
+
+
+# ----------------------------------------------------------------------------------------------
+# one trial (runs in the worker)
+
+
+@dataclass(frozen=True)
+class _PointJob:
+    """What a worker needs for the trials of one point (pickled once per batch of calls)."""
+
+    trial: Callable[..., Any]
+    scenario: Any
+    seed: int
+    prefix: tuple[int, ...]
+    point: dict[str, Any]
+    index: int
+
+
+_worker_blas_limited = False
+
+
+def _limit_worker_blas() -> None:
+    # loky workers start with the BLAS variables at 1 (inner_max_num_threads) and Dask's nanny
+    # sets them too; threadpoolctl also caps a library loaded before the variables were read.
+    global _worker_blas_limited
+    if not _worker_blas_limited and threadpool_limits is not None:
+        threadpool_limits(1)
+    _worker_blas_limited = True
+
+
+def _run_trial(job: _PointJob, trial: int, in_worker: bool) -> Outcome:
+    if in_worker:
+        _limit_worker_blas()
+    rng = _rng(job.seed, job.prefix, trial)
+    try:
+        rows = _as_rows(job.trial(job.scenario, rng, **job.point), job.point)
+    except Exception as exc:  # reported by the caller with experiment, point and trial
+        return job.index, trial, None, _portable(exc) if in_worker else exc
+    return job.index, trial, rows, None
+
+
+def _as_rows(out: object, point: Mapping[str, Any]) -> Rows:
+    if isinstance(out, Mapping):
+        out = [out]
+    elif not isinstance(out, list | tuple):
+        raise CalibrationError(
+            f"the trial returned a {type(out).__name__}; return a dict or a list of dicts"
+        )
+    rows = []
+    for i, row in enumerate(out):
+        if not isinstance(row, Mapping):
+            raise CalibrationError(f"row {i} of the trial is a {type(row).__name__}, not a dict")
+        if not all(isinstance(key, str) for key in row):
+            raise CalibrationError(f"row {i} of the trial has a column name that is not a str")
+        clash = sorted(key for key in row if key == "trial" or key in point)
+        if clash:
+            raise CalibrationError(
+                f"row {i} of the trial has column(s) {clash}, which the engine adds (trial index "
+                "and sweep point keys); rename them"
+            )
+        rows.append(dict(row))
+    return rows
+
+
+def _portable(exc: Exception) -> BaseException:
+    """``exc`` with the worker's traceback as a note, or a RuntimeError if it does not pickle."""
+    text = traceback.format_exc()
+    try:
+        exc.add_note(f"traceback in the worker:\n{text}")
+        pickle.loads(pickle.dumps(exc))
+    except Exception:
+        return RuntimeError(f"{type(exc).__name__}: {exc}\ntraceback in the worker:\n{text}")
+    return exc
+
+
+# ----------------------------------------------------------------------------------------------
+# where the trials run
+
+
+@contextlib.contextmanager
+def _outcomes(
+    pending: Sequence[tuple[_PointJob, int]], n_jobs: int | None, scheduler: object
+) -> Iterator[Iterator[Outcome]]:
+    """Yield an iterator over the outcomes of ``pending`` trials, in the order they finish."""
+    if scheduler is None and n_jobs != 1:
+        import joblib
+
+        # joblib reads n_jobs=None as 1; here it means all cores, as -1 does
+        n_jobs = -1 if n_jobs is None else n_jobs
+        n_jobs = 1 if joblib.effective_n_jobs(n_jobs) == 1 else n_jobs
+    if not pending:
+        yield iter(())
+    elif scheduler is None and n_jobs == 1:
+        limits = threadpool_limits(1) if threadpool_limits else contextlib.nullcontext()
+        with limits:
+            yield (_run_trial(job, trial, False) for job, trial in pending)
+    else:
+        import joblib
+
+        tasks = (joblib.delayed(_run_trial)(job, trial, True) for job, trial in pending)
+        with contextlib.ExitStack() as stack:
+            if scheduler is None:
+                stack.enter_context(joblib.parallel_config(backend="loky", inner_max_num_threads=1))
+            else:
+                client = stack.enter_context(_dask_client(scheduler))
+                stack.enter_context(joblib.parallel_config(backend="dask", client=client))
+                n_jobs = -1
+            # batch_size="auto": joblib groups fast trials so dispatch does not dominate them
+            results = joblib.Parallel(n_jobs=n_jobs, return_as="generator_unordered")(tasks)
+            try:
+                yield results
+            finally:
+                with warnings.catch_warnings():
+                    # after a failed trial the engine drops the trials in flight on purpose
+                    warnings.filterwarnings("ignore", "[0-9]+ tasks ", UserWarning)
+                    results.close()
+
+
+@contextlib.contextmanager
+def _dask_client(scheduler: object) -> Iterator[Any]:
+    from distributed import Client
+
+    if isinstance(scheduler, Client):
+        yield scheduler
+    elif isinstance(scheduler, str):
+        client = Client(scheduler, set_as_default=False)
+        try:
+            yield client
+        finally:
+            client.close()
+    else:
+        raise CalibrationError(
+            "scheduler must be a Dask scheduler address such as 'tcp://host:8786' or a "
+            f"distributed.Client, got {type(scheduler).__name__}"
+        )
+
+
+# ----------------------------------------------------------------------------------------------
+# cache
+
+
+class _Cache:
+    """Per-trial row files of one experiment run (layout in the module docstring)."""
+
+    def __init__(self, root: Path, experiment: Experiment, seed: int, point_jsons: list[str]):
+        self.root = root / experiment.name
+        base = {
+            "format": CACHE_FORMAT,
+            "seed": seed,
+            "experiment": experiment.name,
+            "trial_function": _function_fingerprint(experiment.trial, experiment.name),
+            "scenario": experiment.scenario_key
+            if experiment.scenario_key is not None
+            else _scenario_digest(experiment.scenario, experiment.name),
+        }
+        self.keys = [{**base, "point": point_json} for point_json in point_jsons]
+        self.dirs = [
+            self.root / _slug(point) / hashlib.sha256(_dumps(key).encode()).hexdigest()[:16]
+            for point, key in zip(experiment.points, self.keys, strict=True)
+        ]
+
+    def remove_stale(self, started: float) -> None:
+        """Delete temporary files older than ``started`` (epoch s), left by a killed run."""
+        if self.root.is_dir():
+            for tmp in self.root.rglob("*.tmp"):
+                with contextlib.suppress(FileNotFoundError):
+                    if tmp.stat().st_mtime < started:
+                        tmp.unlink()
+
+    def _path(self, point: int, trial: int) -> Path:
+        return self.dirs[point] / f"trial-{trial:06d}.pkl"
+
+    def load(self, point: int, trial: int) -> Rows | None:
+        """The stored rows of one trial, or None if absent or stored under another key."""
+        try:
+            with open(self._path(point, trial), "rb") as f:
+                stored = pickle.load(f)
+        except FileNotFoundError:
+            return None
+        except Exception:
+            return None  # unreadable (e.g. a class renamed since): computed again, overwritten
+        if not isinstance(stored, dict) or stored.get("key") != self.keys[point]:
+            return None
+        if stored.get("trial") != trial:
+            return None
+        return stored["rows"]
+
+    def load_all(self, n_trials: int) -> dict[tuple[int, int], Rows]:
+        """The stored rows of trials 0 to ``n_trials - 1`` of every point, by (point, trial)."""
+        stored = {}
+        for point in range(len(self.dirs)):
+            for trial in range(n_trials):
+                if (rows := self.load(point, trial)) is not None:
+                    stored[point, trial] = rows
+        return stored
+
+    def save(self, point: int, trial: int, rows: Rows) -> None:
+        """Store the rows of one trial atomically."""
+        folder = self.dirs[point]
+        if not (folder / "key.json").exists():
+            folder.mkdir(parents=True, exist_ok=True)
+            _write_atomic(folder / "key.json", (_dumps(self.keys[point]) + "\n").encode())
+        record = {"key": self.keys[point], "trial": trial, "rows": rows}
+        _write_atomic(self._path(point, trial), pickle.dumps(record, protocol=_PICKLE_PROTOCOL))
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _dumps(obj: object) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"))
+
+
+def _slug(point: Mapping[str, Any]) -> str:
+    text = ",".join(f"{key}={value}" for key, value in point.items())
+    text = re.sub(r"[^A-Za-z0-9._=,+-]", "_", text)[:80] or "_"
+    return "_" + text[1:] if text.startswith(".") else text
+
+
+def _qualified(obj: object) -> str | None:
+    module, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+    return None if module is None or qualname is None else f"{module}:{qualname}"
+
+
+def _function_fingerprint(function: Callable[..., Any], name: str) -> str:
+    fingerprint = _qualified(function)
+    if fingerprint is None or "<" in fingerprint:
+        raise CalibrationError(
+            f"experiment {name!r}: the cache needs a module-level trial function, got "
+            f"{fingerprint or repr(function)}"
+        )
+    return fingerprint
+
+
+def _scenario_digest(scenario: object, name: str) -> str:
+    try:
+        text = _dumps(_canonical(scenario))
+    except RecursionError:
+        raise CalibrationError(
+            f"experiment {name!r}: the scenario refers to itself; pass scenario_key"
+        ) from None
+    except _Unstable as exc:
+        raise CalibrationError(
+            f"experiment {name!r}: the scenario holds {exc}, whose repr is not stable across "
+            "runs; pass Experiment(scenario_key=...) to cache it"
+        ) from None
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class _Unstable(Exception):
+    pass
+
+
+def _canonical(obj: object) -> object:
+    """A JSON-ready form of ``obj`` that is the same in every process (for the cache key)."""
+    if isinstance(obj, enum.Enum):
+        return {"enum": _qualified(type(obj)), "name": obj.name}
+    if obj is None or isinstance(obj, bool | int | float | str):
+        return obj
+    if isinstance(obj, np.ndarray):
+        if obj.dtype.hasobject:
+            return {
+                "array": "object",
+                "shape": obj.shape,
+                "items": [_canonical(x) for x in obj.flat],
+            }
+        data = hashlib.sha256(np.ascontiguousarray(obj).tobytes()).hexdigest()
+        return {"array": obj.dtype.str, "shape": obj.shape, "sha256": data}
+    if isinstance(obj, np.generic):
+        return {"numpy": obj.dtype.str, "value": _canonical(obj.item())}
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        fields = {f.name: _canonical(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        return {"dataclass": _qualified(type(obj)), "fields": fields}
+    if isinstance(obj, Mapping):
+        items = sorted(([_canonical(k), _canonical(v)] for k, v in obj.items()), key=_dumps)
+        return {"mapping": _qualified(type(obj)), "items": items}
+    if isinstance(obj, list | tuple):
+        return {"sequence": _qualified(type(obj)), "items": [_canonical(x) for x in obj]}
+    if isinstance(obj, set | frozenset):
+        return {"set": sorted((_canonical(x) for x in obj), key=_dumps)}
+    if isinstance(obj, PurePath):
+        return {"path": str(obj)}
+    if isinstance(obj, pd.DataFrame | pd.Series):
+        data = hashlib.sha256(obj.to_csv().encode()).hexdigest()
+        return {"pandas": type(obj).__name__, "csv_sha256": data}
+    if callable(obj) and _qualified(obj) and "<" not in str(_qualified(obj)):
+        return {"callable": _qualified(obj)}
+    if (
+        type(obj).__reduce_ex__ is object.__reduce_ex__
+        and type(obj).__reduce__ is object.__reduce__
+    ):
+        # what pickle would store: __dict__ and slots, or a custom __getstate__
+        state = obj.__getstate__()
+        if state is not None:
+            return {"object": _qualified(type(obj)), "state": _canonical(state)}
+    text = repr(obj)
+    if re.search(r" at 0x[0-9a-fA-F]+", text):
+        raise _Unstable(text)
+    return {"repr": _qualified(type(obj)), "text": text}
+
+
+# ----------------------------------------------------------------------------------------------
+# running
+
+
+def run(
+    experiment: Experiment,
+    seed: int,
+    *,
+    n_jobs: int | None = None,
+    scheduler: str | Any | None = None,
+    cache_dir: str | os.PathLike[str] | None = None,
+    progress: bool = True,
+) -> pd.DataFrame:
+    """Run every trial of ``experiment`` and return their rows.
+
+    Parameters
+    ----------
+    experiment : Experiment
+        What to run.
+    seed : int
+        The run's seed, >= 0; with the experiment name, sweep point and trial index it fixes
+        each trial's generator (:func:`trial_rng`).
+    n_jobs : int, optional
+        Local worker processes (joblib, loky backend, single-threaded BLAS in each): None or -1
+        for all cores, 1 to run serially in this process. Ignored when ``scheduler`` is given.
+    scheduler : str or distributed.Client, optional
+        A Dask scheduler address (``"tcp://host:8786"``) or client to run the trials on, through
+        joblib's Dask backend. Workers must be able to import the trial function.
+    cache_dir : path-like, optional
+        Folder of stored trial rows (see the module docstring). Stored trials with the same
+        seed, experiment, point, trial function and scenario are reused, not recomputed.
+    progress : bool, default True
+        Show a progress bar on stderr.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per row returned by a trial. Columns: the sweep point's keys, ``trial`` (int,
+        0 to ``n_trials - 1``), then the trial's columns in order of first appearance. Rows are
+        sorted by point (in ``experiment.points`` order), trial, then row order within the
+        trial; the index is a RangeIndex. Identical bytes for any ``n_jobs`` or scheduler.
+
+    Raises
+    ------
+    CalibrationError
+        On bad arguments, and when a trial raises (the message names the experiment, point and
+        trial; the trial's exception is the ``__cause__``). Trials finished before are kept in
+        the cache.
+    """
+    if not isinstance(experiment, Experiment):
+        raise CalibrationError(f"experiment must be an Experiment, got {type(experiment).__name__}")
+    seed = _check_index(seed, "seed")
+    if n_jobs is not None and (
+        isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or not n_jobs
+    ):
+        raise CalibrationError(f"n_jobs must be None, -1 or a positive integer, got {n_jobs!r}")
+    started = time.time()
+    exp = experiment
+    point_jsons = [_point_json(point) for point in exp.points]
+    jobs = [
+        _PointJob(exp.trial, exp.scenario, seed, _spawn_prefix(exp.name, key), point, i)
+        for i, (point, key) in enumerate(zip(exp.points, point_jsons, strict=True))
+    ]
+    cache = None if cache_dir is None else _Cache(Path(cache_dir), exp, seed, point_jsons)
+    done: dict[tuple[int, int], Rows] = {}
+    if cache is not None:
+        cache.remove_stale(started)
+        done = cache.load_all(exp.n_trials)
+    pending = [(job, t) for job in jobs for t in range(exp.n_trials) if (job.index, t) not in done]
+    labels = [f"{exp.name} {_label(point)}".rstrip() for point in exp.points]
+    total = len(jobs) * exp.n_trials
+    bar = tqdm(
+        total=total,
+        initial=len(done),
+        desc=labels[0],
+        unit="trial",
+        file=sys.stderr,
+        disable=not progress,
+    )
+    with bar, _outcomes(pending, n_jobs, scheduler) as outcomes:
+        for p, t, rows, error in outcomes:
+            if error is not None:
+                raise _trial_error(exp, seed, p, t, error) from error
+            done[p, t] = rows
+            if cache is not None:
+                cache.save(p, t, rows)
+            bar.set_description_str(labels[p], refresh=False)
+            bar.update()
+    return _frame(exp, done)
+
+
+def _trial_error(exp: Experiment, seed: int, p: int, t: int, error: BaseException) -> Exception:
+    point = exp.points[p]
+    return CalibrationError(
+        f"experiment {exp.name!r}, point {_label(point) or '(no sweep)'}, trial {t} failed: "
+        f"{type(error).__name__}: {error} (its generator is "
+        f"trial_rng({seed}, {exp.name!r}, {point!r}, {t}))"
+    )
+
+
+def _frame(exp: Experiment, done: Mapping[tuple[int, int], Rows]) -> pd.DataFrame:
+    records = [
+        {**point, "trial": t, **row}
+        for p, point in enumerate(exp.points)
+        for t in range(exp.n_trials)
+        for row in done[p, t]
+    ]
+    if not records:
+        return pd.DataFrame(columns=[*exp.points[0], "trial"])
+    return pd.DataFrame.from_records(records)
+
+
+def run_many(
+    experiments: Sequence[Experiment], seed: int, **kwargs: Any
+) -> dict[str, pd.DataFrame]:
+    """Run several experiments one after the other with the same seed and options.
+
+    Parameters
+    ----------
+    experiments : sequence of Experiment
+        Experiments with distinct names.
+    seed : int
+        The seed of every run.
+    **kwargs
+        Passed to :func:`run` (``n_jobs``, ``scheduler``, ``cache_dir``, ``progress``).
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        The table of each experiment, by name, in the given order.
+
+    Raises
+    ------
+    CalibrationError
+        On repeated names, and as :func:`run`.
+    """
+    names = [getattr(exp, "name", None) for exp in experiments]
+    repeated = sorted({name for name in names if names.count(name) > 1}, key=str)
+    if repeated:
+        raise CalibrationError(f"experiment names must be distinct; repeated: {repeated}")
+    return {exp.name: run(exp, seed, **kwargs) for exp in experiments}
+
+
+# ----------------------------------------------------------------------------------------------
+# atomic result folders
+
+
+@contextlib.contextmanager
+def staged_dir(final: str | os.PathLike[str]) -> Iterator[Path]:
+    """Fill a result folder elsewhere and swap it in whole, or not at all.
+
+    Yields an empty staging folder ``.<name>.staging-<pid>`` beside ``final``. When the block
+    ends normally, the staging folder replaces ``final`` (the old ``final`` is renamed away to
+    ``.<name>.old-<pid>``, the staging folder renamed to ``final``, the old one deleted). When
+    the block raises, the staging folder is deleted and ``final`` is left as it was. Staging and
+    old folders of processes that no longer run (a killed run) are removed on entry; if such a
+    run died between its two renames, its old folder is renamed back to ``final``.
+
+    Parameters
+    ----------
+    final : path-like
+        The result folder; its parent is created if missing.
+
+    Yields
+    ------
+    pathlib.Path
+        The staging folder, to write the results into.
+    """
+    final = Path(final)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    _recover_staged(final)
+    staging = final.parent / f".{final.name}.staging-{os.getpid()}"
+    staging.mkdir()
+    try:
+        yield staging
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    old = final.parent / f".{final.name}.old-{os.getpid()}"
+    if final.exists() or final.is_symlink():
+        os.rename(final, old)
+    try:
+        os.rename(staging, final)
+    except BaseException:
+        if old.exists():
+            os.rename(old, final)
+        raise
+    _remove(old)
+
+
+def _recover_staged(final: Path) -> None:
+    pattern = re.compile(rf"\.{re.escape(final.name)}\.(staging|old)-(\d+)")
+    leftovers = []
+    for entry in final.parent.iterdir():
+        match = pattern.fullmatch(entry.name)
+        if match and not _alive(int(match.group(2))):
+            leftovers.append((match.group(1), entry))
+    for kind, entry in sorted(leftovers, key=lambda item: item[0] != "old"):
+        if kind == "old" and not (final.exists() or final.is_symlink()):
+            os.rename(entry, final)  # the run died between its renames: keep the old results
+        else:
+            _remove(entry)
+
+
+def _alive(pid: int) -> bool:
+    if pid <= 0 or pid == os.getpid():
+        return False  # our own leftovers are stale: this call is about to make a new one
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()

@@ -1,0 +1,435 @@
+"""Tests of calstudy.core.montecarlo: the same bytes for any worker count or scheduler, streams
+keyed by (seed, experiment, point, trial), a resumable cache and atomic result folders."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+from mc_trials import (
+    POINTS,
+    SEED,
+    Scenario,
+    assert_same_bytes,
+    bad_return,
+    calls,
+    clashing_row,
+    expected_first,
+    experiment,
+    firsts,
+    noisy_solve,
+    one_row,
+    pid_row,
+    stable_experiment,
+)
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.montecarlo import Experiment, run, run_many, staged_dir, trial_rng
+
+# ----------------------------------------------------------------------------------------------
+# rows and streams
+
+
+def test_rows_sorted_and_self_describing():
+    exp = experiment(n_trials=5)
+    df = run(exp, SEED, n_jobs=1, progress=False)
+    assert list(df.columns) == ["sigma", "robot", "trial", "k", "err", "x0", "tag", "first"]
+    assert df["trial"].dtype == np.int64
+    assert isinstance(df.index, pd.RangeIndex)
+    order = [
+        (POINTS.index({"sigma": s, "robot": r}), t, k)
+        for s, r, t, k in df[["sigma", "robot", "trial", "k"]].itertuples(index=False)
+    ]
+    assert order == sorted(order)
+    for (_sigma, r, _trial), rows in df.groupby(["sigma", "robot", "trial"], sort=False):
+        assert list(rows["k"]) == list(range(len(rows)))
+        assert (rows["tag"] == r).all()
+    assert df.groupby(["sigma"])["trial"].nunique().tolist() == [5, 5]
+
+
+def test_rows_follow_trial_rng():
+    df = run(experiment(n_trials=4), SEED, n_jobs=1, progress=False)
+    for point in POINTS:
+        rows = df[(df["sigma"] == point["sigma"]) & (df["k"] == 0)]
+        assert rows["first"].tolist() == [expected_first(SEED, "solve", point, t) for t in range(4)]
+
+
+def test_different_trials_points_names_and_seeds_get_different_streams():
+    draws = [
+        expected_first(seed, name, point, t)
+        for seed in (0, 1)
+        for name in ("solve", "solve2")
+        for point in (*POINTS, {})
+        for t in range(20)
+    ]
+    assert len(set(draws)) == len(draws)
+    # the point's key order is not part of its identity
+    a = trial_rng(3, "x", {"sigma": 0.1, "robot": "a"}, 2).random(4)
+    b = trial_rng(3, "x", {"robot": "a", "sigma": 0.1}, 2).random(4)
+    np.testing.assert_array_equal(a, b)
+    # NumPy scalars are the Python numbers they hold
+    c = trial_rng(3, "x", {"sigma": np.float64(0.1), "robot": np.str_("a")}, 2).random(4)
+    np.testing.assert_array_equal(a, c)
+
+
+def test_trial_rng_follows_documented_formula():
+    def words(text):
+        digest = hashlib.sha256(text.encode()).digest()
+        return [int(w) for w in np.frombuffer(digest, dtype="<u4")]
+
+    point = {"sigma": 0.05, "n": 3}
+    key = (
+        *words("noise_sweep"),
+        *words(json.dumps(point, sort_keys=True, separators=(",", ":"))),
+        7,
+    )
+    sequence = np.random.SeedSequence(entropy=11, spawn_key=key)
+    want = np.random.Generator(np.random.PCG64(sequence)).random(5)
+    np.testing.assert_array_equal(trial_rng(11, "noise_sweep", point, 7).random(5), want)
+
+
+def test_trial_rng_same_in_another_process():
+    code = (
+        "from calstudy.core.montecarlo import trial_rng;"
+        "print(repr(trial_rng(5, 'handeye', {'sigma': 0.05}, 12).random(3).tolist()))"
+    )
+    env = {**os.environ, "PYTHONHASHSEED": "random", "PYTHONPATH": os.pathsep.join(sys.path)}
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout
+    assert out.strip() == repr(trial_rng(5, "handeye", {"sigma": 0.05}, 12).random(3).tolist())
+
+
+def test_serial_and_two_workers_give_identical_bytes():
+    exp = experiment(n_trials=12)
+    serial = run(exp, SEED, n_jobs=1, progress=False)
+    parallel = run(exp, SEED, n_jobs=2, progress=False)
+    assert_same_bytes(parallel, serial)
+    assert_same_bytes(
+        run(exp, SEED + 1, n_jobs=1, progress=False), run(exp, SEED + 1, n_jobs=2, progress=False)
+    )
+    assert not serial.equals(run(exp, SEED + 1, n_jobs=1, progress=False))
+
+
+def test_n_jobs_one_runs_in_process_and_default_uses_workers():
+    exp = Experiment("where", pid_row, None, 8)
+    assert set(run(exp, SEED, n_jobs=1, progress=False)["pid"]) == {os.getpid()}
+    if (os.cpu_count() or 1) > 1:
+        workers = run(exp, SEED, progress=False)
+        assert os.getpid() not in set(workers["pid"])
+        assert set(workers["blas"]) == {"1,1,1"}  # single-threaded BLAS in every worker
+
+
+def test_dask_local_cluster_gives_identical_bytes():
+    distributed = pytest.importorskip("distributed")
+    exp = experiment(n_trials=4)
+    serial = run(exp, SEED, n_jobs=1, progress=False)
+    with (
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        assert_same_bytes(run(exp, SEED, scheduler=client, progress=False), serial)
+        assert_same_bytes(
+            run(exp, SEED, scheduler=cluster.scheduler_address, progress=False), serial
+        )
+
+
+# ----------------------------------------------------------------------------------------------
+# cache
+
+
+def test_resume_computes_only_new_trials_and_returns_first_n(tmp_path):
+    state, cache = tmp_path / "state", tmp_path / "cache"
+    state.mkdir()
+    point = {"sigma": 0.1}
+
+    def exp(n):
+        return experiment("grow", n_trials=n, points=[point], state_dir=str(state))
+
+    run(exp(5), SEED, n_jobs=1, cache_dir=cache, progress=False)
+    assert calls(state) == firsts("grow", point, range(5))
+    eight = run(exp(8), SEED, n_jobs=1, cache_dir=cache, progress=False)
+    assert calls(state) == firsts("grow", point, range(5, 8))
+    assert_same_bytes(eight, run(exp(8), SEED, n_jobs=1, progress=False))
+    assert len(calls(state)) == 8
+    three = run(exp(3), SEED, n_jobs=2, cache_dir=cache, progress=False)
+    assert calls(state) == []
+    assert_same_bytes(three, eight[eight["trial"] < 3].reset_index(drop=True))
+    assert_same_bytes(run(exp(8), SEED, n_jobs=2, cache_dir=cache, progress=False), eight)
+    assert calls(state) == []
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_interrupted_run_resumes_without_recomputing(tmp_path, n_jobs):
+    state, cache = tmp_path / "state", tmp_path / "cache"
+    state.mkdir()
+    point = {"sigma": 0.1}
+    fail = expected_first(SEED, "interrupt", point, 3)
+    exp = experiment(
+        "interrupt",
+        n_trials=6,
+        points=[point],
+        state_dir=str(state),
+        fail_draw=fail,
+        fail_once=True,
+    )
+    with pytest.raises(CalibrationError, match="trial 3 failed"):
+        run(exp, SEED, n_jobs=n_jobs, cache_dir=cache, progress=False)
+    first_calls = calls(state)
+    stored = {int(p.stem.split("-")[1]) for p in cache.rglob("trial-*.pkl")}
+    assert 3 not in stored
+    resumed = run(exp, SEED, n_jobs=n_jobs, cache_dir=cache, progress=False)
+    second_calls = calls(state)
+    assert second_calls == firsts("interrupt", point, set(range(6)) - stored)
+    if n_jobs == 1:
+        assert first_calls == firsts("interrupt", point, range(4))
+        assert stored == {0, 1, 2}
+    plain = dataclasses.replace(exp, scenario=Scenario())
+    assert_same_bytes(resumed, run(plain, SEED, n_jobs=1, progress=False))
+
+
+def test_changed_key_recomputes(tmp_path):
+    state, cache = tmp_path / "state", tmp_path / "cache"
+    state.mkdir()
+    exp = experiment("key", n_trials=3, points=[{}], state_dir=str(state))
+    run(exp, SEED, n_jobs=1, cache_dir=cache, progress=False)
+    assert len(calls(state)) == 3
+    run(exp, SEED + 1, n_jobs=1, cache_dir=cache, progress=False)
+    assert calls(state) == firsts("key", {}, range(3), seed=SEED + 1)
+    run(exp, SEED, n_jobs=1, cache_dir=cache, progress=False)
+    assert calls(state) == []
+    scaled = dataclasses.replace(exp, scenario=dataclasses.replace(exp.scenario, scale=2.0))
+    run(scaled, SEED, n_jobs=1, cache_dir=cache, progress=False)
+    assert len(calls(state)) == 3
+    for key in ("v1", "v2", "v1"):
+        run(
+            dataclasses.replace(exp, scenario_key=key),
+            SEED,
+            n_jobs=1,
+            cache_dir=cache,
+            progress=False,
+        )
+    assert len(calls(state)) == 6
+
+
+def test_cache_key_is_the_same_in_another_process(tmp_path):
+    state, cache = tmp_path / "state", tmp_path / "cache"
+    state.mkdir()
+    code = (
+        "import sys\n"
+        "from calstudy.core.montecarlo import run\n"
+        "from mc_trials import stable_experiment\n"
+        "run(stable_experiment(sys.argv[1]), 1, n_jobs=1, cache_dir=sys.argv[2], progress=False)\n"
+    )
+    env = {**os.environ, "PYTHONHASHSEED": "random", "PYTHONPATH": os.pathsep.join(sys.path)}
+    subprocess.run([sys.executable, "-c", code, str(state), str(cache)], env=env, check=True)
+    assert len(calls(state)) == 3
+    run(stable_experiment(str(state)), 1, n_jobs=1, cache_dir=cache, progress=False)
+    assert calls(state) == []
+
+
+def test_stale_temporary_files_are_removed(tmp_path):
+    folder = tmp_path / "cache" / "stale" / "somewhere"
+    folder.mkdir(parents=True)
+    stale, kept = folder / ".trial-000001.pkl.999.tmp", folder / "notes.txt"
+    stale.write_bytes(b"half a pickle")
+    kept.write_text("mine")
+    an_hour_ago = time.time() - 3600
+    os.utime(stale, (an_hour_ago, an_hour_ago))
+    exp = Experiment("stale", one_row, None, 2)
+    run(exp, SEED, n_jobs=1, cache_dir=tmp_path / "cache", progress=False)
+    assert not stale.exists()
+    assert kept.read_text() == "mine"
+    assert list((tmp_path / "cache").rglob("*.tmp")) == []
+
+
+def test_unstable_scenario_needs_a_key(tmp_path):
+    exp = Experiment("opaque", one_row, object(), 2)
+    with pytest.raises(CalibrationError, match="scenario_key"):
+        run(exp, SEED, n_jobs=1, cache_dir=tmp_path, progress=False)
+    keyed = dataclasses.replace(exp, scenario_key="opaque-v1")
+    assert len(run(keyed, SEED, n_jobs=1, cache_dir=tmp_path, progress=False)) == 2
+    with pytest.raises(CalibrationError, match="module-level"):
+        run(
+            Experiment("lam", lambda s, rng: {}, None, 1),
+            SEED,
+            n_jobs=1,
+            cache_dir=tmp_path,
+            progress=False,
+        )
+
+
+# ----------------------------------------------------------------------------------------------
+# errors, validation, progress
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_trial_exception_names_experiment_point_and_trial(tmp_path, n_jobs):
+    point = {"sigma": 0.2, "robot": "kuka"}
+    exp = experiment(
+        "boom",
+        n_trials=5,
+        state_dir=str(tmp_path),
+        fail_draw=expected_first(SEED, "boom", point, 2),
+    )
+    with pytest.raises(
+        CalibrationError,
+        match=r"experiment 'boom', point sigma=0.2 robot=kuka, trial 2 failed: ValueError: kaboom",
+    ) as info:
+        run(exp, SEED, n_jobs=n_jobs, progress=False)
+    assert isinstance(info.value.__cause__, ValueError)
+    assert str(info.value.__cause__) == "kaboom"
+
+
+@pytest.mark.parametrize(
+    ("trial", "points", "match"),
+    [
+        (bad_return, ({},), "returned a float"),
+        (clashing_row, ({"sigma": 0.1},), r"column\(s\) \['sigma'\]"),
+    ],
+)
+def test_bad_rows_are_reported(trial, points, match):
+    with pytest.raises(CalibrationError, match=match):
+        run(Experiment("rows", trial, None, 2, points), SEED, n_jobs=1, progress=False)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"n_trials": 0}, "n_trials must be at least 1, got 0"),
+        ({"n_trials": 2.5}, "n_trials must be an integer"),
+        ({"n_trials": True}, "n_trials must be an integer"),
+        ({"name": ""}, "experiment name"),
+        ({"name": "../up"}, "experiment name"),
+        ({"points": {"sigma": 0.1}}, "got one mapping"),
+        ({"points": []}, "non-empty sequence"),
+        ({"points": [0.1, 0.2]}, r"points\[0\] must be a mapping"),
+        ({"points": [{"sigma": 0.1}, {"s": 0.2}]}, "same keys"),
+        ({"points": [{"sigma": 0.1}, {"sigma": 0.1}]}, r"points\[1\] repeats points\[0\]"),
+        ({"points": [{"sigma": np.ones(2)}]}, "use a scalar"),
+        ({"points": [{"trial": 1}]}, "trial index"),
+        ({"trial": "noisy_solve"}, "callable"),
+    ],
+)
+def test_experiment_validation(kwargs, match):
+    args = {"name": "valid", "trial": noisy_solve, "scenario": Scenario(), "n_trials": 3, **kwargs}
+    with pytest.raises(CalibrationError, match=match):
+        Experiment(**args)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"seed": -1}, "seed must be a non-negative integer, got -1"),
+        ({"seed": 1.5}, "seed must be a non-negative integer"),
+        ({"n_jobs": 0}, "n_jobs"),
+        ({"scheduler": 8786}, "scheduler must be"),
+    ],
+)
+def test_run_validation(kwargs, match):
+    args = {"seed": SEED, "n_jobs": 1, "progress": False, **kwargs}
+    with pytest.raises(CalibrationError, match=match):
+        run(Experiment("valid", one_row, None, 1), **args)
+
+
+def test_progress_goes_to_stderr_only(capsys):
+    exp = Experiment("prog", one_row, None, 3, [{"sigma": 0.1}, {"sigma": 0.3}])
+    quiet = run(exp, SEED, n_jobs=1, progress=False)
+    captured = capsys.readouterr()
+    assert (captured.out, captured.err) == ("", "")
+    loud = run(exp, SEED, n_jobs=1, progress=True)
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "prog sigma=0.3" in captured.err and "6/6" in captured.err
+    assert_same_bytes(loud, quiet)
+
+
+def test_run_many_and_single_point():
+    a = Experiment("a", one_row, None, 3)
+    b = Experiment("b", one_row, None, 2)
+    tables = run_many([a, b], SEED, n_jobs=1, progress=False)
+    assert list(tables) == ["a", "b"]
+    assert list(tables["a"].columns) == ["trial", "u"]
+    assert tables["a"]["u"].tolist() == [trial_rng(SEED, "a", {}, t).random() for t in range(3)]
+    assert not np.isin(tables["b"]["u"], tables["a"]["u"]).any()
+    with pytest.raises(CalibrationError, match="repeated"):
+        run_many([a, a], SEED, n_jobs=1, progress=False)
+
+
+# ----------------------------------------------------------------------------------------------
+# staged_dir
+
+
+def test_staged_dir_swaps_in_whole(tmp_path):
+    final = tmp_path / "results" / "run"
+    with staged_dir(final) as stage:
+        (stage / "a.csv").write_text("1")
+    assert sorted(p.name for p in final.iterdir()) == ["a.csv"]
+    with staged_dir(final) as stage:
+        assert stage.parent == final.parent and stage != final and not any(stage.iterdir())
+        (stage / "b.csv").write_text("2")
+        assert (final / "a.csv").read_text() == "1"  # untouched until the block ends
+    assert sorted(p.name for p in final.iterdir()) == ["b.csv"]
+    assert sorted(p.name for p in final.parent.iterdir()) == ["run"]
+
+
+def test_staged_dir_exception_leaves_final_untouched(tmp_path):
+    final = tmp_path / "run"
+    final.mkdir()
+    (final / "a.csv").write_text("old")
+    with pytest.raises(KeyError), staged_dir(final) as stage:
+        (stage / "a.csv").write_text("new")
+        raise KeyError("half-way")
+    assert (final / "a.csv").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_staged_dir_removes_leftovers_of_a_killed_run(tmp_path):
+    final = tmp_path / "run"
+    final.mkdir()
+    (final / "a.csv").write_text("old")
+    code = (
+        "import os, signal, sys\n"
+        "from calstudy.core.montecarlo import staged_dir\n"
+        "with staged_dir(sys.argv[1]) as stage:\n"
+        "    (stage / 'a.csv').write_text('half')\n"
+        "    os.kill(os.getpid(), signal.SIGKILL)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    done = subprocess.run([sys.executable, "-c", code, str(final)], env=env, check=False)
+    assert done.returncode == -signal.SIGKILL
+    assert len(list(tmp_path.glob(".run.staging-*"))) == 1
+    with staged_dir(final) as stage:
+        assert [p.name for p in tmp_path.glob(".run.staging-*")] == [stage.name]
+        (stage / "a.csv").write_text("new")
+    assert (final / "a.csv").read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_staged_dir_restores_old_results_of_a_run_killed_mid_swap(tmp_path):
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    pid = int(dead.stdout)
+    old = tmp_path / f".run.old-{pid}"
+    old.mkdir()
+    (old / "a.csv").write_text("old")
+    (tmp_path / f".run.staging-{pid}").mkdir()
+    with pytest.raises(RuntimeError), staged_dir(tmp_path / "run"):
+        raise RuntimeError("this run fails too")
+    assert (tmp_path / "run" / "a.csv").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
