@@ -31,22 +31,19 @@ change its fingerprint: delete the cache, or put a version in ``Experiment.scena
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import enum
 import hashlib
 import json
 import operator
 import os
 import pickle
 import re
-import shutil
 import sys
 import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path, PurePath
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -54,21 +51,18 @@ import pandas as pd
 from tqdm import tqdm
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core.trialcache import Rows, TrialCache
 
 try:  # optional: caps BLAS threads of libraries already loaded in a process
     from threadpoolctl import threadpool_limits
 except ImportError:  # pragma: no cover - depends on the environment
     threadpool_limits = None
 
-__all__ = ["Experiment", "run", "run_many", "staged_dir", "trial_rng"]
+__all__ = ["Experiment", "run", "run_many", "trial_rng"]
 
-#: Version of the cache file layout and key; bump it when either changes.
-CACHE_FORMAT = 1
-_PICKLE_PROTOCOL = 4
 _NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 _SCALARS = (type(None), bool, int, float, str, np.bool_, np.integer, np.floating)
 
-Rows = list[dict[str, Any]]
 # (point index, trial index, rows or None, exception or None)
 Outcome = tuple[int, int, Rows | None, BaseException | None]
 
@@ -420,177 +414,6 @@ def _dask_client(scheduler: object) -> Iterator[Any]:
 
 
 # ----------------------------------------------------------------------------------------------
-# cache
-
-
-class _Cache:
-    """Per-trial row files of one experiment run (layout in the module docstring)."""
-
-    def __init__(self, root: Path, experiment: Experiment, seed: int, point_jsons: list[str]):
-        self.root = root / experiment.name
-        base = {
-            "format": CACHE_FORMAT,
-            "seed": seed,
-            "experiment": experiment.name,
-            "trial_function": _function_fingerprint(experiment.trial, experiment.name),
-            "scenario": experiment.scenario_key
-            if experiment.scenario_key is not None
-            else _scenario_digest(experiment.scenario, experiment.name),
-        }
-        self.keys = [{**base, "point": point_json} for point_json in point_jsons]
-        self.dirs = [
-            self.root / _slug(point) / hashlib.sha256(_dumps(key).encode()).hexdigest()[:16]
-            for point, key in zip(experiment.points, self.keys, strict=True)
-        ]
-
-    def remove_stale(self, started: float) -> None:
-        """Delete temporary files older than ``started`` (epoch s), left by a killed run."""
-        if self.root.is_dir():
-            for tmp in self.root.rglob("*.tmp"):
-                with contextlib.suppress(FileNotFoundError):
-                    if tmp.stat().st_mtime < started:
-                        tmp.unlink()
-
-    def _path(self, point: int, trial: int) -> Path:
-        return self.dirs[point] / f"trial-{trial:06d}.pkl"
-
-    def load(self, point: int, trial: int) -> Rows | None:
-        """The stored rows of one trial, or None if absent or stored under another key."""
-        try:
-            with open(self._path(point, trial), "rb") as f:
-                stored = pickle.load(f)
-        except FileNotFoundError:
-            return None
-        except Exception:
-            return None  # unreadable (e.g. a class renamed since): computed again, overwritten
-        if not isinstance(stored, dict) or stored.get("key") != self.keys[point]:
-            return None
-        if stored.get("trial") != trial:
-            return None
-        return stored["rows"]
-
-    def load_all(self, n_trials: int) -> dict[tuple[int, int], Rows]:
-        """The stored rows of trials 0 to ``n_trials - 1`` of every point, by (point, trial)."""
-        stored = {}
-        for point in range(len(self.dirs)):
-            for trial in range(n_trials):
-                if (rows := self.load(point, trial)) is not None:
-                    stored[point, trial] = rows
-        return stored
-
-    def save(self, point: int, trial: int, rows: Rows) -> None:
-        """Store the rows of one trial atomically."""
-        folder = self.dirs[point]
-        if not (folder / "key.json").exists():
-            folder.mkdir(parents=True, exist_ok=True)
-            _write_atomic(folder / "key.json", (_dumps(self.keys[point]) + "\n").encode())
-        record = {"key": self.keys[point], "trial": trial, "rows": rows}
-        _write_atomic(self._path(point, trial), pickle.dumps(record, protocol=_PICKLE_PROTOCOL))
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def _dumps(obj: object) -> str:
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"))
-
-
-def _slug(point: Mapping[str, Any]) -> str:
-    text = ",".join(f"{key}={value}" for key, value in point.items())
-    text = re.sub(r"[^A-Za-z0-9._=,+-]", "_", text)[:80] or "_"
-    return "_" + text[1:] if text.startswith(".") else text
-
-
-def _qualified(obj: object) -> str | None:
-    module, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
-    return None if module is None or qualname is None else f"{module}:{qualname}"
-
-
-def _function_fingerprint(function: Callable[..., Any], name: str) -> str:
-    fingerprint = _qualified(function)
-    if fingerprint is None or "<" in fingerprint:
-        raise CalibrationError(
-            f"experiment {name!r}: the cache needs a module-level trial function, got "
-            f"{fingerprint or repr(function)}"
-        )
-    return fingerprint
-
-
-def _scenario_digest(scenario: object, name: str) -> str:
-    try:
-        text = _dumps(_canonical(scenario))
-    except RecursionError:
-        raise CalibrationError(
-            f"experiment {name!r}: the scenario refers to itself; pass scenario_key"
-        ) from None
-    except _Unstable as exc:
-        raise CalibrationError(
-            f"experiment {name!r}: the scenario holds {exc}, whose repr is not stable across "
-            "runs; pass Experiment(scenario_key=...) to cache it"
-        ) from None
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-class _Unstable(Exception):
-    pass
-
-
-def _canonical(obj: object) -> object:
-    """A JSON-ready form of ``obj`` that is the same in every process (for the cache key)."""
-    if isinstance(obj, enum.Enum):
-        return {"enum": _qualified(type(obj)), "name": obj.name}
-    if obj is None or isinstance(obj, bool | int | float | str):
-        return obj
-    if isinstance(obj, np.ndarray):
-        if obj.dtype.hasobject:
-            return {
-                "array": "object",
-                "shape": obj.shape,
-                "items": [_canonical(x) for x in obj.flat],
-            }
-        data = hashlib.sha256(np.ascontiguousarray(obj).tobytes()).hexdigest()
-        return {"array": obj.dtype.str, "shape": obj.shape, "sha256": data}
-    if isinstance(obj, np.generic):
-        return {"numpy": obj.dtype.str, "value": _canonical(obj.item())}
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        fields = {f.name: _canonical(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
-        return {"dataclass": _qualified(type(obj)), "fields": fields}
-    if isinstance(obj, Mapping):
-        items = sorted(([_canonical(k), _canonical(v)] for k, v in obj.items()), key=_dumps)
-        return {"mapping": _qualified(type(obj)), "items": items}
-    if isinstance(obj, list | tuple):
-        return {"sequence": _qualified(type(obj)), "items": [_canonical(x) for x in obj]}
-    if isinstance(obj, set | frozenset):
-        return {"set": sorted((_canonical(x) for x in obj), key=_dumps)}
-    if isinstance(obj, PurePath):
-        return {"path": str(obj)}
-    if isinstance(obj, pd.DataFrame | pd.Series):
-        data = hashlib.sha256(obj.to_csv().encode()).hexdigest()
-        return {"pandas": type(obj).__name__, "csv_sha256": data}
-    if callable(obj) and _qualified(obj) and "<" not in str(_qualified(obj)):
-        return {"callable": _qualified(obj)}
-    if (
-        type(obj).__reduce_ex__ is object.__reduce_ex__
-        and type(obj).__reduce__ is object.__reduce__
-    ):
-        # what pickle would store: __dict__ and slots, or a custom __getstate__
-        state = obj.__getstate__()
-        if state is not None:
-            return {"object": _qualified(type(obj)), "state": _canonical(state)}
-    text = repr(obj)
-    if re.search(r" at 0x[0-9a-fA-F]+", text):
-        raise _Unstable(text)
-    return {"repr": _qualified(type(obj)), "text": text}
-
-
-# ----------------------------------------------------------------------------------------------
 # running
 
 
@@ -653,7 +476,7 @@ def run(
         _PointJob(exp.trial, exp.scenario, seed, _spawn_prefix(exp.name, key), point, i)
         for i, (point, key) in enumerate(zip(exp.points, point_jsons, strict=True))
     ]
-    cache = None if cache_dir is None else _Cache(Path(cache_dir), exp, seed, point_jsons)
+    cache = None if cache_dir is None else TrialCache(Path(cache_dir), exp, seed, point_jsons)
     done: dict[tuple[int, int], Rows] = {}
     if cache is not None:
         cache.remove_stale(started)
@@ -733,81 +556,3 @@ def run_many(
     return {exp.name: run(exp, seed, **kwargs) for exp in experiments}
 
 
-# ----------------------------------------------------------------------------------------------
-# atomic result folders
-
-
-@contextlib.contextmanager
-def staged_dir(final: str | os.PathLike[str]) -> Iterator[Path]:
-    """Fill a result folder elsewhere and swap it in whole, or not at all.
-
-    Yields an empty staging folder ``.<name>.staging-<pid>`` beside ``final``. When the block
-    ends normally, the staging folder replaces ``final`` (the old ``final`` is renamed away to
-    ``.<name>.old-<pid>``, the staging folder renamed to ``final``, the old one deleted). When
-    the block raises, the staging folder is deleted and ``final`` is left as it was. Staging and
-    old folders of processes that no longer run (a killed run) are removed on entry; if such a
-    run died between its two renames, its old folder is renamed back to ``final``.
-
-    Parameters
-    ----------
-    final : path-like
-        The result folder; its parent is created if missing.
-
-    Yields
-    ------
-    pathlib.Path
-        The staging folder, to write the results into.
-    """
-    final = Path(final)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    _recover_staged(final)
-    staging = final.parent / f".{final.name}.staging-{os.getpid()}"
-    staging.mkdir()
-    try:
-        yield staging
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    old = final.parent / f".{final.name}.old-{os.getpid()}"
-    if final.exists() or final.is_symlink():
-        os.rename(final, old)
-    try:
-        os.rename(staging, final)
-    except BaseException:
-        if old.exists():
-            os.rename(old, final)
-        raise
-    _remove(old)
-
-
-def _recover_staged(final: Path) -> None:
-    pattern = re.compile(rf"\.{re.escape(final.name)}\.(staging|old)-(\d+)")
-    leftovers = []
-    for entry in final.parent.iterdir():
-        match = pattern.fullmatch(entry.name)
-        if match and not _alive(int(match.group(2))):
-            leftovers.append((match.group(1), entry))
-    for kind, entry in sorted(leftovers, key=lambda item: item[0] != "old"):
-        if kind == "old" and not (final.exists() or final.is_symlink()):
-            os.rename(entry, final)  # the run died between its renames: keep the old results
-        else:
-            _remove(entry)
-
-
-def _alive(pid: int) -> bool:
-    if pid <= 0 or pid == os.getpid():
-        return False  # our own leftovers are stale: this call is about to make a new one
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path)
-    elif path.exists() or path.is_symlink():
-        path.unlink()

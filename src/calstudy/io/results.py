@@ -12,14 +12,17 @@ not testable) and are computed from Monte Carlo samples by :func:`verdict_vs_pub
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import importlib.metadata
 import json
 import os
 import platform
+import re
+import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -154,6 +157,86 @@ def notebook_writers(out_dir: str | Path):
         display(Image(filename=str(path)))
 
     return save_table, show_figure
+
+
+# ----------------------------------------------------------------------------------------------
+# atomic result folders
+
+
+@contextlib.contextmanager
+def staged_dir(final: str | os.PathLike[str]) -> Iterator[Path]:
+    """Fill a result folder elsewhere and swap it in whole, or not at all.
+
+    Yields an empty staging folder ``.<name>.staging-<pid>`` beside ``final``. When the block
+    ends normally, the staging folder replaces ``final`` (the old ``final`` is renamed away to
+    ``.<name>.old-<pid>``, the staging folder renamed to ``final``, the old one deleted). When
+    the block raises, the staging folder is deleted and ``final`` is left as it was. Staging and
+    old folders of processes that no longer run (a killed run) are removed on entry; if such a
+    run died between its two renames, its old folder is renamed back to ``final``.
+
+    Parameters
+    ----------
+    final : path-like
+        The result folder; its parent is created if missing.
+
+    Yields
+    ------
+    pathlib.Path
+        The staging folder, to write the results into.
+    """
+    final = Path(final)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    _recover_staged(final)
+    staging = final.parent / f".{final.name}.staging-{os.getpid()}"
+    staging.mkdir()
+    try:
+        yield staging
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    old = final.parent / f".{final.name}.old-{os.getpid()}"
+    if final.exists() or final.is_symlink():
+        os.rename(final, old)
+    try:
+        os.rename(staging, final)
+    except BaseException:
+        if old.exists():
+            os.rename(old, final)
+        raise
+    _remove(old)
+
+
+def _recover_staged(final: Path) -> None:
+    pattern = re.compile(rf"\.{re.escape(final.name)}\.(staging|old)-(\d+)")
+    leftovers = []
+    for entry in final.parent.iterdir():
+        match = pattern.fullmatch(entry.name)
+        if match and not _alive(int(match.group(2))):
+            leftovers.append((match.group(1), entry))
+    for kind, entry in sorted(leftovers, key=lambda item: item[0] != "old"):
+        if kind == "old" and not (final.exists() or final.is_symlink()):
+            os.rename(entry, final)  # the run died between its renames: keep the old results
+        else:
+            _remove(entry)
+
+
+def _alive(pid: int) -> bool:
+    if pid <= 0 or pid == os.getpid():
+        return False  # our own leftovers are stale: this call is about to make a new one
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,0 +1,210 @@
+"""The per-trial cache of the Monte Carlo engine (:mod:`calstudy.core.montecarlo`).
+
+Layout and key are described in that module's docstring: one pickle per finished trial under
+``cache_dir/<experiment>/<point-slug>/<key>/``, written atomically, reused only when the seed,
+experiment, point, trial function and scenario fingerprint all match.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import enum
+import hashlib
+import json
+import os
+import pickle
+import re
+from collections.abc import Callable, Mapping
+from pathlib import Path, PurePath
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+from calstudy.core.errors import CalibrationError
+
+try:  # optional: caps BLAS threads of libraries already loaded in a process
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover - depends on the environment
+    threadpool_limits = None
+
+
+#: Version of the cache file layout and key; bump it when either changes.
+CACHE_FORMAT = 1
+_PICKLE_PROTOCOL = 4
+
+Rows = list[dict[str, Any]]
+
+if TYPE_CHECKING:  # the engine imports this module, not the other way round
+    from calstudy.core.montecarlo import Experiment
+
+
+
+class TrialCache:
+    """Per-trial row files of one experiment run (layout in the module docstring)."""
+
+    def __init__(self, root: Path, experiment: Experiment, seed: int, point_jsons: list[str]):
+        self.root = root / experiment.name
+        base = {
+            "format": CACHE_FORMAT,
+            "seed": seed,
+            "experiment": experiment.name,
+            "trial_function": _function_fingerprint(experiment.trial, experiment.name),
+            "scenario": experiment.scenario_key
+            if experiment.scenario_key is not None
+            else _scenario_digest(experiment.scenario, experiment.name),
+        }
+        self.keys = [{**base, "point": point_json} for point_json in point_jsons]
+        self.dirs = [
+            self.root / _slug(point) / hashlib.sha256(_dumps(key).encode()).hexdigest()[:16]
+            for point, key in zip(experiment.points, self.keys, strict=True)
+        ]
+
+    def remove_stale(self, started: float) -> None:
+        """Delete temporary files older than ``started`` (epoch s), left by a killed run."""
+        if self.root.is_dir():
+            for tmp in self.root.rglob("*.tmp"):
+                with contextlib.suppress(FileNotFoundError):
+                    if tmp.stat().st_mtime < started:
+                        tmp.unlink()
+
+    def _path(self, point: int, trial: int) -> Path:
+        return self.dirs[point] / f"trial-{trial:06d}.pkl"
+
+    def load(self, point: int, trial: int) -> Rows | None:
+        """The stored rows of one trial, or None if absent or stored under another key."""
+        try:
+            with open(self._path(point, trial), "rb") as f:
+                stored = pickle.load(f)
+        except FileNotFoundError:
+            return None
+        except Exception:
+            return None  # unreadable (e.g. a class renamed since): computed again, overwritten
+        if not isinstance(stored, dict) or stored.get("key") != self.keys[point]:
+            return None
+        if stored.get("trial") != trial:
+            return None
+        return stored["rows"]
+
+    def load_all(self, n_trials: int) -> dict[tuple[int, int], Rows]:
+        """The stored rows of trials 0 to ``n_trials - 1`` of every point, by (point, trial)."""
+        stored = {}
+        for point in range(len(self.dirs)):
+            for trial in range(n_trials):
+                if (rows := self.load(point, trial)) is not None:
+                    stored[point, trial] = rows
+        return stored
+
+    def save(self, point: int, trial: int, rows: Rows) -> None:
+        """Store the rows of one trial atomically."""
+        folder = self.dirs[point]
+        if not (folder / "key.json").exists():
+            folder.mkdir(parents=True, exist_ok=True)
+            _write_atomic(folder / "key.json", (_dumps(self.keys[point]) + "\n").encode())
+        record = {"key": self.keys[point], "trial": trial, "rows": rows}
+        _write_atomic(self._path(point, trial), pickle.dumps(record, protocol=_PICKLE_PROTOCOL))
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _dumps(obj: object) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"))
+
+
+def _slug(point: Mapping[str, Any]) -> str:
+    text = ",".join(f"{key}={value}" for key, value in point.items())
+    text = re.sub(r"[^A-Za-z0-9._=,+-]", "_", text)[:80] or "_"
+    return "_" + text[1:] if text.startswith(".") else text
+
+
+def _qualified(obj: object) -> str | None:
+    module, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+    return None if module is None or qualname is None else f"{module}:{qualname}"
+
+
+def _function_fingerprint(function: Callable[..., Any], name: str) -> str:
+    fingerprint = _qualified(function)
+    if fingerprint is None or "<" in fingerprint:
+        raise CalibrationError(
+            f"experiment {name!r}: the cache needs a module-level trial function, got "
+            f"{fingerprint or repr(function)}"
+        )
+    return fingerprint
+
+
+def _scenario_digest(scenario: object, name: str) -> str:
+    try:
+        text = _dumps(_canonical(scenario))
+    except RecursionError:
+        raise CalibrationError(
+            f"experiment {name!r}: the scenario refers to itself; pass scenario_key"
+        ) from None
+    except _Unstable as exc:
+        raise CalibrationError(
+            f"experiment {name!r}: the scenario holds {exc}, whose repr is not stable across "
+            "runs; pass Experiment(scenario_key=...) to cache it"
+        ) from None
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class _Unstable(Exception):
+    pass
+
+
+def _canonical(obj: object) -> object:
+    """A JSON-ready form of ``obj`` that is the same in every process (for the cache key)."""
+    if isinstance(obj, enum.Enum):
+        return {"enum": _qualified(type(obj)), "name": obj.name}
+    if obj is None or isinstance(obj, bool | int | float | str):
+        return obj
+    if isinstance(obj, np.ndarray):
+        if obj.dtype.hasobject:
+            return {
+                "array": "object",
+                "shape": obj.shape,
+                "items": [_canonical(x) for x in obj.flat],
+            }
+        data = hashlib.sha256(np.ascontiguousarray(obj).tobytes()).hexdigest()
+        return {"array": obj.dtype.str, "shape": obj.shape, "sha256": data}
+    if isinstance(obj, np.generic):
+        return {"numpy": obj.dtype.str, "value": _canonical(obj.item())}
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        fields = {f.name: _canonical(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        return {"dataclass": _qualified(type(obj)), "fields": fields}
+    if isinstance(obj, Mapping):
+        items = sorted(([_canonical(k), _canonical(v)] for k, v in obj.items()), key=_dumps)
+        return {"mapping": _qualified(type(obj)), "items": items}
+    if isinstance(obj, list | tuple):
+        return {"sequence": _qualified(type(obj)), "items": [_canonical(x) for x in obj]}
+    if isinstance(obj, set | frozenset):
+        return {"set": sorted((_canonical(x) for x in obj), key=_dumps)}
+    if isinstance(obj, PurePath):
+        return {"path": str(obj)}
+    if isinstance(obj, pd.DataFrame | pd.Series):
+        data = hashlib.sha256(obj.to_csv().encode()).hexdigest()
+        return {"pandas": type(obj).__name__, "csv_sha256": data}
+    if callable(obj) and _qualified(obj) and "<" not in str(_qualified(obj)):
+        return {"callable": _qualified(obj)}
+    if (
+        type(obj).__reduce_ex__ is object.__reduce_ex__
+        and type(obj).__reduce__ is object.__reduce__
+    ):
+        # what pickle would store: __dict__ and slots, or a custom __getstate__
+        state = obj.__getstate__()
+        if state is not None:
+            return {"object": _qualified(type(obj)), "state": _canonical(state)}
+    text = repr(obj)
+    if re.search(r" at 0x[0-9a-fA-F]+", text):
+        raise _Unstable(text)
+    return {"repr": _qualified(type(obj)), "text": text}
+
+
