@@ -238,7 +238,8 @@ def test_rotation_beyond_tolerance_is_refused_naming_the_pose():
     cell = _cell(13)
     bad = cell.target2camera.copy()
     bad[4, :3, :3] *= 1.001  # a scale error of 1e-3: max |R^T R - I| about 2e-3
-    with pytest.raises(CalibrationError, match=r"camera rotation of pose 4 .*max \|R\^T R - I\| = 0.002 exceeds"):
+    msg = r"camera rotation of pose 4 .*max \|R\^T R - I\| = 0.002 exceeds"
+    with pytest.raises(CalibrationError, match=msg):
         hp.calibrate_handeye(cell.flange2base, bad)
     res = hp.calibrate_handeye(cell.flange2base, bad, ortho_tol=3e-3)
     assert res.prepared.worst_pose == 4

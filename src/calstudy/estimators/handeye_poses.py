@@ -1018,6 +1018,11 @@ class HandEyeResult:
         return jac @ self.covariance @ jac.T
 
 
+def outlier_limit(alpha: float = 1e-3) -> float:
+    """Outlier flag limit: the ``1 - alpha`` quantile of chi-square with 6 degrees of freedom."""
+    return float(chi2.ppf(1.0 - alpha, 6))
+
+
 def _robust_sigmas(res: np.ndarray, alpha: float = 1e-3) -> tuple[float, float]:
     """Noise level ``(sigma_rot, sigma_trans)`` from per-pose residuals ``(N, 6)``, robustly.
 
@@ -1192,7 +1197,7 @@ def _calibrate(
         s2 = chi / max(m - 12, 1)
         cov = cov * s2
         basis = f"scaled by residual chi2 (s^2 = {s2:.3g})"
-    limit = chi2.ppf(1.0 - outlier_alpha, 6)
+    limit = outlier_limit(outlier_alpha)
     flagged = [int(i) for i in prep.ids[score > limit]]
     if flagged:
         notes.append(f"{len(flagged)} pose(s) flagged as outliers (chi2 > {limit:.3g}): {flagged}")
