@@ -70,10 +70,17 @@ def check_rotation(name: str, rotation, tol: float = ORTHONORMAL_TOL) -> np.ndar
     if dev[worst] > tol:
         raise CalibrationError(
             f"{name} is not orthonormal (max |R^T R - I| = {dev[worst]:.3g} at item {worst}, "
-            f"tolerance {tol:g})"
+            f"tolerance {tol:g}); if the rotations are rounded values, re-project them to SO(3) "
+            "(project_to_so3), as calibrate_handeye does up to its ortho_tol"
         )
-    if abs(det[worst] - 1.0) > tol:
+    if det[worst] < 0:
         raise CalibrationError(f"{name} is a reflection (det = {det[worst]:.6g} at item {worst})")
+    if abs(det[worst] - 1.0) > tol:
+        raise CalibrationError(
+            f"{name} is not orthonormal (det = {det[worst]:.9g} at item {worst}, tolerance "
+            f"{tol:g}); if the rotations are rounded values, re-project them to SO(3) "
+            "(project_to_so3), as calibrate_handeye does up to its ortho_tol"
+        )
     return r
 
 

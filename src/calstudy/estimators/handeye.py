@@ -306,7 +306,9 @@ def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x
     return np.linalg.pinv(jac.T @ jac)
 
 
-def opencv_handeye(flange2base, target2sensor, method: str) -> np.ndarray:
+def opencv_handeye(
+    flange2base, target2sensor, method: str, tol: float = geo.ORTHONORMAL_TOL
+) -> np.ndarray:
     """``sensor2flange`` by ``cv2.calibrateHandEye`` (AX = XB) with a named method.
 
     Parameters
@@ -317,6 +319,9 @@ def opencv_handeye(flange2base, target2sensor, method: str) -> np.ndarray:
         Pose of a fixed target in the sensor frame at each robot pose, mm.
     method : str
         One of ``"Tsai"``, ``"Park"``, ``"Horaud"``, ``"Andreff"``, ``"Daniilidis"``.
+    tol : float
+        Orthonormality tolerance of the input rotations. For measured poses with rounded
+        rotations, :func:`calstudy.estimators.handeye_poses.calibrate_handeye` re-projects them.
 
     Returns
     -------
@@ -332,8 +337,8 @@ def opencv_handeye(flange2base, target2sensor, method: str) -> np.ndarray:
         raise CalibrationError(
             f"unknown hand-eye method {method!r}; use one of {list(OPENCV_METHODS)}"
         )
-    g2b = geo.check_transform("flange poses", flange2base)
-    t2c = geo.check_transform("target poses", target2sensor)
+    g2b = geo.check_transform("flange poses", flange2base, tol)
+    t2c = geo.check_transform("target poses", target2sensor, tol)
     if g2b.ndim != 3 or g2b.shape != t2c.shape:
         raise CalibrationError(
             f"flange poses {g2b.shape} and target poses {t2c.shape} must both be (N, 4, 4)"
