@@ -182,6 +182,17 @@ def selfcal_claims(
 START_LABELS = {"good": "good initial estimate", "poor": "very poor initial estimate"}
 
 
+def _finish(fig, ax, title: str, xlabel: str, ylabel: str | None = None, legend_size=8):
+    """Axis labels, grid, legend (``legend_size`` None: matplotlib's default) and title."""
+    ax.set_xlabel(xlabel)
+    if ylabel is not None:
+        ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=legend_size)
+    ax.set_title(title)
+    return fig
+
+
 def convergence_figure(summary: pd.DataFrame, title: str):
     """Mean position error per LM iteration, median and 5-95 % band (Fig. 5 of the paper).
 
@@ -192,12 +203,7 @@ def convergence_figure(summary: pd.DataFrame, title: str):
         ax.plot(sub["iteration"], sub["median_mm"], "o-", label=START_LABELS.get(start, start))
         ax.fill_between(sub["iteration"], sub["p5_mm"], sub["p95_mm"], alpha=0.2)
     ax.set_yscale("log")
-    ax.set_xlabel("LM iteration")
-    ax.set_ylabel("mean position error (mm)")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    ax.set_title(title)
-    return fig
+    return _finish(fig, ax, title, "LM iteration", "mean position error (mm)", legend_size=None)
 
 
 def robot_parameters_figure(trial: pd.DataFrame, title: str):
@@ -268,11 +274,7 @@ def routes_figure(summary: pd.DataFrame, requirement_mm: float, title: str):
     ax.axvline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
     ax.set_yticks(y, summary["method"])
     ax.set_xscale("log")
-    ax.set_xlabel("largest validation error of a calibration (mm)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title(title)
-    return fig
+    return _finish(fig, ax, title, "largest validation error of a calibration (mm)")
 
 
 def singular_values_figure(table: pd.DataFrame, title: str):
@@ -280,12 +282,7 @@ def singular_values_figure(table: pd.DataFrame, title: str):
     fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
     for design, sub in table.groupby("design", sort=False):
         ax.semilogy(sub["index"], sub["singular_value"], "o-", ms=4, label=design)
-    ax.set_xlabel("index")
-    ax.set_ylabel("singular value (mm per unit)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title(title)
-    return fig
+    return _finish(fig, ax, title, "index", "singular value (mm per unit)")
 
 
 def noise_sweep_figure(table: pd.DataFrame, requirement_mm: float, title: str):
@@ -297,9 +294,5 @@ def noise_sweep_figure(table: pd.DataFrame, requirement_mm: float, title: str):
     ax.axhline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("noise scale (repeatability, scanner and tracker noise x)")
-    ax.set_ylabel("largest validation error (mm)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title(title)
-    return fig
+    xlabel = "noise scale (repeatability, scanner and tracker noise x)"
+    return _finish(fig, ax, title, xlabel, "largest validation error (mm)")

@@ -74,22 +74,69 @@ class Station:
         return self.spheres_base @ self.part2base[:3, :3].T + self.part2base[:3, 3]
 
 
+def _draw_until(n: int, tries: int, draw, failure) -> np.ndarray:
+    """``n`` results (n, ...) of ``draw(found)`` in at most ``tries`` calls (``None`` is a miss).
+
+    Raises a :class:`CalibrationError` with the message ``failure(len(found))`` otherwise.
+    """
+    out: list[np.ndarray] = []
+    for _ in range(tries):
+        item = draw(out)
+        if item is not None:
+            out.append(item)
+            if len(out) == n:
+                return np.array(out)
+    raise CalibrationError(failure(len(out)))
+
+
+def _view_pose(scenario: Scenario, centre: np.ndarray, towards: np.ndarray, rng) -> np.ndarray:
+    """A drawn sensor pose (4, 4) in the base frame looking at ``centre`` (see plan_views).
+
+    ``towards`` is the unit direction from the sphere to the robot's shoulder.
+    """
+    tilt = scenario.view_cone_rad * math.sqrt(rng.uniform())
+    turn = rng.uniform(0, 2 * math.pi)
+    frame = look_at(np.zeros(3), towards)[:3, :3]
+    d = frame @ [
+        math.sin(tilt) * math.cos(turn),
+        math.sin(tilt) * math.sin(turn),
+        math.cos(tilt),
+    ]
+    offset = rng.uniform(-1.0, 1.0, 3) * [
+        scenario.field_mm,
+        scenario.field_mm,
+        scenario.depth_mm,
+    ]
+    distance = scenario.standoff_mm + offset[2]
+    eye = centre + distance * d
+    sensor2base = look_at(eye, centre)
+    roll_deg = rng.uniform(-scenario.roll_deg, scenario.roll_deg)
+    roll = make_transform(euler_zyx_to_matrix(roll_deg, 0, 0), np.zeros(3))
+    shift = make_transform(np.eye(3), [-offset[0], -offset[1], 0.0])
+    return sensor2base @ roll @ shift
+
+
 def draw_placements(scenario: Scenario, n: int, rng: np.random.Generator, tries: int = 1000):
     """``n`` sphere centres (n, 3) in the robot base frame, uniform in the envelope, spaced.
 
     Centres closer than ``min_separation_mm`` to an earlier one are redrawn.
     """
     lo, hi = scenario.envelope
-    out: list[np.ndarray] = []
-    for _ in range(tries):
+
+    def draw(found: list[np.ndarray]) -> np.ndarray | None:
         c = rng.uniform(lo, hi)
-        if all(np.linalg.norm(c - o) >= scenario.min_separation_mm for o in out):
-            out.append(c)
-            if len(out) == n:
-                return np.array(out)
-    raise CalibrationError(
-        f"could not place {n} spheres {scenario.min_separation_mm:g} mm apart in the envelope "
-        f"after {tries} draws"
+        return (
+            c if all(np.linalg.norm(c - o) >= scenario.min_separation_mm for o in found) else None
+        )
+
+    return _draw_until(
+        n,
+        tries,
+        draw,
+        lambda _: (
+            f"could not place {n} spheres {scenario.min_separation_mm:g} mm apart in the "
+            f"envelope after {tries} draws"
+        ),
     )
 
 
@@ -195,40 +242,23 @@ def plan_views(
     centre = np.asarray(centre_base, float)
     towards = _shoulder(robot) - centre
     towards /= np.linalg.norm(towards)
-    out = []
-    for _ in range(max_tries):
-        tilt = scenario.view_cone_rad * math.sqrt(rng.uniform())
-        turn = rng.uniform(0, 2 * math.pi)
-        frame = look_at(np.zeros(3), towards)[:3, :3]
-        d = frame @ [
-            math.sin(tilt) * math.cos(turn),
-            math.sin(tilt) * math.sin(turn),
-            math.cos(tilt),
-        ]
-        offset = rng.uniform(-1.0, 1.0, 3) * [
-            scenario.field_mm,
-            scenario.field_mm,
-            scenario.depth_mm,
-        ]
-        distance = scenario.standoff_mm + offset[2]
-        eye = centre + distance * d
-        sensor2base = look_at(eye, centre)
-        roll_deg = rng.uniform(-scenario.roll_deg, scenario.roll_deg)
-        roll = make_transform(euler_zyx_to_matrix(roll_deg, 0, 0), np.zeros(3))
-        shift = make_transform(np.eye(3), [-offset[0], -offset[1], 0.0])
-        sensor2base = sensor2base @ roll @ shift
-        flange2base = sensor2base @ flange2sensor
+
+    def draw(_found: list[np.ndarray]) -> np.ndarray | None:
+        flange2base = _view_pose(scenario, centre, towards, rng) @ flange2sensor
         q0 = _seed_configuration(robot, flange2base[:3, 3])
         try:
-            q = robot.ik(flange2base, q0)
+            return robot.ik(flange2base, q0)
         except CalibrationError:
-            continue
-        out.append(q)
-        if len(out) == n:
-            return np.array(out)
-    raise CalibrationError(
-        f"found only {len(out)} of {n} reachable views of the sphere at "
-        f"{np.round(centre, 1).tolist()} mm after {max_tries} tries"
+            return None
+
+    return _draw_until(
+        n,
+        max_tries,
+        draw,
+        lambda found: (
+            f"found only {found} of {n} reachable views of the sphere at "
+            f"{np.round(centre, 1).tolist()} mm after {max_tries} tries"
+        ),
     )
 
 
