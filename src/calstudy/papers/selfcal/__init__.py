@@ -1,1 +1,17 @@
-"""The one-step self-calibration paper."""
+"""The one-step self-calibration paper (``selfcal``).
+
+Modules, lowest first (a module imports only those before it):
+
+- :mod:`~calstudy.papers.selfcal.model`: the 30-parameter global model of robot, sensor mounting
+  and base (Eq. 1-6) on Pinocchio;
+- :mod:`~calstudy.papers.selfcal.identify`: sphere fit, bad-input checks, one-step identification
+  (Eq. 10-11), its covariance, the three-step route and identifiability;
+- :mod:`~calstudy.papers.selfcal.scenario`: the simulated cell and the published numbers, read
+  from ``data/selfcal/scenario.toml``;
+- :mod:`~calstudy.papers.selfcal.simulate`: true stations, planned views, scans, tracker readings;
+- :mod:`~calstudy.papers.selfcal.experiments`: trials, Monte Carlo, noise sweep, identifiability
+  designs;
+- :mod:`~calstudy.papers.selfcal.report`: summary tables, figures and claim rows.
+
+``model`` and ``identify`` know nothing of the simulation, so they serve measured data as well.
+"""

@@ -1,0 +1,371 @@
+"""The synthetic cell of the ``selfcal`` paper: true stations, views, scans and tracker readings.
+
+A drawn :class:`Station` is the "true" system (robot with manufacturing errors, base placement,
+sensor mounting, sphere placements); :func:`simulate` moves it to planned views and returns what
+the identification sees (:class:`calstudy.papers.selfcal.identify.Measurements`), with the
+scanner, repeatability and tracker noise of the scenario. Every function that draws takes the
+``rng`` it draws from.
+
+Frames: ``part`` (the tracker's), robot ``base``, ``flange`` and ``sensor``. Millimetres and
+radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.geometry import euler_zyx_to_matrix, look_at, make_transform, rotvec_to_matrix
+from calstudy.models.kinematics import Robot, perturb_robot
+from calstudy.papers.selfcal.identify import Measurements, check_sphere_layout, fit_sphere_cap
+from calstudy.papers.selfcal.model import (
+    BASE,
+    IS_LENGTH,
+    N_PARAMS,
+    ROBOT,
+    SENSOR,
+    default_model,
+    parameters_from_robot,
+    params_to_pose,
+    pose_to_params,
+)
+from calstudy.papers.selfcal.scenario import Scenario
+
+# ----------------------------------------------------------------------------------------------
+# the true station
+
+
+def _random_motion(rng: np.random.Generator, sigma_mm: float, sigma_rad: float) -> np.ndarray:
+    return make_transform(
+        rotvec_to_matrix(rng.normal(0.0, sigma_rad, 3)), rng.normal(0.0, sigma_mm, 3)
+    )
+
+
+@dataclass
+class Station:
+    """A drawn "true" system and what is known of it before calibration.
+
+    Attributes
+    ----------
+    true_robot : Robot
+        Nominal robot plus manufacturing errors (``d2`` kept at 0, see :func:`draw_station`).
+    part2base, sensor2flange : numpy.ndarray, shape (4, 4)
+        True robot placement in the part frame and true sensor mounting.
+    true_params, nominal_params : numpy.ndarray, shape (30,)
+        The true system, and the "good" initial estimate: nominal robot, rough base pose from
+        the layout, sensor pose from the bracket drawing.
+    spheres_base : numpy.ndarray, shape (k, 3)
+        Calibration sphere centres in the robot base frame (mm).
+    """
+
+    true_robot: Robot
+    part2base: np.ndarray
+    sensor2flange: np.ndarray
+    true_params: np.ndarray
+    nominal_params: np.ndarray
+    spheres_base: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    @property
+    def spheres_part(self) -> np.ndarray:
+        """True sphere centres in the part frame, (k, 3) mm."""
+        return self.spheres_base @ self.part2base[:3, :3].T + self.part2base[:3, 3]
+
+
+def _draw_until(n: int, tries: int, draw, failure) -> np.ndarray:
+    """``n`` results (n, ...) of ``draw(found)`` in at most ``tries`` calls (``None`` is a miss).
+
+    Raises a :class:`CalibrationError` with the message ``failure(len(found))`` otherwise.
+    """
+    out: list[np.ndarray] = []
+    for _ in range(tries):
+        item = draw(out)
+        if item is not None:
+            out.append(item)
+            if len(out) == n:
+                return np.array(out)
+    raise CalibrationError(failure(len(out)))
+
+
+def _view_pose(scenario: Scenario, centre: np.ndarray, towards: np.ndarray, rng) -> np.ndarray:
+    """A drawn sensor pose (4, 4) in the base frame looking at ``centre`` (see plan_views).
+
+    ``towards`` is the unit direction from the sphere to the robot's shoulder.
+    """
+    tilt = scenario.view_cone_rad * math.sqrt(rng.uniform())
+    turn = rng.uniform(0, 2 * math.pi)
+    frame = look_at(np.zeros(3), towards)[:3, :3]
+    d = frame @ [
+        math.sin(tilt) * math.cos(turn),
+        math.sin(tilt) * math.sin(turn),
+        math.cos(tilt),
+    ]
+    offset = rng.uniform(-1.0, 1.0, 3) * [
+        scenario.field_mm,
+        scenario.field_mm,
+        scenario.depth_mm,
+    ]
+    distance = scenario.standoff_mm + offset[2]
+    eye = centre + distance * d
+    sensor2base = look_at(eye, centre)
+    roll_deg = rng.uniform(-scenario.roll_deg, scenario.roll_deg)
+    roll = make_transform(euler_zyx_to_matrix(roll_deg, 0, 0), np.zeros(3))
+    shift = make_transform(np.eye(3), [-offset[0], -offset[1], 0.0])
+    return sensor2base @ roll @ shift
+
+
+def draw_placements(scenario: Scenario, n: int, rng: np.random.Generator, tries: int = 1000):
+    """``n`` sphere centres (n, 3) in the robot base frame, uniform in the envelope, spaced.
+
+    Centres closer than ``min_separation_mm`` to an earlier one are redrawn.
+    """
+    lo, hi = scenario.envelope
+
+    def draw(found: list[np.ndarray]) -> np.ndarray | None:
+        c = rng.uniform(lo, hi)
+        return (
+            c if all(np.linalg.norm(c - o) >= scenario.min_separation_mm for o in found) else None
+        )
+
+    return _draw_until(
+        n,
+        tries,
+        draw,
+        lambda _: (
+            f"could not place {n} spheres {scenario.min_separation_mm:g} mm apart in the "
+            f"envelope after {tries} draws"
+        ),
+    )
+
+
+def draw_station(scenario: Scenario, rng: np.random.Generator) -> Station:
+    """Draw a true system: manufacturing errors, base and sensor poses, four sphere placements.
+
+    :func:`calstudy.models.kinematics.perturb_robot` perturbs every link parameter; the offset
+    ``d2``
+    along the axis of joint 2 is then set back to 0 because Eq. 2 has no such parameter (for
+    parallel axes 2 and 3 it is carried by ``d3``), so the true system lies in the model class.
+    """
+    true_robot = perturb_robot(scenario.robot, rng)
+    vec = true_robot.parameters()
+    vec[5 + 2] = 0.0  # d of link 2
+    true_robot = true_robot.with_parameters(vec)
+    part2base = scenario.base_rough @ _random_motion(rng, *scenario.base_sigma)
+    sensor2flange = scenario.sensor_design @ _random_motion(rng, *scenario.sensor_sigma)
+    spheres = draw_placements(scenario, scenario.n_spheres, rng)
+    check_sphere_layout(spheres, scenario.radius_mm)
+    return Station(
+        true_robot,
+        part2base,
+        sensor2flange,
+        parameters_from_robot(true_robot, part2base, sensor2flange),
+        parameters_from_robot(scenario.robot, scenario.base_rough, scenario.sensor_design),
+        spheres,
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# measurement simulation
+
+
+def scan_cap(centre_sensor, radius_mm: float, half_angle: float, n: int, sigma: float, rng):
+    """Points (n, 3) of the sphere cap facing the sensor origin, with isotropic normal noise.
+
+    Area-uniform on the cap of half-angle ``half_angle`` (rad) around the direction from the
+    centre to the sensor origin; sensor frame, mm.
+    """
+    c = np.asarray(centre_sensor, dtype=float)
+    axis = -c / np.linalg.norm(c)
+    frame = look_at(np.zeros(3), axis)[:3, :3]  # columns x, y, z with z along axis
+    u = rng.uniform(math.cos(half_angle), 1.0, n)
+    phi = rng.uniform(0.0, 2.0 * math.pi, n)
+    s = np.sqrt(1.0 - u**2)
+    local = np.column_stack([s * np.cos(phi), s * np.sin(phi), u])
+    return c + radius_mm * local @ frame.T + rng.normal(0.0, sigma, (n, 3))
+
+
+def cap_centre_covariance(centre_sensor, radius_mm, half_angle, n, sigma) -> np.ndarray:
+    """Covariance (3, 3) of the fitted centre of such a cap, to first order (for ML weights).
+
+    The fit's linearisation: ``sigma^2 [(G^T G)^-1]_{:3,:3}`` with rows ``G_i = [n_i, 1]``
+    (unit normals, radius), evaluated on the expected area-uniform point distribution.
+    """
+    c = np.asarray(centre_sensor, dtype=float)
+    axis = -c / np.linalg.norm(c)
+    frame = look_at(np.zeros(3), axis)[:3, :3]
+    # second moments of the unit normal over the area-uniform cap, in the local frame
+    cos_a = math.cos(half_angle)
+    mean_u = (1.0 + cos_a) / 2.0
+    mean_u2 = (1.0 + cos_a + cos_a**2) / 3.0
+    mean_s2 = 1.0 - mean_u2
+    gtg = np.zeros((4, 4))
+    gtg[0, 0] = gtg[1, 1] = mean_s2 / 2.0
+    gtg[2, 2] = mean_u2
+    gtg[2, 3] = gtg[3, 2] = mean_u
+    gtg[3, 3] = 1.0
+    cov_local = sigma**2 / n * np.linalg.inv(gtg)[:3, :3]
+    return frame @ cov_local @ frame.T
+
+
+def tracker_sigma(scenario: Scenario, points_part) -> np.ndarray:
+    """Standard deviation per axis (mm) of the tracker's reading of each point (m, 3)."""
+    u0, u1, k = scenario.tracker
+    dist_m = np.linalg.norm(np.asarray(points_part, float), axis=-1) / 1000.0
+    return (u0 + u1 * dist_m) / k / math.sqrt(3.0)
+
+
+def _shoulder(robot: Robot) -> np.ndarray:
+    """Point on axis 1 at the height of axis 2, robot base frame (where views look from)."""
+    return robot.base[:3, :3] @ [0.0, 0.0, robot.links[0].d] + robot.base[:3, 3]
+
+
+def plan_views(
+    scenario: Scenario,
+    centre_base,
+    n: int,
+    rng: np.random.Generator,
+    sensor2flange=None,
+    max_tries: int = 200,
+) -> np.ndarray:
+    """Joint angles (n, 6) that show the sphere at ``centre_base`` to the sensor.
+
+    Planned with the nominal robot and the design sensor pose (all the controller knows): each
+    view looks at a point within ``field_mm``/``depth_mm`` of the sphere, from a direction within
+    ``view_cone`` of the direction to the robot's shoulder, turned about the optical axis at
+    random. Views whose inverse kinematics fails or leaves the joint limits are redrawn.
+    """
+    robot = scenario.robot
+    s2f = scenario.sensor_design if sensor2flange is None else sensor2flange
+    flange2sensor = np.linalg.inv(s2f)
+    centre = np.asarray(centre_base, float)
+    towards = _shoulder(robot) - centre
+    towards /= np.linalg.norm(towards)
+
+    def draw(_found: list[np.ndarray]) -> np.ndarray | None:
+        flange2base = _view_pose(scenario, centre, towards, rng) @ flange2sensor
+        q0 = _seed_configuration(robot, flange2base[:3, 3])
+        try:
+            return robot.ik(flange2base, q0)
+        except CalibrationError:
+            return None
+
+    return _draw_until(
+        n,
+        max_tries,
+        draw,
+        lambda found: (
+            f"found only {found} of {n} reachable views of the sphere at "
+            f"{np.round(centre, 1).tolist()} mm after {max_tries} tries"
+        ),
+    )
+
+
+def _seed_configuration(robot: Robot, flange_xyz) -> np.ndarray:
+    """An elbow-up start for IK: joint 1 towards the point, arm half bent, wrist bent down."""
+    q1 = math.atan2(flange_xyz[1], flange_xyz[0])
+    return np.array([q1, 0.3, 0.0, 0.0, -0.8, 0.0])
+
+
+def _measure_view(scenario: Scenario, pose: np.ndarray, centre_part, rng: np.random.Generator):
+    """One view of one sphere: the fitted centre ``C``, the noise-free one, their covariance.
+
+    ``pose`` is the commanded sensor pose in the part frame (4, 4); the repeatability error is
+    drawn here, then the scan. Returns ``C`` (3,), ``C_true`` (3,), the covariance (3, 3) of
+    ``P - P_ref`` in the part frame and the tracker's part of it (3, 3).
+    """
+    pose = pose.copy()
+    pose[:3, 3] += rng.normal(0.0, scenario.repeatability_mm, 3)
+    c_true = np.linalg.solve(pose, np.append(centre_part, 1.0))[:3]
+    cloud = scan_cap(
+        c_true,
+        scenario.radius_mm,
+        scenario.cap_half_angle_rad,
+        scenario.points_per_cap,
+        scenario.sigma_point_mm,
+        rng,
+    )
+    centre_fit, _, _ = fit_sphere_cap(cloud, scenario.max_cap_condition)
+    cov_c = cap_centre_covariance(
+        c_true,
+        scenario.radius_mm,
+        scenario.cap_half_angle_rad,
+        scenario.points_per_cap,
+        scenario.sigma_point_mm,
+    )
+    rot = pose[:3, :3]
+    tracker = tracker_sigma(scenario, centre_part) ** 2 * np.eye(3)
+    cov = rot @ cov_c @ rot.T + scenario.repeatability_mm**2 * np.eye(3) + tracker
+    return centre_fit, c_true, cov, tracker
+
+
+def simulate(
+    scenario: Scenario,
+    station: Station,
+    placements_base,
+    views_per_sphere: int,
+    rng: np.random.Generator,
+) -> Measurements:
+    """Measure each sphere placement (k, 3) from ``views_per_sphere`` robot positions.
+
+    The true system moves (true robot, true base and sensor, repeatability); the scanner returns
+    a noisy cap whose LLS fit gives ``C``; the tracker reads each placement once with its noise.
+    """
+    model = default_model()
+    placements = np.asarray(placements_base, float)
+    parts = station.part2base[:3, :3] @ placements.T
+    truth_part = parts.T + station.part2base[:3, 3]
+    reading = (
+        truth_part
+        + rng.normal(size=truth_part.shape) * tracker_sigma(scenario, truth_part)[:, None]
+    )
+    Q, C, C_true, idx, cov, shared = [], [], [], [], [], []
+    for k, centre in enumerate(placements):
+        views = plan_views(scenario, centre, views_per_sphere, rng)
+        poses = model.sensor2part(station.true_params, views)
+        for q, pose in zip(views, poses, strict=True):
+            centre_fit, c_true, cov_view, tracker = _measure_view(
+                scenario, pose, truth_part[k], rng
+            )
+            Q.append(q)
+            C.append(centre_fit)
+            C_true.append(c_true)
+            idx.append(k)
+            cov.append(cov_view)
+            shared.append(tracker)
+    return Measurements(
+        np.array(Q),
+        np.array(C),
+        reading[np.array(idx)],
+        np.array(idx),
+        np.array(C_true),
+        np.array(cov),
+        np.array(shared),
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# initial estimates
+
+
+def poor_start(scenario: Scenario, station: Station, rng: np.random.Generator) -> np.ndarray:
+    """The "very poor" initial estimate of ``scenario.poor`` around the true system."""
+    p = np.empty(N_PARAMS)
+    cfg = scenario.poor
+
+    def offset(true6, mm, deg):
+        t = rng.normal(size=3)
+        r = rng.normal(size=3)
+        bad = params_to_pose(true6) @ make_transform(
+            rotvec_to_matrix(math.radians(deg) * r / np.linalg.norm(r)),
+            mm * t / np.linalg.norm(t),
+        )
+        return pose_to_params(bad)
+
+    p[BASE] = offset(station.true_params[BASE], cfg["base_mm"], cfg["base_deg"])
+    p[SENSOR] = offset(station.true_params[SENSOR], cfg["sensor_mm"], cfg["sensor_deg"])
+    signs = rng.choice([-1.0, 1.0], size=18)
+    size = np.where(IS_LENGTH[ROBOT], cfg["robot_length_mm"], math.radians(cfg["robot_angle_deg"]))
+    p[ROBOT] = station.true_params[ROBOT] + signs * size
+    return p
