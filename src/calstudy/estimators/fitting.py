@@ -398,7 +398,7 @@ def solve_pnp_ransac(object_points, image_uv, k, threshold_px: float) -> np.ndar
     Returns
     -------
     numpy.ndarray, shape (4, 4)
-        ``target2cam``.
+        ``target2cam``, refined on the inliers only.
 
     Raises
     ------

@@ -150,33 +150,17 @@ def test_survey_with_a_poor_pnp_start_converges(scenario):
 
 def test_bundle_adjustment_rejects_bad_weights(scenario):
     views, poses, points, ref = spliced(scenario, np.random.default_rng(12))
+    kw = dict(fixed_view=ref, sigma_px=0.1, sigma_mm=0.1, depth_ref_mm=0.0)
     with pytest.raises(CalibrationError, match=r"depth_ref_mm \(0.0\) must be > 0"):
-        mk.bundle_adjust(
-            scenario.rig,
-            views,
-            poses,
-            points,
-            fixed_view=ref,
-            sigma_px=0.1,
-            sigma_mm=0.1,
-            depth_ref_mm=0.0,
-        )
+        mk.bundle_adjust(scenario.rig, views, poses, points, **kw)
 
 
 def test_bundle_adjustment_divergence_raises(scenario):
     views, poses, points, ref = spliced(scenario, np.random.default_rng(12))
     bad = points + np.random.default_rng(0).normal(0, 150.0, points.shape)
+    kw = dict(fixed_view=ref, sigma_px=0.1, sigma_mm=0.1, max_nfev=3)
     with pytest.raises(CalibrationError, match="bundle adjustment diverged: RMS reprojection"):
-        mk.bundle_adjust(
-            scenario.rig,
-            views,
-            poses,
-            bad,
-            fixed_view=ref,
-            sigma_px=0.1,
-            sigma_mm=0.1,
-            max_nfev=3,
-        )
+        mk.bundle_adjust(scenario.rig, views, poses, bad, **kw)
 
 
 def test_ransac_pnp_rejects_gross_errors(scenario):

@@ -275,6 +275,17 @@ class Published:
     table3_rows: list
 
 
+#: Published field -> dotted key in published.toml.
+_PUBLISHED = {
+    "icp_rows": "icp.rows",
+    "table1_rows": "table1.rows",
+    "table2_rows": "table2.rows",
+    "table2_overall": "table2.overall",
+    "table3_methods": "table3.methods",
+    "table3_rows": "table3.rows",
+}
+
+
 def load_published(path: str | Path | None = None) -> Published:
     """The paper's numbers, ``data/dualarm/published.toml`` (or ``path``).
 
@@ -287,11 +298,4 @@ def load_published(path: str | Path | None = None) -> Published:
     """
     src = scenario_file(PAPER, "published.toml", path)
     d = read_toml(src, "dualarm published results")
-    return Published(
-        icp_rows=require(d, "icp.rows", src),
-        table1_rows=require(d, "table1.rows", src),
-        table2_rows=require(d, "table2.rows", src),
-        table2_overall=require(d, "table2.overall", src),
-        table3_methods=require(d, "table3.methods", src),
-        table3_rows=require(d, "table3.rows", src),
-    )
+    return Published(**{field: require(d, key, src) for field, key in _PUBLISHED.items()})
