@@ -14,16 +14,18 @@ import numpy as np
 from timing import best_seconds
 
 from calstudy.estimators import sfm as mk
-from calstudy.papers.dualarm import dualarm as da
+from calstudy.papers.dualarm import experiments as ex
+from calstudy.papers.dualarm import simulate as sim
+from calstudy.papers.dualarm.scenario import load_scenario
 
 BUDGET_S = 2.0
 REPEATS = 5
 
 
 def main() -> None:
-    scn = da.load_scenario()
-    views = da.survey_views(scn, np.random.default_rng(1))
-    recon = da.survey_markers(scn, views)
+    scn = load_scenario()
+    views = sim.survey_views(scn, np.random.default_rng(1))
+    recon = ex.survey_markers(scn, views)
     used = [views[j] for j in recon.used_views]
     w2c, pts = mk.splice_clusters(recon.clusters)
     poses = np.stack([w2c[j] for j in range(len(used))])
@@ -46,7 +48,7 @@ def main() -> None:
             REPEATS,
         ),
         "whole reconstruction (graph to bundle adjustment)": best_seconds(
-            lambda: da.survey_markers(scn, views), REPEATS
+            lambda: ex.survey_markers(scn, views), REPEATS
         ),
     }
     print(

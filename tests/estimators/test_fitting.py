@@ -18,6 +18,7 @@ from calstudy.estimators.fitting import (
     fit_sphere,
     homography_to_pose,
     solve_pnp,
+    solve_pnp_ransac,
 )
 
 K = np.array([[2000.0, 0.0, 640.0], [0.0, 1990.0, 512.0], [0.0, 0.0, 1.0]])
@@ -320,3 +321,23 @@ def test_solve_pnp_bad_input(rng):
     skewed[0, 1] = 0.5
     with pytest.raises(CalibrationError, match="no skew"):
         solve_pnp(pts, uv, skewed)
+
+
+def test_solve_pnp_ransac_rejects_gross_errors(rng):
+    """An oblique plate with every seventh centre 15 px off: the pose is exact on the rest."""
+    pts = grid_points(7, 9, 20.0)
+    for _ in range(5):
+        pose = random_view(rng)
+        uv = project(pose, pts)
+        uv[::7] += 15.0
+        est = solve_pnp_ransac(pts, uv, K, 1.0)
+        assert g.translation_error(est, pose) < 1e-6
+        assert g.rotation_error(est, pose) < 1e-9
+
+
+def test_solve_pnp_ransac_bad_input():
+    pts = grid_points(2, 2)
+    with pytest.raises(CalibrationError, match="at least 4 points; got 3"):
+        solve_pnp_ransac(pts[:3], np.zeros((3, 2)), K, 1.0)
+    with pytest.raises(CalibrationError, match=r"image_uv has shape \(3, 2\); expected \(4, 2\)"):
+        solve_pnp_ransac(pts, np.zeros((3, 2)), K, 1.0)

@@ -249,3 +249,40 @@ def _cell(text: str, row: int, col: int, value: str) -> str:
     cells[col - 1] = value
     lines[row - 1] = ",".join(cells)
     return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------- dualarm: Tsai check, Eq. 11
+
+
+def test_opencv_handeye_min_pair_rotation_names_the_pair():
+    rng = np.random.default_rng(21)
+    _, rot = _poses(rng, n_rot=6)
+    rot = rot.copy()
+    rot[4] = rot[3] @ geo.make_transform(np.eye(3), [20.0, 0.0, 0.0])  # a pure translation
+    target2base = geo.make_transform(geo.random_rotation(rng), X_B)
+    target2sensor = geo.invert(rot @ SENSOR2FLANGE) @ target2base
+    with pytest.raises(CalibrationError, match=r"poses 3 and 4 differ by a rotation of 0 deg"):
+        he.opencv_handeye(rot, target2sensor, "Tsai", he.MIN_PAIR_ROTATION)
+    # without the check OpenCV runs on (and the other motions still fix the answer)
+    est = he.opencv_handeye(rot, target2sensor, "Tsai")
+    assert geo.rotation_error(est, SENSOR2FLANGE) < 1e-6
+
+
+def test_base_to_base_chains_two_robots():
+    """Eq. 11: two robots whose cameras see one world frame give the transform between their
+    bases, for any number of poses per robot; unequal pose counts are rejected."""
+    rng = np.random.default_rng(22)
+    def pose(n, scale):
+        return geo.make_transform(geo.random_rotation(rng, n), rng.uniform(-scale, scale, (n, 3)))
+
+    world2base, cam2flange = pose(2, 900.0), pose(2, 100.0)
+    args = []
+    for a, n in ((0, 3), (1, 5)):
+        flange2base = pose(n, 900.0)
+        world2cam = geo.invert(flange2base @ cam2flange[a]) @ world2base[a]
+        args += [flange2base, cam2flange[a], world2cam]
+    truth = world2base[0] @ geo.invert(world2base[1])
+    np.testing.assert_allclose(he.base_to_base(*args), truth, atol=1e-9)
+    args[2] = args[2][:2]
+    with pytest.raises(CalibrationError, match="3 flange poses but 2 camera poses"):
+        he.base_to_base(*args)

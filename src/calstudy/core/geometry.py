@@ -200,6 +200,20 @@ def project_to_so3(matrix) -> np.ndarray:
     return u @ np.diag([1.0, 1.0, d]) @ vt
 
 
+def mean_transform(transforms) -> np.ndarray:
+    """Average ``(4, 4)`` of rigid transforms ``(N, 4, 4)``: the mean translation and the mean
+    rotation matrix projected to SO(3) (:func:`project_to_so3`), a good average of rotations
+    that differ little.
+
+    Raises
+    ------
+    CalibrationError
+        On a bad shape, non-finite values or non-orthonormal rotations.
+    """
+    t = check_transform("transforms", transforms)
+    return make_transform(project_to_so3(t[:, :3, :3].mean(axis=0)), t[:, :3, 3].mean(0))
+
+
 # ----------------------------------------------------------------------------------------------
 # errors and random draws
 

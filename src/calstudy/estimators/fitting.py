@@ -375,6 +375,67 @@ def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.
     return make_transform(rot, tvec.ravel())
 
 
+def solve_pnp_ransac(object_points, image_uv, k, threshold_px: float) -> np.ndarray:
+    """Pose ``target2cam`` of a planar target by ``cv2.solvePnPRansac``, robust to gross errors.
+
+    RANSAC (AP3P hypotheses, 500 iterations, fixed OpenCV seed) selects the inliers; a plane seen
+    obliquely admits a second, mirrored pose that reprojects almost as well, so the pose is
+    recomputed on the inliers by IPPE (which returns the better of the two), the inliers are
+    recomputed from it (reprojection error below ``threshold_px``) and the pose refined by LM on
+    them. No lens distortion.
+
+    Parameters
+    ----------
+    object_points : array_like, shape (N, 3)
+        Points of the (planar) target in its frame, mm; ``N >= 4``.
+    image_uv : array_like, shape (N, 2)
+        Their detected image coordinates, px, some of them possibly gross errors.
+    k : array_like, shape (3, 3)
+        Camera intrinsic matrix.
+    threshold_px : float
+        Reprojection error (px) below which a point is an inlier.
+
+    Returns
+    -------
+    numpy.ndarray, shape (4, 4)
+        ``target2cam``, refined on the inliers only.
+
+    Raises
+    ------
+    CalibrationError
+        On wrong shapes, fewer than 4 points, or fewer than 4 inliers.
+    """
+    obj = check_shape("object_points", object_points, (None, 3))
+    uv = check_shape("image_uv", image_uv, (obj.shape[0], 2))
+    if obj.shape[0] < 4:
+        raise CalibrationError(f"RANSAC-PnP needs at least 4 points; got {obj.shape[0]}")
+    cv2.setRNGSeed(0)
+    ok, rvec, tvec, inliers = cv2.solvePnPRansac(
+        obj,
+        uv,
+        k,
+        None,
+        reprojectionError=threshold_px,
+        iterationsCount=500,
+        confidence=0.999,
+        flags=cv2.SOLVEPNP_AP3P,
+    )
+    if not ok or inliers is None or len(inliers) < 4:
+        raise CalibrationError(f"RANSAC-PnP found no pose for the {obj.shape[0]} points")
+    keep = inliers.ravel()
+    ok, rvec, tvec = cv2.solvePnP(obj[keep], uv[keep], k, None, flags=cv2.SOLVEPNP_IPPE)
+    proj = cv2.projectPoints(obj, rvec, tvec, k, None)[0].reshape(-1, 2)
+    good = np.linalg.norm(proj - uv, axis=1) < threshold_px
+    if not ok or good.sum() < 4:
+        raise CalibrationError(
+            f"RANSAC-PnP kept {int(good.sum())} of {obj.shape[0]} points within "
+            f"{threshold_px:g} px; PnP needs 4"
+        )
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-16)
+    rvec, tvec = cv2.solvePnPRefineLM(obj[good], uv[good], k, None, rvec, tvec, criteria=criteria)
+    return make_transform(cv2.Rodrigues(rvec)[0], tvec.ravel())
+
+
 __all__ = [
     "fit_homography",
     "fit_rigid",
@@ -382,4 +443,5 @@ __all__ = [
     "fit_sphere",
     "homography_to_pose",
     "solve_pnp",
+    "solve_pnp_ransac",
 ]

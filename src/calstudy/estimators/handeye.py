@@ -35,6 +35,8 @@ from calstudy.estimators.fitting import fit_rotation
 PURE_TRANSLATION_TOL = np.deg2rad(0.01)
 #: condition number of Eq. 13's matrix above which T_F is declared undetermined
 MAX_CONDITION = 1e6
+#: smallest rotation (rad) between consecutive poses that Tsai-Lenz is given by the dualarm chain
+MIN_PAIR_ROTATION = np.deg2rad(0.5)
 
 OPENCV_METHODS = {
     "Tsai": cv2.CALIB_HAND_EYE_TSAI,
@@ -306,8 +308,26 @@ def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x
     return np.linalg.pinv(jac.T @ jac)
 
 
+def check_pair_rotations(flange2base: np.ndarray, min_pair_rotation: float) -> None:
+    """Raise a :class:`CalibrationError` naming the first consecutive pair of flange poses
+    ``(N, 4, 4)`` whose relative rotation is the smallest, if it is below ``min_pair_rotation``
+    (rad)."""
+    rel = np.swapaxes(flange2base[:-1, :3, :3], -1, -2) @ flange2base[1:, :3, :3]
+    angles = geo.rotation_angle(rel)
+    k = int(np.argmin(angles))
+    if angles[k] < min_pair_rotation:
+        raise CalibrationError(
+            f"poses {k} and {k + 1} differ by a rotation of {np.degrees(angles[k]):.3g} deg "
+            f"(minimum {np.degrees(min_pair_rotation):.3g} deg); Tsai-Lenz needs rotating motions"
+        )
+
+
 def opencv_handeye(
-    flange2base, target2sensor, method: str, tol: float = geo.ORTHONORMAL_TOL
+    flange2base,
+    target2sensor,
+    method: str,
+    min_pair_rotation: float = 0.0,
+    tol: float = geo.ORTHONORMAL_TOL,
 ) -> np.ndarray:
     """``sensor2flange`` by ``cv2.calibrateHandEye`` (AX = XB) with a named method.
 
@@ -319,6 +339,10 @@ def opencv_handeye(
         Pose of a fixed target in the sensor frame at each robot pose, mm.
     method : str
         One of ``"Tsai"``, ``"Park"``, ``"Horaud"``, ``"Andreff"``, ``"Daniilidis"``.
+    min_pair_rotation : float, default 0
+        Smallest rotation (rad) of the flange between consecutive poses; 0 checks nothing.
+        Tsai-Lenz takes the rotation axis of each motion, undefined for a pure translation
+        (:data:`MIN_PAIR_ROTATION` is a safe value for it).
     tol : float
         Orthonormality tolerance of the input rotations. For measured poses with rounded
         rotations, :func:`calstudy.estimators.handeye_poses.calibrate_handeye` re-projects them.
@@ -331,7 +355,9 @@ def opencv_handeye(
     Raises
     ------
     CalibrationError
-        For an unknown method, fewer than 3 poses, bad shapes, or a non-finite OpenCV result.
+        For an unknown method, fewer than 3 poses, bad shapes, a consecutive pair rotating less
+        than ``min_pair_rotation`` (the message names the pair and its angle), or a non-finite
+        OpenCV result.
     """
     if method not in OPENCV_METHODS:
         raise CalibrationError(
@@ -345,6 +371,8 @@ def opencv_handeye(
         )
     if g2b.shape[0] < 3:
         raise CalibrationError(f"AX = XB needs at least 3 poses; got {g2b.shape[0]}")
+    if min_pair_rotation > 0.0:
+        check_pair_rotations(g2b, min_pair_rotation)
     rot, trans = cv2.calibrateHandEye(
         list(g2b[:, :3, :3]),
         list(g2b[:, :3, 3:]),
@@ -356,6 +384,47 @@ def opencv_handeye(
     if not np.all(np.isfinite(out)):
         raise CalibrationError(f"OpenCV {method} hand-eye returned a non-finite result")
     return out
+
+
+def base_to_base(
+    flange2base_1, cam2flange_1, world2cam_1, flange2base_2, cam2flange_2, world2cam_2
+) -> np.ndarray:
+    """``base2_to_base1`` of two robots whose cameras locate one world frame (dualarm Eq. 11).
+
+    ``world2base_a = flange2base_a @ cam2flange_a @ world2cam_a``, averaged over arm ``a``'s
+    poses by :func:`calstudy.core.geometry.mean_transform`; then
+    ``base2_to_base1 = world2base_1 @ world2base_2^-1``.
+
+    Parameters
+    ----------
+    flange2base_1, flange2base_2 : array_like, shape (N_a, 4, 4)
+        Each robot's flange poses, mm.
+    cam2flange_1, cam2flange_2 : array_like, shape (4, 4)
+        Each robot's hand-eye transform.
+    world2cam_1, world2cam_2 : array_like, shape (N_a, 4, 4)
+        The world frame in each camera at each pose.
+
+    Returns
+    -------
+    (4, 4) array
+        ``base2_to_base1`` (``p_base1 = base2_to_base1 @ p_base2``).
+
+    Raises
+    ------
+    CalibrationError
+        On bad shapes, non-orthonormal rotations, or unequal numbers of flange and camera poses.
+    """
+    w2b = []
+    for g2b, c2f, w2c in (
+        (flange2base_1, cam2flange_1, world2cam_1),
+        (flange2base_2, cam2flange_2, world2cam_2),
+    ):
+        g = geo.check_transform("flange poses", g2b).reshape(-1, 4, 4)
+        w = geo.check_transform("world2cam", w2c).reshape(-1, 4, 4)
+        if len(g) != len(w):
+            raise CalibrationError(f"{len(g)} flange poses but {len(w)} camera poses")
+        w2b.append(geo.mean_transform(g @ geo.check_transform("cam2flange", c2f) @ w))
+    return w2b[0] @ geo.invert(w2b[1])
 
 
 def stationary_sensor_to_base(

@@ -1,30 +1,16 @@
 """Tables, figures and claim verdicts of the ``dualarm`` notebook, from the Monte Carlo tables of
-:mod:`calstudy.papers.dualarm.dualarm`, with the paper's numbers (``data/dualarm/published.toml``)
-beside them."""
+:mod:`calstudy.papers.dualarm.experiments`, with the paper's numbers
+(:func:`calstudy.papers.dualarm.scenario.load_published`) beside them."""
 
 from __future__ import annotations
-
-import tomllib
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from calstudy.claims import ClaimRow, verdict_vs_published
-from calstudy.core.paths import data_path
-from calstudy.core.stats import percentile_interval
-from calstudy.papers.dualarm.dualarm import SPHERES, Scenario, marker_error
-
-
-def load_published(path: str | Path | None = None) -> dict:
-    """The paper's numbers, ``data/dualarm/published.toml``."""
-    p = data_path("dualarm", "published.toml") if path is None else Path(path)
-    return tomllib.loads(p.read_text())
-
-
-def _interval(x) -> tuple[float, float]:
-    x = np.asarray(x, dtype=float)
-    return percentile_interval(x) if x.size >= 2 else (float(x[0]), float(x[0]))
+from calstudy.core.stats import median_and_spread
+from calstudy.papers.dualarm.experiments import marker_error
+from calstudy.papers.dualarm.scenario import SPHERES, Published, Scenario
 
 
 def survey_table(scn: Scenario, views: list, recon) -> pd.DataFrame:
@@ -49,15 +35,15 @@ def icp_per_trial(icp: pd.DataFrame) -> pd.DataFrame:
     return icp.groupby(["arm", "sphere", "trial"], as_index=False)[["before_mm", "after_mm"]].mean()
 
 
-def icp_summary(icp: pd.DataFrame, published: dict) -> pd.DataFrame:
+def icp_summary(icp: pd.DataFrame, published: Published) -> pd.DataFrame:
     """Figs. 5-6 in numbers: per arm and sphere, the mean error before and after ICP (mean of
     the per-trial means, 95 % interval over trials), their ratio, and the paper's values."""
-    pub = {(int(a), s): (b, c) for a, s, b, c in published["icp"]["rows"]}
+    pub = {(int(a), s): (b, c) for a, s, b, c in published.icp_rows}
     rows = []
     for (arm, sphere), g in icp_per_trial(icp).groupby(["arm", "sphere"]):
         ratio = g["after_mm"] / g["before_mm"]
         b, a = pub[(int(arm), sphere)]
-        low, high = _interval(g["after_mm"])
+        _, low, high = median_and_spread(g["after_mm"])
         rows.append(
             {
                 "arm": arm,
@@ -75,10 +61,12 @@ def icp_summary(icp: pd.DataFrame, published: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def table1(global_df: pd.DataFrame, published: dict, method: str = "coded markers") -> pd.DataFrame:
+def table1(
+    global_df: pd.DataFrame, published: Published, method: str = "coded markers"
+) -> pd.DataFrame:
     """Table 1: mean absolute per-axis centre errors per group and over all groups."""
     g = global_df[global_df["method"] == method]
-    pub = {int(r[0]): r[1:] for r in published["table1"]["rows"]}
+    pub = {int(r[0]): r[1:] for r in published.table1_rows}
     rows = []
     for group, part in [*g.groupby("group"), (0, g)]:
         p = pub.get(int(group), [np.nan] * 3)
@@ -96,11 +84,13 @@ def table1(global_df: pd.DataFrame, published: dict, method: str = "coded marker
     return pd.DataFrame(rows)
 
 
-def table2(global_df: pd.DataFrame, published: dict, method: str = "coded markers") -> pd.DataFrame:
+def table2(
+    global_df: pd.DataFrame, published: Published, method: str = "coded markers"
+) -> pd.DataFrame:
     """Table 2: mean Euclidean centre errors per group (rows) and arm-1 pose (columns), against
     arm 2's reference centre as in the paper; ``mean_vs_true_centre_mm`` against the true one."""
     g = global_df[global_df["method"] == method]
-    pub = {int(r[0]): r[1:] for r in published["table2"]["rows"]}
+    pub = {int(r[0]): r[1:] for r in published.table2_rows}
     rows = []
     for group, part in [*g.groupby("group"), (0, g)]:
         row = {"group": "all" if group == 0 else str(group)}
@@ -115,11 +105,10 @@ def table2(global_df: pd.DataFrame, published: dict, method: str = "coded marker
     return pd.DataFrame(rows)
 
 
-def table3(global_df: pd.DataFrame, published: dict) -> pd.DataFrame:
+def table3(global_df: pd.DataFrame, published: Published) -> pd.DataFrame:
     """Table 3: sphere-A centre errors by global calibration method, reproduced where testable."""
-    t3 = published["table3"]
     rows = []
-    for name, pub in zip(t3["methods"], t3["rows"], strict=True):
+    for name, pub in zip(published.table3_methods, published.table3_rows, strict=True):
         part = global_df[global_df["method"] == name]
         testable = len(part) > 0
         row = {"method": name, "testable": "yes" if testable else "not testable"}
@@ -170,7 +159,7 @@ def sweep_summary(sweep: pd.DataFrame, by: str, columns) -> pd.DataFrame:
     for key, g in sweep.groupby(by):
         row = {by: key}
         for c in columns:
-            lo, hi = _interval(g[c])
+            _, lo, hi = median_and_spread(g[c])
             row[c] = g[c].mean()
             row[f"{c}_ci_low"], row[f"{c}_ci_high"] = lo, hi
         rows.append(row)
@@ -190,7 +179,7 @@ def icp_figure(icp: pd.DataFrame, arm: int):
         for k, (col, label) in enumerate((("before_mm", "before ICP"), ("after_mm", "after ICP"))):
             stats = [g[g["view"] == v][col] for v in views]
             mean = np.array([s.mean() for s in stats])
-            ci = np.array([_interval(s) for s in stats])
+            ci = np.array([median_and_spread(s)[1:] for s in stats])
             ax.bar(
                 x + (k - 0.5) * 0.38, mean, 0.38, label=label, yerr=np.abs(ci.T - mean), capsize=2
             )
@@ -221,11 +210,11 @@ def sweep_figure(
     return fig
 
 
-def dualarm_claims(mc: dict, published: dict, notebook: str):
+def dualarm_claims(mc: dict, published: Published, notebook: str):
     """The three claim rows, verdicts computed by :func:`calstudy.claims.verdict_vs_published`."""
     per = icp_per_trial(mc["icp"])
     trial = per.groupby("trial")[["before_mm", "after_mm"]].mean()
-    pub = np.array([r[2:] for r in published["icp"]["rows"]], dtype=float)
+    pub = np.array([r[2:] for r in published.icp_rows], dtype=float)
     pub_ratio = float(pub[:, 1].mean() / pub[:, 0].mean())
     v_icp = verdict_vs_published(
         pub_ratio,
@@ -236,9 +225,9 @@ def dualarm_claims(mc: dict, published: dict, notebook: str):
     )
     g = mc["global"].groupby(["method", "trial"])["euclid_mm"].mean().unstack(0)
     ours, circ = g["coded markers"].to_numpy(), g["circular plate"].to_numpy()
-    overall = float(published["table2"]["overall"])
+    overall = float(published.table2_overall)
     v_glob = verdict_vs_published(overall, ours, 0.0, kind="value", direction="higher")
-    t3 = dict(zip(published["table3"]["methods"], published["table3"]["rows"], strict=True))
+    t3 = dict(zip(published.table3_methods, published.table3_rows, strict=True))
     ours_pub, circ_pub = t3["coded markers"][3], t3["circular plate"][3]
     pub_vs = ours_pub / circ_pub
     v_vs = verdict_vs_published(pub_vs, ours, circ, kind="ratio", direction="lower")

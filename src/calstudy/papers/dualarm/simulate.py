@@ -1,0 +1,248 @@
+"""The synthetic world of the ``dualarm`` paper: camera poses, robot errors, detections, scans.
+
+The simulated station (:class:`~calstudy.papers.dualarm.scenario.Scenario`) knows the true
+transforms; what these functions hand on is what the calibration sees: the flange poses the robots
+*report* (true poses spoiled by repeatability and, during multi-view scans, by drift), marker and
+plate-circle centres in the images, and point clouds in the left camera frame.
+
+Frames: ``cam2world`` places the left camera in the marker (world) frame, ``world2cam`` is its
+inverse, ``flange2base`` the flange in its robot base. Millimetres, radians, pixels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calstudy.core import geometry as geo
+from calstudy.core.errors import CalibrationError
+from calstudy.estimators import sfm as mk
+from calstudy.papers.dualarm.scenario import ARMS, Scenario
+
+# ----------------------------------------------------------------------------------------------
+# poses
+
+
+def view_poses(
+    rng: np.random.Generator,
+    target,
+    distance_mm: float,
+    n: int,
+    tilt: float,
+    axis=(0.0, 0.0, 1.0),
+    up=None,
+) -> np.ndarray:
+    """``cam2world`` ``(n, 4, 4)`` of cameras ``distance_mm`` from ``target``, looking at it from
+    directions within ``tilt`` rad of ``axis`` (uniform in the cone), image rotated at random
+    about the optical axis unless ``up`` fixes it."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(a, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(a, e1)
+    out = np.empty((n, 4, 4))
+    cos_t = 1.0 - rng.random(n) * (1.0 - np.cos(tilt))
+    phi = rng.random(n) * 2 * np.pi
+    spin = rng.random(n) * 2 * np.pi
+    for k in range(n):
+        s = np.sqrt(1.0 - cos_t[k] ** 2)
+        d = cos_t[k] * a + s * (np.cos(phi[k]) * e1 + np.sin(phi[k]) * e2)
+        u = up if up is not None else np.cos(spin[k]) * e1 + np.sin(spin[k]) * e2
+        out[k] = geo.look_at(np.asarray(target) + distance_mm * d, target, up=u)
+    return out
+
+
+def pose_errors(scn: Scenario, n: int, rng: np.random.Generator, drift: bool) -> np.ndarray:
+    """Errors ``E`` ``(n, 4, 4)`` of reported flange poses: ``true = reported @ E``.
+
+    Repeatability on every pose; with ``drift``, a random walk from the first pose adds the
+    attitude drift of a multi-view scan.
+    """
+    rep = geo.perturb(np.tile(np.eye(4), (n, 1, 1)), scn.repeat_sigma_rad, scn.repeat_sigma_mm, rng)
+    if not drift:
+        return rep
+    steps = geo.perturb(np.tile(np.eye(4), (n, 1, 1)), scn.drift_step_rad, scn.drift_step_mm, rng)
+    walk = np.empty_like(steps)
+    walk[0] = np.eye(4)
+    for k in range(1, n):
+        walk[k] = walk[k - 1] @ steps[k]
+    return walk @ rep
+
+
+def arm_poses(
+    scn: Scenario, arm: int, cam2world, rng: np.random.Generator, drift: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """True and reported ``flange2base`` ``(n, 4, 4)`` that put arm ``arm``'s left camera at
+    ``cam2world``."""
+    a = arm - 1
+    true = scn.world2base[a] @ np.asarray(cam2world) @ geo.invert(scn.cam2flange[a])
+    reported = true @ geo.invert(pose_errors(scn, len(true), rng, drift))
+    return true, reported
+
+
+def mid_point(scn: Scenario) -> np.ndarray:
+    """World point ``(3,)`` halfway between the centres of the two marker groups."""
+    return 0.5 * (scn.group_centre(1) + scn.group_centre(2))
+
+
+# ----------------------------------------------------------------------------------------------
+# images of the markers and of the calibration plate
+
+
+def observe_markers(scn: Scenario, world2cam, rng: np.random.Generator) -> mk.View:
+    """Markers detected in one stereo pair: visible in both images and facing the camera, each
+    lost with probability ``loss_rate``, centres with ``sigma_px`` noise."""
+    w2c = np.asarray(world2cam)
+    pl = geo.apply(w2c, scn.markers)
+    pr = geo.apply(scn.rig.left2right, pl)
+    eye = geo.invert(w2c)[:3, 3]
+    to_cam = eye - scn.markers
+    cos_view = to_cam[:, 2] / np.linalg.norm(to_cam, axis=1)  # markers face world +z
+    front = (pl[:, 2] > 0) & (pr[:, 2] > 0) & (cos_view > np.cos(scn.max_view_angle))
+    ul = np.full((len(pl), 2), -1e9)
+    ur = np.full((len(pl), 2), -1e9)
+    ul[front] = scn.rig.left.project(pl[front])
+    ur[front] = scn.rig.right.project(pr[front])
+    seen = front & scn.rig.left.in_image(ul) & scn.rig.right.in_image(ur)
+    seen &= rng.random(len(pl)) >= scn.loss_rate
+    noise = rng.normal(0.0, scn.sigma_px, (2, len(pl), 2))
+    ids = np.flatnonzero(seen)
+    return mk.make_view(ids, ul[ids] + noise[0, ids], ur[ids] + noise[1, ids])
+
+
+def plate_images(
+    scn: Scenario, plate2world, cam2world, rng: np.random.Generator, outliers: bool = False
+) -> np.ndarray:
+    """Circle centres ``(n, N, 2)`` (px) of the plate at ``plate2world`` in the left image of
+    each of the ``n`` cameras ``cam2world``, with ``sigma_px`` noise; with ``outliers``, a
+    fraction ``plate_outlier_rate`` of them moved by ``plate_outlier_px`` in a random direction
+    (gross detection errors)."""
+    uvs = np.empty((len(cam2world), len(scn.plate_points), 2))
+    for k, c2w in enumerate(cam2world):
+        true = geo.invert(c2w) @ plate2world
+        uv = scn.rig.left.observe(true, scn.plate_points, scn.sigma_px, rng)
+        if outliers:
+            bad = rng.random(len(uv)) < scn.plate_outlier_rate
+            lo, hi = scn.plate_outlier_px
+            mag = rng.uniform(lo, hi, len(uv))
+            ang = rng.uniform(0, 2 * np.pi, len(uv))
+            uv[bad] += (mag * np.column_stack([np.cos(ang), np.sin(ang)]).T).T[bad]
+        uvs[k] = uv
+    return uvs
+
+
+def handeye_images(scn: Scenario, arm: int, rng: np.random.Generator):
+    """Arm ``arm`` images the plate (at its marker group) from ``handeye_poses`` poses: ``(reported
+    flange2base (n, 4, 4), circle centres (n, N, 2))``."""
+    plate2world = geo.make_transform(np.eye(3), scn.group_centre(arm))
+    cam2world = view_poses(
+        rng, plate2world[:3, 3], scn.working_distance_mm, scn.handeye_poses, scn.handeye_tilt
+    )
+    _, reported = arm_poses(scn, arm, cam2world, rng, drift=False)
+    return reported, plate_images(scn, plate2world, cam2world, rng)
+
+
+def circular_plate_images(scn: Scenario, rng: np.random.Generator) -> list:
+    """Table 3's comparison: a circle plate halfway between the arms (overlapping field), each
+    arm images it from ``calibration_poses`` poses from its own side, with gross detection
+    errors. Per arm ``(reported flange2base (n, 4, 4), circle centres (n, N, 2))``."""
+    mid = mid_point(scn)
+    plate2world = geo.make_transform(np.eye(3), [mid[0], mid[1], 0.0])
+    out = []
+    for arm, side in zip(ARMS, (1.0, -1.0), strict=True):
+        axis = (0.0, side * np.sin(scn.plate_tilt), np.cos(scn.plate_tilt))
+        cam2world = view_poses(
+            rng,
+            plate2world[:3, 3],
+            scn.working_distance_mm,
+            scn.calibration_poses,
+            scn.plate_jitter,
+            axis=axis,
+        )
+        _, reported = arm_poses(scn, arm, cam2world, rng, drift=False)
+        out.append((reported, plate_images(scn, plate2world, cam2world, rng, outliers=True)))
+    return out
+
+
+def survey_views(scn: Scenario, rng: np.random.Generator, bridges: bool = True) -> list[mk.View]:
+    """The scanner's unordered stereo images of the markers: ``survey_views_per_group`` of each
+    group and ``survey_bridge_views`` of both (none with ``bridges=False``)."""
+    poses = [
+        view_poses(
+            rng,
+            scn.group_centre(arm),
+            scn.working_distance_mm,
+            scn.survey_views_per_group,
+            scn.survey_tilt,
+        )
+        for arm in ARMS
+    ]
+    if bridges:
+        poses.append(
+            view_poses(
+                rng,
+                mid_point(scn),
+                scn.survey_bridge_distance_mm,
+                scn.survey_bridge_views,
+                scn.survey_bridge_tilt,
+                up=(0.0, 1.0, 0.0),
+            )
+        )
+    cam2world = np.concatenate(poses)
+    return [observe_markers(scn, geo.invert(c), rng) for c in cam2world]
+
+
+def arm_world_views(scn: Scenario, arm: int, rng: np.random.Generator):
+    """Arm ``arm`` sees its marker group from ``calibration_poses`` poses: ``(reported
+    flange2base, views)``."""
+    cam2world = view_poses(
+        rng, scn.group_centre(arm), scn.working_distance_mm, scn.calibration_poses, scn.survey_tilt
+    )
+    _, reported = arm_poses(scn, arm, cam2world, rng, drift=False)
+    return reported, [observe_markers(scn, geo.invert(c), rng) for c in cam2world]
+
+
+# ----------------------------------------------------------------------------------------------
+# sphere scans
+
+
+def scan_sphere(scn: Scenario, centre_world, radius: float, cam2world, rng) -> np.ndarray:
+    """Points ``(points_per_scan, 3)`` of the sphere cap the left camera at ``cam2world`` sees,
+    in the left camera frame, with ``point_sigma_mm`` noise per coordinate."""
+    c = np.asarray(centre_world, dtype=float)
+    eye = np.asarray(cam2world)[:3, 3]
+    n_draw = 4 * scn.points_per_scan
+    normals = rng.normal(size=(n_draw, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    pts = c + radius * normals
+    view = eye - pts
+    cos_inc = np.einsum("ij,ij->i", normals, view) / np.linalg.norm(view, axis=1)
+    vis = np.flatnonzero(cos_inc > np.cos(scn.max_incidence))[: scn.points_per_scan]
+    if vis.size < scn.points_per_scan:
+        raise CalibrationError(
+            f"the scan sees {vis.size} sphere points; {scn.points_per_scan} requested"
+        )
+    local = geo.apply(geo.invert(cam2world), pts[vis])
+    return local + rng.normal(0.0, scn.point_sigma_mm, local.shape)
+
+
+def sphere_scans(scn: Scenario, arm: int, centre_world, radius: float, n_views: int, rng):
+    """A multi-view scan of one sphere by arm ``arm`` (the arm drifting from view to view):
+    ``(reported flange2base (n_views, 4, 4), clouds)``, each cloud ``(points_per_scan, 3)`` in
+    the left camera frame."""
+    cam2world = view_poses(rng, centre_world, scn.working_distance_mm, n_views, scn.icp_tilt)
+    _, reported = arm_poses(scn, arm, cam2world, rng, drift=True)
+    return reported, [scan_sphere(scn, centre_world, radius, c, rng) for c in cam2world]
+
+
+def sphere_place(scn: Scenario, arm: int, radius: float) -> np.ndarray:
+    """Where arm ``arm``'s multi-view test sphere stands (world): ``icp_sphere_offset_mm`` beside
+    its marker group, on the stand."""
+    g = scn.group_centre(arm)
+    return np.array([g[0] + scn.icp_sphere_offset_mm, g[1], scn.stand_height_mm + radius])
+
+
+def global_sphere_place(scn: Scenario, offset_mm: float, radius: float) -> np.ndarray:
+    """Where sphere A stands for one group of Tables 1-2 (world): ``offset_mm`` along the line
+    of the bases from the point between the marker groups, on the stand."""
+    mid = mid_point(scn)
+    return np.array([mid[0], mid[1] + offset_mm, scn.stand_height_mm + radius])
