@@ -41,6 +41,7 @@ from calstudy.estimators.fitting import fit_rigid, fit_sphere, solve_pnp
 from calstudy.estimators.handeye import opencv_handeye
 from calstudy.estimators.icp import weighted_icp
 from calstudy.models.sensors import PinholeCamera
+from calstudy.models.stereo import StereoRig, stereo_rig
 
 #: smallest rotation (rad) between consecutive hand-eye poses accepted by :func:`tsai_handeye`
 MIN_PAIR_ROTATION = np.deg2rad(0.5)
@@ -60,7 +61,7 @@ class Scenario:
     true transforms of arm ``a + 1``.
     """
 
-    rig: mk.StereoRig
+    rig: StereoRig
     markers: np.ndarray
     marker_names: tuple
     marker_group: np.ndarray
@@ -146,7 +147,7 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
         width=cam["width"],
         height=cam["height"],
     )
-    rig = mk.stereo_rig(camera, st["baseline_mm"], st["convergence_distance_mm"])
+    rig = stereo_rig(camera, st["baseline_mm"], st["convergence_distance_mm"])
     m = d["markers"]
     names = tuple(m["names"])
     group = np.array([m["groups"].index(n.split("-")[0]) for n in names])
