@@ -1,8 +1,7 @@
 """Speed of the circle-of-confusion rectification on a full 7904 x 6004 frame (budget 2 s).
 
-Times ``calstudy.models.optics.rectify_coc`` (vectorised, float32, OpenCV filters) on a synthetic
-full
-frame of blurred dots, best of several repeats, and the per-pixel loop of the paper's flowchart
+Times ``calstudy.estimators.coc.rectify_coc`` (vectorised, float32, OpenCV filters) on a synthetic
+full frame of blurred dots, best of several repeats, and the per-pixel loop of the paper's flowchart
 (``rectify_coc_reference``) on a crop, scaled to the full frame. The circle-of-confusion radius is
 that of Eq. 4 for a dot at 900 mm with the optics of ``data/binocular/sensor.toml``.
 """
@@ -13,8 +12,8 @@ import cv2
 import numpy as np
 from timing import best_seconds
 
-from calstudy.models import optics as coc
-from calstudy.papers.binocular import binocular_sim as sim
+from calstudy.estimators import coc
+from calstudy.papers.binocular.scenario import load_scenario
 
 BUDGET_S = 2.0
 REPEATS = 3
@@ -33,19 +32,9 @@ def frame(width: int, height: int, delta: float) -> np.ndarray:
 
 
 def main() -> None:
-    scenario = sim.load_scenario()
-    cfg = scenario.config["sensor"]
-    optics = cfg["optics"]
-    delta = float(
-        coc.coc_radius_px(
-            900.0,
-            optics["focus_distance_mm"],
-            scenario.focal_mm,
-            optics["f_number"],
-            cfg["image"]["pixel_pitch_mm"],
-        )
-    )
-    width, height = scenario.sensor.width, scenario.sensor.height
+    scenario = load_scenario()
+    delta = float(scenario.coc_radius_px(900.0))
+    width, height = scenario.sensor.left.width, scenario.sensor.left.height
     img = frame(width, height, delta)
     full = best_seconds(lambda: coc.rectify_coc(img, delta), REPEATS)
     crop = img[300 - CROP // 2 : 300 + CROP // 2, 265 - CROP // 2 : 265 + CROP // 2].copy()

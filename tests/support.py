@@ -38,6 +38,26 @@ def ci_parameters(stem: str) -> dict:
         pytest.fail(f"ci-params.yml has no mapping for {stem}")
     return dict(data[stem])
 
+
+def disk_image(size=41, radius=9.0, centre=(20.3, 19.6), blur=0.0):
+    """A float32 ROI ``(size, size)``: a bright anti-aliased disc (0.9) on 0.1, optionally
+    blurred by a circle of confusion of ``blur`` px (binocular Eq. 7)."""
+    from calstudy.models.optics import defocus
+
+    yy, xx = np.mgrid[0:size, 0:size]
+    d = np.hypot(xx - centre[0], yy - centre[1])
+    img = np.clip(radius + 0.5 - d, 0, 1).astype(np.float32) * 0.8 + 0.1
+    return defocus(img, blur) if blur else img
+
+
+def binocular_rig():
+    """The binocular sensor of Table 1 (``data/binocular/sensor.toml``) as a StereoRig."""
+    from calstudy.core.config import read_toml
+    from calstudy.core.paths import data_path
+    from calstudy.models.stereo import StereoRig
+
+    return StereoRig.from_table(read_toml(data_path("binocular", "sensor.toml"), "sensor"))
+
 def run(path: Path, parameters: dict, tmp_path: Path) -> Path:
     """Execute ``path`` with papermill as ``make reproduce`` does; return its results folder."""
     import papermill

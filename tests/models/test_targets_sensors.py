@@ -1,5 +1,7 @@
 """Tests of calstudy.models.targets and calstudy.models.sensors."""
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -204,3 +206,16 @@ def test_line_laser_errors(rng):
         sensor.measure_sphere_centre(np.zeros((0, 3)), 25.0, rng)
     with pytest.raises(CalibrationError, match="side must be"):
         LineLaserSensor(side=0)
+
+
+def test_camera_with_distortion_projects_like_opencv_and_undistorts_back():
+    dist = (-0.18, 0.038, -1.2e-4, -2.1e-3)
+    cam = dataclasses.replace(CAMERA, dist=dist)
+    assert cam.distorted and not CAMERA.distorted
+    p = np.array([[40.0, -30.0, 400.0], [-60.0, 20.0, 500.0]])
+    want, _ = cv2.projectPoints(p, np.zeros(3), np.zeros(3), CAMERA.K, np.array(dist))
+    np.testing.assert_allclose(cam.project(p), want.reshape(-1, 2), atol=1e-9)
+    np.testing.assert_allclose(cam.normalise(cam.project(p)), p[:, :2] / p[:, 2:], atol=1e-12)
+    np.testing.assert_allclose(CAMERA.normalise(CAMERA.project(p)), p[:, :2] / p[:, 2:], atol=1e-12)
+    with pytest.raises(CalibrationError, match="distortion"):
+        PinholeCamera(fx=1.0, fy=1.0, cx=0.0, cy=0.0, width=10, height=10, dist=(0.1, 0.2))

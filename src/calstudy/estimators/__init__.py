@@ -1,2 +1,2 @@
 """Estimators: fitting, hand-eye, workpiece frames, ICP, structure from motion, binocular
-corrections."""
+corrections (triangulation, calibrator, hand-eye update) and circle-of-confusion rectification."""

@@ -1,11 +1,12 @@
-"""Binocular sensor, multi-target calibrator, observed-error modification and hand-eye update.
+"""Binocular triangulation, multi-target calibrator, observed-error modification and hand-eye
+update.
 
-The geometric half of the `binocular` paper (Sections 2 and 3.2); the imaging half (circle of
-confusion, fusion, rectification, ellipse centres) is :mod:`calstudy.models.optics`.
+The geometric half of the `binocular` paper (Sections 2 and 3.2); the imaging half is
+:mod:`calstudy.models.optics` (the circle-of-confusion model) and :mod:`calstudy.estimators.coc`
+(rectification, ellipse centres), the sensor :class:`calstudy.models.stereo.StereoRig`.
 
-- :class:`StereoSensor`: two distorted pinhole cameras (Table 1); projection by
-  ``cv2.projectPoints``, triangulation (Eq. 1) by ``cv2.undistortPointsIter`` and
-  ``cv2.triangulatePoints`` with a check that the two rays meet.
+- :func:`triangulate`: Eq. 1 by ``cv2.undistortPointsIter`` and ``cv2.triangulatePoints`` with a
+  check that the two rays meet.
 - :func:`solve_calibrator_layout`: a 3D layout of targets P1-P6 and the virtual P7, P8 consistent
   with the standard distances of Table 2.
 - :func:`modify_observed_error`: the distance-constraint adjustment of Eq. 23-25 (least norm).
@@ -20,9 +21,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import tomllib
-from dataclasses import dataclass, replace
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -30,10 +28,9 @@ from scipy.optimize import least_squares
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.paths import data_path
 from calstudy.estimators.fitting import fit_rigid
 from calstudy.estimators.handeye import OPENCV_METHODS, opencv_handeye
-from calstudy.models.optics import UNDISTORT_CRITERIA
+from calstudy.models.stereo import StereoRig
 
 #: Indices (0-based) of the physical targets averaged into the virtual P7 and P8 (Section 3.2).
 P7_FROM = (1, 2, 4)
@@ -41,178 +38,52 @@ P8_FROM = (0, 3, 5)
 TARGET_NAMES = ("P1", "P2", "P3", "P4", "P5", "P6", "P7", "P8")
 
 
-def load_toml(name: str, directory=None) -> dict:
-    """Read ``<directory>/<name>.toml`` (default directory: ``data/binocular``)."""
-    path = (
-        data_path("binocular", f"{name}.toml")
-        if directory is None
-        else Path(directory) / f"{name}.toml"
-    )
-    if not path.is_file():
-        raise CalibrationError(f"{path}: no such file; the binocular station needs {name}.toml")
-    with path.open("rb") as handle:
-        return tomllib.load(handle)
-
-
 # ----------------------------------------------------------------------------------------------
-# the sensor
+# triangulation (Eq. 1)
 
 
-@dataclass(frozen=True)
-class StereoSensor:
-    """Two cameras with OpenCV distortion; ``p_right = R p_left + t`` (the extrinsic of Table 1).
+def triangulate(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.ndarray:
+    """Sensor-frame points ``(N, 3)`` from matched image points (Eq. 1), undistorted first.
 
-    Attributes
+    Both cameras' points are undistorted to normalised coordinates
+    (:meth:`calstudy.models.stereo.StereoRig.normalise`), then ``cv2.triangulatePoints`` (linear,
+    on normalised coordinates) with the rig's ``left2right``. The distance between the two
+    back-projected rays at their closest approach is checked against ``tol_mm``.
+
+    Parameters
     ----------
-    k_left, k_right : (3, 3) arrays
-        Camera matrices, px.
-    dist_left, dist_right : (4,) arrays
-        ``k1 k2 p1 p2`` (Eq. 6).
-    rotation : (3, 3) array
-        ``R`` of left2right.
-    translation : (3,) array
-        ``t`` of left2right, mm.
-    width, height : int
-        Image size, px.
+    rig : StereoRig
+        The calibrated sensor (its cameras with their distortion); the sensor frame is the left
+        camera frame.
+    uv_left, uv_right : (N, 2) array_like
+        Matched image points, px.
+    tol_mm : float, default 0.5
+        Largest accepted ray gap, mm.
+
+    Raises
+    ------
+    CalibrationError
+        If the arrays differ in shape or are not finite, or a pair of rays misses by more
+        than ``tol_mm`` (a wrong match or a wrong calibration).
     """
-
-    k_left: np.ndarray
-    dist_left: np.ndarray
-    k_right: np.ndarray
-    dist_right: np.ndarray
-    rotation: np.ndarray
-    translation: np.ndarray
-    width: int
-    height: int
-
-    @classmethod
-    def from_table(cls, table: dict | None = None) -> StereoSensor:
-        """The sensor of ``data/binocular/sensor.toml`` (Table 1), rotation re-orthonormalised."""
-        table = load_toml("sensor") if table is None else table
-
-        def k(cam: dict) -> np.ndarray:
-            return np.array([[cam["fx"], 0, cam["cx"]], [0, cam["fy"], cam["cy"]], [0, 0, 1.0]])
-
-        ext = table["extrinsic"]
-        return cls(
-            k(table["left"]),
-            np.array(table["left"]["dist"], dtype=float),
-            k(table["right"]),
-            np.array(table["right"]["dist"], dtype=float),
-            geo.project_to_so3(np.array(ext["rotation"], dtype=float)),
-            np.array(ext["translation_mm"], dtype=float),
-            int(table["image"]["width"]),
-            int(table["image"]["height"]),
+    a = geo.check_finite("left image points", uv_left).reshape(-1, 2)
+    b = geo.check_finite("right image points", uv_right).reshape(-1, 2)
+    if a.shape != b.shape or a.shape[0] == 0:
+        raise CalibrationError(f"left {a.shape} and right {b.shape} points must match, N >= 1")
+    xl, xr = rig.normalise(a, "left"), rig.normalise(b, "right")
+    rotation, translation = rig.rotation, rig.translation
+    p1 = np.hstack([np.eye(3), np.zeros((3, 1))])
+    p2 = np.hstack([rotation, translation[:, None]])
+    hom = cv2.triangulatePoints(p1, p2, xl.T.copy(), xr.T.copy())
+    points = (hom[:3] / hom[3]).T
+    gap = ray_gap(xl, xr, rotation, translation)
+    worst = int(np.argmax(gap))
+    if gap[worst] > tol_mm:
+        raise CalibrationError(
+            f"rays of point {worst} miss each other by {gap[worst]:.3g} mm "
+            f"(tolerance {tol_mm:g} mm): wrong match or calibration"
         )
-
-    @property
-    def left2right(self) -> np.ndarray:
-        """``(4, 4)`` transform from the left to the right camera frame."""
-        return geo.make_transform(self.rotation, self.translation)
-
-    def cameras(self):
-        """``[(K, dist, sensor2camera), ...]`` for the left and right camera."""
-        return [
-            (self.k_left, self.dist_left, np.eye(4)),
-            (self.k_right, self.dist_right, self.left2right),
-        ]
-
-    def project(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """Image points ``(N, 2)`` of sensor-frame points ``(N, 3)`` in the left and right image."""
-        p = geo.check_finite("points", points).reshape(-1, 3)
-        out = []
-        for k, dist, s2c in self.cameras():
-            rvec = cv2.Rodrigues(s2c[:3, :3])[0]
-            uv, _ = cv2.projectPoints(p, rvec, s2c[:3, 3].copy(), k, dist)
-            out.append(uv.reshape(-1, 2))
-        return out[0], out[1]
-
-    def normalise(self, uv, side: str) -> np.ndarray:
-        """Undistorted normalised coordinates ``(N, 2)`` of image points of one camera.
-
-        ``side`` is ``"left"`` or ``"right"``.
-        """
-        if side not in ("left", "right"):
-            raise CalibrationError(f"camera side is {side!r}; expected 'left' or 'right'")
-        k, dist = (
-            (self.k_left, self.dist_left) if side == "left" else (self.k_right, self.dist_right)
-        )
-        pts = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
-        return cv2.undistortPointsIter(pts, k, dist, None, None, UNDISTORT_CRITERIA).reshape(-1, 2)
-
-    def triangulate(self, uv_left, uv_right, tol_mm: float = 0.5) -> np.ndarray:
-        """Sensor-frame points ``(N, 3)`` from matched image points (Eq. 1), undistorted first.
-
-        ``cv2.triangulatePoints`` (linear, on normalised coordinates). The distance between
-        the two back-projected rays at their closest approach is checked against ``tol_mm``.
-
-        Raises
-        ------
-        CalibrationError
-            If the arrays differ in shape or are not finite, or a pair of rays misses by more
-            than ``tol_mm`` (a wrong match or a wrong calibration).
-        """
-        a = geo.check_finite("left image points", uv_left).reshape(-1, 2)
-        b = geo.check_finite("right image points", uv_right).reshape(-1, 2)
-        if a.shape != b.shape or a.shape[0] == 0:
-            raise CalibrationError(f"left {a.shape} and right {b.shape} points must match, N >= 1")
-        xl, xr = self.normalise(a, "left"), self.normalise(b, "right")
-        p1 = np.hstack([np.eye(3), np.zeros((3, 1))])
-        p2 = np.hstack([self.rotation, self.translation[:, None]])
-        hom = cv2.triangulatePoints(p1, p2, xl.T.copy(), xr.T.copy())
-        points = (hom[:3] / hom[3]).T
-        gap = ray_gap(xl, xr, self.rotation, self.translation)
-        worst = int(np.argmax(gap))
-        if gap[worst] > tol_mm:
-            raise CalibrationError(
-                f"rays of point {worst} miss each other by {gap[worst]:.3g} mm "
-                f"(tolerance {tol_mm:g} mm): wrong match or calibration"
-            )
-        return points
-
-    def perturbed(self, sigmas: dict, rng: np.random.Generator) -> StereoSensor:
-        """A sensor whose parameters differ from this one by normal calibration errors.
-
-        ``sigmas`` holds ``focal_px``, ``principal_point_px``, ``k1``,
-        ``extrinsic_rotation_rad`` and ``extrinsic_translation_mm`` (standard deviations).
-        """
-
-        def k(m: np.ndarray) -> np.ndarray:
-            m = m.copy()
-            m[[0, 1], [0, 1]] += rng.normal(0.0, sigmas["focal_px"], 2)
-            m[[0, 1], [2, 2]] += rng.normal(0.0, sigmas["principal_point_px"], 2)
-            return m
-
-        def d(v: np.ndarray) -> np.ndarray:
-            v = v.copy()
-            v[0] += rng.normal(0.0, sigmas["k1"])
-            return v
-
-        rot = geo.rotvec_to_matrix(rng.normal(0.0, sigmas["extrinsic_rotation_rad"], 3))
-        return replace(
-            self,
-            k_left=k(self.k_left),
-            dist_left=d(self.dist_left),
-            k_right=k(self.k_right),
-            dist_right=d(self.dist_right),
-            rotation=rot @ self.rotation,
-            translation=self.translation + rng.normal(0.0, sigmas["extrinsic_translation_mm"], 3),
-        )
-
-    def aim_point(self, distance_mm: float) -> np.ndarray:
-        """Sensor-frame point ``distance_mm`` from the baseline midpoint, where both optical axes
-        point best (along the line from the midpoint to the axes' closest approach)."""
-        c_left, d_left = np.zeros(3), np.array([0.0, 0.0, 1.0])
-        c_right = -self.rotation.T @ self.translation
-        d_right = self.rotation.T @ np.array([0.0, 0.0, 1.0])
-        w = c_left - c_right
-        b = d_left @ d_right
-        s = (b * (d_right @ w) - (d_left @ w)) / (1 - b**2)
-        u = ((d_right @ w) - b * (d_left @ w)) / (1 - b**2)
-        meet = 0.5 * (c_left + s * d_left + c_right + u * d_right)
-        mid = 0.5 * (c_left + c_right)
-        direction = (meet - mid) / np.linalg.norm(meet - mid)
-        return mid + distance_mm * direction
+    return points
 
 
 def ray_gap(x_left, x_right, rotation, translation) -> np.ndarray:

@@ -18,7 +18,9 @@ global frame follow from
    between the triangulated and the global marker positions, with a sparse Jacobian.
 
 Frames: ``world2cam`` maps world points into the *left* (reference) camera; the right camera sees
-``left2right @ p_left``. Pixels in px, lengths in mm.
+``left2right @ p_left``. Pixels in px, lengths in mm. The rig
+(:class:`calstudy.models.stereo.StereoRig`) must have ideal cameras: these steps model no lens
+distortion, and refuse a rig whose cameras have one (undistort the image points first).
 """
 
 from __future__ import annotations
@@ -35,49 +37,10 @@ from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.fitting import fit_rigid
 from calstudy.models.sensors import PinholeCamera
+from calstudy.models.stereo import StereoRig
 
 #: default largest RMS reprojection error (px) a converged bundle adjustment may leave
 MAX_RMS_PX = 2.0
-
-
-@dataclass(frozen=True)
-class StereoRig:
-    """A calibrated binocular sensor.
-
-    Attributes
-    ----------
-    left, right : PinholeCamera
-        The two cameras (the left one is the sensor's reference frame).
-    right2left : numpy.ndarray, shape (4, 4)
-        Pose of the right camera in the left camera frame (``p_left = right2left @ p_right``).
-    """
-
-    left: PinholeCamera
-    right: PinholeCamera
-    right2left: np.ndarray
-
-    @property
-    def left2right(self) -> np.ndarray:
-        """``(4, 4)`` transform from the left to the right camera frame."""
-        return geo.invert(self.right2left)
-
-    def project(self, points_left) -> tuple[np.ndarray, np.ndarray]:
-        """Noise-free ``(uv_left, uv_right)``, each ``(N, 2)`` px, of points ``(N, 3)`` in the
-        left camera frame (mm)."""
-        p = geo.check_shape("points_left", points_left, (None, 3))
-        return self.left.project(p), self.right.project(geo.apply(self.left2right, p))
-
-
-def stereo_rig(camera: PinholeCamera, baseline_mm: float, convergence_mm: float) -> StereoRig:
-    """Two equal cameras, the right one ``baseline_mm`` along the left one's x axis, both aimed
-    at the point ``convergence_mm`` in front of the left camera."""
-    if not (baseline_mm > 0 and convergence_mm > 0):
-        raise CalibrationError(
-            f"baseline ({baseline_mm} mm) and convergence distance ({convergence_mm} mm) "
-            "must be > 0"
-        )
-    right2left = geo.look_at([baseline_mm, 0.0, 0.0], [0.0, 0.0, convergence_mm], up=[0, -1, 0])
-    return StereoRig(camera, camera, right2left)
 
 
 @dataclass(frozen=True)
@@ -114,7 +77,18 @@ def make_view(ids, uv_left, uv_right) -> View:
 # triangulation (Eq. 7)
 
 
+def _check_ideal(*cameras: PinholeCamera) -> None:
+    """Raise if a camera has lens distortion, which these steps do not model."""
+    for camera in cameras:
+        if camera.distorted:
+            raise CalibrationError(
+                f"the camera has lens distortion {camera.dist}; structure from motion here "
+                "models ideal pinhole cameras: undistort the image points first"
+            )
+
+
 def _projection_matrix(camera: PinholeCamera, world2cam: np.ndarray) -> np.ndarray:
+    _check_ideal(camera)
     return camera.K @ world2cam[:3, :]
 
 
@@ -216,6 +190,7 @@ def pnp_pose(object_points, image_uv, camera: PinholeCamera) -> np.ndarray:
     uv = geo.check_shape("image_uv", image_uv, (obj.shape[0], 2))
     if obj.shape[0] < 4:
         raise CalibrationError(f"PnP needs at least 4 markers; got {obj.shape[0]}")
+    _check_ideal(camera)
     k = camera.K
     ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
     if not ok:
@@ -728,7 +703,6 @@ __all__ = [
     "BundleResult",
     "Cluster",
     "MarkerReconstruction",
-    "StereoRig",
     "View",
     "bundle_adjust",
     "cluster_images",
@@ -739,6 +713,5 @@ __all__ = [
     "reconstruct_markers",
     "refine_camera_pose",
     "splice_clusters",
-    "stereo_rig",
     "triangulate",
 ]

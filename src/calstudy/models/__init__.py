@@ -1,1 +1,2 @@
-"""Models of the physical world: robots, sensors, optics, targets."""
+"""Models of the physical world: robots, sensors (pinhole camera, stereo rig, line laser),
+optics, targets."""

@@ -1,4 +1,5 @@
-"""Simulated instruments: a pinhole camera and a line-structured laser sensor.
+"""Simulated instruments: a pinhole camera (optionally with lens distortion) and a line-structured
+laser sensor.
 
 Each instrument maps true geometry to what it reports, with a stated noise model; every noise
 level that is not from a paper is a documented assumption. Millimetres, pixels and radians. A pose
@@ -9,11 +10,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from calstudy.core.circles import CIRCLE_METHODS, fit_circles_2d_batch
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import apply, check_shape, check_transform
+
+#: Termination of the iterative undistortion: exact to double precision for the binocular paper's
+#: lenses (Table 1).
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-15)
 
 
 def _indices(mask: np.ndarray, limit: int = 10) -> str:
@@ -28,7 +34,8 @@ def _indices(mask: np.ndarray, limit: int = 10) -> str:
 
 @dataclass(frozen=True, kw_only=True)
 class PinholeCamera:
-    """An ideal pinhole camera (no distortion), hybrid Eq. 15.
+    """A pinhole camera, hybrid Eq. 15, ideal unless it has OpenCV lens distortion (binocular
+    Eq. 6).
 
     The camera frame has its origin at the projection centre, z along the optical axis (points
     in front have z > 0), x towards increasing u and y towards increasing v. Pixel centres are at
@@ -45,6 +52,9 @@ class PinholeCamera:
         Skew factor ``K[0, 1]`` in px (the paper's gamma_c); 0 for OpenCV compatibility.
     width, height : int
         Image size in px.
+    dist : tuple of float
+        OpenCV distortion coefficients ``k1 k2 p1 p2 [k3 ...]`` (4, 5, 8, 12 or 14 values);
+        empty (the default) for an ideal camera.
     """
 
     fx: float
@@ -54,11 +64,18 @@ class PinholeCamera:
     skew: float = 0.0
     width: int
     height: int
+    dist: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         values = [self.fx, self.fy, self.cx, self.cy, self.skew, self.width, self.height]
         if not np.isfinite(values).all():
             raise CalibrationError(f"camera parameters must be finite; got {values}")
+        dist = tuple(float(d) for d in np.asarray(self.dist, dtype=float).reshape(-1))
+        if len(dist) not in (0, 4, 5, 8, 12, 14) or not np.isfinite(dist).all():
+            raise CalibrationError(
+                f"distortion must be 0, 4, 5, 8, 12 or 14 finite OpenCV coefficients; got {dist}"
+            )
+        object.__setattr__(self, "dist", dist)
         if self.fx <= 0 or self.fy <= 0:
             raise CalibrationError(f"focal lengths must be positive; got {self.fx}, {self.fy} px")
         if self.width <= 0 or self.height <= 0:
@@ -68,6 +85,16 @@ class PinholeCamera:
     def K(self) -> np.ndarray:  # noqa: N802  (the standard name of the intrinsic matrix)
         """Intrinsic matrix ``[[fx, skew, cx], [0, fy, cy], [0, 0, 1]]``, shape (3, 3), px."""
         return np.array([[self.fx, self.skew, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def distorted(self) -> bool:
+        """True if the camera has a non-zero distortion coefficient."""
+        return any(d != 0.0 for d in self.dist)
+
+    @property
+    def dist_coeffs(self) -> np.ndarray:
+        """The distortion coefficients as OpenCV takes them, shape (len(dist),)."""
+        return np.array(self.dist, dtype=float)
 
     def project(self, points_cam) -> np.ndarray:
         """Image coordinates of points given in the camera frame.
@@ -80,7 +107,8 @@ class PinholeCamera:
         Returns
         -------
         numpy.ndarray, shape (N, 2)
-            ``(u, v)`` in px, noise-free.
+            ``(u, v)`` in px, noise-free; through the lens distortion (``cv2.projectPoints``)
+            if the camera has one.
 
         Raises
         ------
@@ -95,8 +123,20 @@ class PinholeCamera:
                 f"target behind the camera: point {i} at z = {p[i, 2]:.1f} mm "
                 f"({int(behind.sum())} of {len(p)} points at z <= 0)"
             )
+        if self.distorted:
+            zero = np.zeros(3)
+            uv, _ = cv2.projectPoints(p, zero, zero, self.K, self.dist_coeffs)
+            return uv.reshape(-1, 2)
         q = p @ self.K.T
         return q[:, :2] / q[:, 2:]
+
+    def normalise(self, uv) -> np.ndarray:
+        """Undistorted normalised coordinates ``(N, 2)`` (``x / z``, ``y / z`` in the camera
+        frame) of image points ``uv`` ``(N, 2)`` px, by ``cv2.undistortPointsIter``."""
+        pts = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
+        return cv2.undistortPointsIter(
+            pts, self.K, self.dist_coeffs, None, None, UNDISTORT_CRITERIA
+        ).reshape(-1, 2)
 
     def in_image(self, uv) -> np.ndarray:
         """Boolean mask, shape (N,), of image points ``uv`` (N, 2) that lie inside the image."""
@@ -374,4 +414,4 @@ class LineLaserSensor:
         return shots.std(axis=0, ddof=1)
 
 
-__all__ = ["LineLaserSensor", "PinholeCamera", "stripe_offset_recommended"]
+__all__ = ["UNDISTORT_CRITERIA", "LineLaserSensor", "PinholeCamera", "stripe_offset_recommended"]

@@ -21,8 +21,8 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.config import read_toml, require, scenario_file
-from calstudy.estimators import sfm as mk
 from calstudy.models.sensors import PinholeCamera
+from calstudy.models.stereo import StereoRig, stereo_rig
 
 PAPER = "dualarm"
 #: the two arms, numbered as in the paper
@@ -39,7 +39,7 @@ class Scenario:
     true transforms of arm ``a + 1``.
     """
 
-    rig: mk.StereoRig
+    rig: StereoRig
     markers: np.ndarray
     marker_names: tuple
     marker_group: np.ndarray
@@ -112,7 +112,7 @@ def _pose(rotvec, translation) -> np.ndarray:
     return geo.make_transform(geo.rotvec_to_matrix(rotvec), translation)
 
 
-def _rig(d: dict, src: Path) -> mk.StereoRig:
+def _rig(d: dict, src: Path) -> StereoRig:
     """The binocular sensor of ``[camera]`` and ``[stereo]``."""
     cam, st = require(d, "camera", src), require(d, "stereo", src)
     camera = PinholeCamera(
@@ -127,7 +127,7 @@ def _rig(d: dict, src: Path) -> mk.StereoRig:
         require(st, "baseline_mm", src),
         require(st, "convergence_distance_mm", src),
     )
-    return mk.stereo_rig(camera, baseline, convergence)
+    return stereo_rig(camera, baseline, convergence)
 
 
 def _markers(d: dict, src: Path) -> dict:

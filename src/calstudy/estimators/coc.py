@@ -1,0 +1,246 @@
+"""Circle-of-confusion rectification and dot-centre detection (binocular paper, Section 3.1).
+
+The inverse steps of the imaging model of :mod:`calstudy.models.optics`:
+
+- :func:`rectify_coc`: the rectification of Eq. 8-11 (Fig. 5), vectorised over the image, and
+  :func:`rectify_coc_reference`, the same computation as a per-pixel double loop that follows the
+  flowchart literally (for tests and the speed ratio of the benchmark);
+- :func:`detect_centre`: Canny boundary and direct least-squares ellipse fit (Eq. 12, OpenCV's
+  ``fitEllipseDirect``, Fitzgibbon's Lagrange formulation).
+
+Images are float arrays with values in [0, 1]; coordinates are in px with pixel centres at
+integers (OpenCV's convention); a region of interest (ROI) is given by the image coordinates of
+its top-left pixel, ``origin = (u0, v0)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from calstudy.core.errors import CalibrationError
+
+# ----------------------------------------------------------------------------------------------
+# circle-of-confusion rectification (Eq. 8-11, Fig. 5)
+
+
+def _disk(radius: float) -> np.ndarray:
+    r = int(math.floor(radius))
+    y, x = np.mgrid[-r : r + 1, -r : r + 1]
+    return (x**2 + y**2 <= radius**2).astype(np.float32)
+
+
+def _check_rectify(image, delta_px: float) -> np.ndarray:
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim != 2 or min(img.shape) < 3:
+        raise CalibrationError(f"rectification needs a 2-D image of >= 3 x 3 px, got {img.shape}")
+    if not np.isfinite(img.sum()):  # a NaN or inf pixel makes the sum non-finite
+        raise CalibrationError(
+            f"the {img.shape[1]} x {img.shape[0]} px image has NaN or inf pixels"
+        )
+    if not (np.isfinite(delta_px) and delta_px >= 1.0 / 3.0):
+        raise CalibrationError(
+            f"circle-of-confusion radius {delta_px} px is below 1/3 px: the 3-delta window "
+            "holds a single pixel and there is nothing to rectify"
+        )
+    return img
+
+
+def rectify_coc(image, delta_px: float, strip_rows: int = 128) -> np.ndarray:
+    """Circle-of-confusion rectification of a whole image (Eq. 8-11, Fig. 5), vectorised.
+
+    At pixel ``u``: ``E_u0`` is the mean over the disc of radius ``3 delta`` (``t`` pixels) and
+    ``E_0 = t E_u0`` the energy in it; Eq. 9 reads ``[a a] [dx^2 dy^2]^T = E_u - E_u0`` with
+    ``a = -E_0 / (4 pi delta^4)``; its Moore-Penrose (least-norm) solution is
+    ``X = dx^2 = dy^2 = (E_u - E_u0) / (2 a)``, positive where the pixel is darker than its
+    neighbourhood (the outer flank of a bright dot), negative where brighter.
+
+    Eq. 11 gives at each pixel ``|dx| = |dy| = sqrt|X|``: how far the pixel's content was
+    spread by the blur. The paper does not say in which direction the pixel is moved; the reading
+    implemented here moves it along the intensity gradient (the only direction a rotationally
+    symmetric blur spreads energy), by ``sqrt(dx^2 + dy^2)``, undoing the spread: a pixel darker
+    than its neighbourhood (outer flank) takes the value from further out, a brighter one from
+    further in. The result is resampled bilinearly (``cv2.remap``, which quantises sub-pixel
+    positions to 1/32 px), in float32.
+
+    The image is processed in horizontal strips of ``strip_rows`` rows (with a halo of the
+    ``3 delta`` window) so that the working arrays stay in cache; the result does not depend on
+    the strip height.
+
+    Parameters
+    ----------
+    image : (rows, cols) array
+        Fused image in [0, 1].
+    delta_px : float
+        Circle-of-confusion radius in px (Eq. 4), >= 1/3.
+    strip_rows : int, default 128
+        Rows per strip.
+
+    Returns
+    -------
+    float32 array, same shape
+    """
+    img = _check_rectify(image, delta_px)
+    rows, cols = img.shape
+    kernel = _disk(3.0 * delta_px)
+    halo = kernel.shape[0] // 2 + 1
+    t = float(kernel.sum())
+    kernel /= t
+    coef = np.float32(2.0 * math.pi * delta_px**4 / t)
+    out = np.empty_like(img)
+    u = np.arange(cols, dtype=np.float32)[None, :]
+    for y0 in range(0, rows, strip_rows):
+        y1 = min(rows, y0 + strip_rows)
+        a, b = max(0, y0 - halo), min(rows, y1 + halo)
+        src = img[a:b]
+        keep = slice(y0 - a, y1 - a)
+        mean = cv2.filter2D(src, cv2.CV_32F, kernel, borderType=cv2.BORDER_REPLICATE)[keep]
+        gx = cv2.Sobel(src, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
+        gy = cv2.Sobel(src, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
+        here = src[keep]
+        # X = 2 pi delta^4 (E_u0 - E_u) / (t E_u0); step = sign(X) sqrt(2 |X|) / |grad|
+        x = np.subtract(mean, here)
+        x *= coef
+        np.maximum(mean, np.float32(1e-6), out=mean)
+        x /= mean
+        step = np.abs(x, out=mean)
+        step *= 2.0
+        np.sqrt(step, out=step)
+        np.copysign(step, x, out=step)
+        norm = cv2.magnitude(gx, gy)
+        norm += np.float32(1e-12)
+        step /= norm
+        gx *= step
+        gy *= step
+        np.subtract(u, gx, out=gx)
+        np.subtract(np.arange(y0, y1, dtype=np.float32)[:, None], gy, out=gy)
+        out[y0:y1] = cv2.remap(img, gx, gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out
+
+
+def rectify_coc_reference(image, delta_px: float) -> np.ndarray:
+    """The rectification of :func:`rectify_coc` as the paper's flowchart (Fig. 5): per pixel.
+
+    A two-layer loop over the pixels (column order): the mean and the energy of the
+    ``3 delta`` disc, the 1 x 2 system of Eq. 9, its Moore-Penrose inverse (Eq. 10, by
+    ``numpy.linalg.pinv``), the least-norm solution (Eq. 11) and its square root; the pixel is
+    then moved along the gradient and resampled bilinearly. Slow: for tests and the benchmark.
+    """
+    img = _check_rectify(image, delta_px).astype(np.float64)
+    rows, cols = img.shape
+    r = int(math.floor(3.0 * delta_px))
+    pad = np.pad(img, r + 1, mode="edge")
+    disk = _disk(3.0 * delta_px).astype(bool)
+    t = disk.sum()
+    out = np.empty_like(img)
+    for j in range(cols):
+        for i in range(rows):
+            window = pad[i + 1 : i + 2 * r + 2, j + 1 : j + 2 * r + 2][disk]
+            e0 = window.sum()
+            eu0 = e0 / t
+            a = np.array([[-max(e0, 1e-6 * t) / (4 * math.pi * delta_px**4)] * 2])
+            b = np.array([img[i, j] - eu0])
+            x = np.linalg.pinv(a) @ b
+            shift = math.copysign(math.sqrt(abs(x[0]) + abs(x[1])), x[0])
+            pi, pj = i + r + 1, j + r + 1
+            gx = (pad[pi - 1 : pi + 2, pj + 1] @ [1, 2, 1]) - (
+                pad[pi - 1 : pi + 2, pj - 1] @ [1, 2, 1]
+            )
+            gy = (pad[pi + 1, pj - 1 : pj + 2] @ [1, 2, 1]) - (
+                pad[pi - 1, pj - 1 : pj + 2] @ [1, 2, 1]
+            )
+            g = math.hypot(gx, gy) + 1e-12
+            out[i, j] = _bilinear(pad, pi - shift * gy / g, pj - shift * gx / g)
+    return out.astype(np.float32)
+
+
+def _bilinear(img: np.ndarray, y: float, x: float) -> float:
+    y = min(max(y, 0.0), img.shape[0] - 1.0)
+    x = min(max(x, 0.0), img.shape[1] - 1.0)
+    y0, x0 = min(int(y), img.shape[0] - 2), min(int(x), img.shape[1] - 2)
+    fy, fx = y - y0, x - x0
+    top = img[y0, x0] * (1 - fx) + img[y0, x0 + 1] * fx
+    bottom = img[y0 + 1, x0] * (1 - fx) + img[y0 + 1, x0 + 1] * fx
+    return float(top * (1 - fy) + bottom * fy)
+
+
+# ----------------------------------------------------------------------------------------------
+# boundary and centre (Eq. 12)
+
+
+def detect_centre(
+    image, origin=(0, 0), low: float = 0.25, high: float = 0.5, min_points: int = 20
+) -> np.ndarray:
+    """Centre of a bright dot in an ROI: Canny boundary, then a direct ellipse fit (Eq. 12).
+
+    Canny runs on Sobel derivatives of the float image with hysteresis thresholds ``low`` and
+    ``high`` relative to the largest gradient magnitude in the ROI; the edge pixels are fitted by
+    ``cv2.fitEllipseDirect`` (Fitzgibbon's direct least squares: the Lagrange problem of Eq. 12
+    with the constraint ``4ac - b^2 = 1``). The ellipse centre is the dot centre.
+
+    Parameters
+    ----------
+    image : (rows, cols) array
+        The ROI (float in [0, 1], or integer).
+    origin : (2,) array_like
+        Image coordinates of the ROI's top-left pixel.
+    low, high : float
+        Canny thresholds as fractions of the largest gradient magnitude.
+    min_points : int
+        Fewest edge pixels accepted for the ellipse fit (>= 5).
+
+    Returns
+    -------
+    (2,) array
+        ``(u, v)`` in image px.
+
+    Raises
+    ------
+    CalibrationError
+        If no dot is found (a flat ROI), the boundary touches the ROI border, there are fewer
+        than ``min_points`` edge pixels, or the fit fails.
+    """
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim != 2 or min(img.shape) < 5:
+        raise CalibrationError(f"ROI must be a 2-D image of >= 5 x 5 px, got shape {img.shape}")
+    if min_points < 5:
+        raise CalibrationError(f"an ellipse needs >= 5 edge points; min_points is {min_points}")
+    span = float(img.max() - img.min())
+    if not np.isfinite(span) or span < 0.02:
+        raise CalibrationError(
+            f"no dot found in the {img.shape[1]} x {img.shape[0]} px ROI at {tuple(origin)}: "
+            f"intensity range {span:.3g} of full scale"
+        )
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    scale = 16000.0 / float(cv2.magnitude(gx, gy).max())
+    edges = cv2.Canny(
+        (gx * scale).astype(np.int16),
+        (gy * scale).astype(np.int16),
+        low * 16000.0,
+        high * 16000.0,
+        L2gradient=True,
+    )
+    rows, cols = np.nonzero(edges)
+    if rows.size < min_points:
+        raise CalibrationError(
+            f"ellipse fit from {rows.size} edge points in the ROI at {tuple(origin)}; "
+            f"at least {min_points} are needed"
+        )
+    if (
+        rows.min() <= 1
+        or cols.min() <= 1
+        or rows.max() >= img.shape[0] - 2
+        or cols.max() >= img.shape[1] - 2
+    ):
+        raise CalibrationError(
+            f"the dot's boundary touches the border of the {img.shape[1]} x {img.shape[0]} px ROI "
+            f"at {tuple(origin)}: the dot is cut off"
+        )
+    pts = np.column_stack([cols, rows]).astype(np.float32)
+    (cu, cv), axes, _ = cv2.fitEllipseDirect(pts)
+    if not (np.isfinite(cu) and np.isfinite(cv) and min(axes) > 0):
+        raise CalibrationError(f"ellipse fit failed on {rows.size} edge points at {tuple(origin)}")
+    return np.array([cu + origin[0], cv + origin[1]], dtype=float)

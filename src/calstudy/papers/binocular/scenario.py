@@ -1,0 +1,187 @@
+"""The eye-in-hand binocular station of notebook 04 (binocular paper, Section 4) and its
+published numbers.
+
+A KUKA KR 210 (nominal model from ``data/robots/kuka_kr210.toml``) carries the binocular sensor
+of Table 1 (``sensor.toml``) and observes the multi-target calibrator of Table 2
+(``calibrator.toml``) from about 850 mm; ``station.toml`` holds the hand-eye matrix, the
+calibrator's place, the poses and the field regions of Section 4.3. Assumptions are in those
+files with their reasons; this module only reads them. The paper's own numbers (Tables 2-5,
+Fig. 13) are the ``[published]`` tables of the same files, read by :func:`published`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calstudy.core import geometry as geo
+from calstudy.core.config import read_toml, require, scenario_file
+from calstudy.estimators.binocular import solve_calibrator_layout
+from calstudy.models import optics
+from calstudy.models.kinematics import Robot, load_robot
+from calstudy.models.stereo import StereoRig
+
+PAPER = "binocular"
+#: The files of a scenario folder (``data/binocular`` or your own).
+TABLES = ("sensor", "calibrator", "station")
+
+
+@dataclass
+class Scenario:
+    """Everything fixed of the station: sensor (Table 1), calibrator, robot, configuration.
+
+    Attributes
+    ----------
+    sensor : StereoRig
+        The calibrated sensor of Table 1 (sensor frame: the left camera).
+    layout : (8, 3) array
+        P1-P8 in the calibrator frame, mm (:func:`calstudy.estimators.binocular.
+        solve_calibrator_layout`).
+    layout_residual : (7,) array
+        The layout's distances to P7 minus Table 2's, mm.
+    robot : Robot
+        Nominal robot model.
+    sensor2flange : (4, 4) array
+        The true hand-eye matrix ``H_gc``.
+    calibrator2base : (4, 4) array
+        The calibrator frame (origin P7, z along the plate normal) in the base frame.
+    config : dict
+        The three tables as read: ``{"sensor": ..., "calibrator": ..., "station": ...}``.
+    """
+
+    sensor: StereoRig
+    layout: np.ndarray
+    layout_residual: np.ndarray
+    robot: Robot
+    sensor2flange: np.ndarray
+    calibrator2base: np.ndarray
+    config: dict = field(repr=False)
+
+    @property
+    def focal_mm(self) -> float:
+        """Focal length of the left camera, mm (``fx`` times the pixel pitch)."""
+        return float(self.sensor.left.fx * self.config["sensor"]["image"]["pixel_pitch_mm"])
+
+    @property
+    def dot_radius_mm(self) -> float:
+        """Radius of an SBR's retro-reflective dot, mm."""
+        return 0.5 * self.config["calibrator"]["sbr"]["dot_diameter_mm"]
+
+    @property
+    def detection(self) -> dict:
+        """Keyword arguments of :func:`calstudy.estimators.coc.detect_centre` (``[detection]``)."""
+        det = self.config["sensor"]["detection"]
+        return {
+            "low": det["canny_low"],
+            "high": det["canny_high"],
+            "min_points": det["min_edge_points"],
+        }
+
+    def coc_radius_px(self, depth_mm):
+        """Circle-of-confusion radius (Eq. 4), px, of points at ``depth_mm`` (scalar or array)
+        from a camera with the optics of ``sensor.toml``."""
+        cfg = self.config["sensor"]
+        return optics.coc_radius_px(
+            depth_mm,
+            cfg["optics"]["focus_distance_mm"],
+            self.focal_mm,
+            cfg["optics"]["f_number"],
+            cfg["image"]["pixel_pitch_mm"],
+        )
+
+
+def plate_frame(centre, normal) -> np.ndarray:
+    """Frame ``(4, 4)`` with origin ``centre`` (mm) and z along ``normal`` (x horizontal)."""
+    z = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x)
+    return geo.make_transform(np.column_stack([x, np.cross(z, x), z]), centre)
+
+
+def scenario_files(path: str | Path | None = None) -> dict[str, Path]:
+    """``{"sensor": ..., "calibrator": ..., "station": ...}``: the files of the folder ``path``,
+    default ``data/binocular``."""
+    own = None if path in (None, "") else Path(path)
+    return {n: scenario_file(PAPER, f"{n}.toml", own and own / f"{n}.toml") for n in TABLES}
+
+
+def read_tables(path: str | Path | None = None) -> dict:
+    """The three tables of the folder ``path`` (default ``data/binocular``), by name.
+
+    Raises
+    ------
+    FileNotFoundError
+        If one of the three files is missing (the message names it).
+    CalibrationError
+        If a file is not valid TOML.
+    """
+    files = scenario_files(path)
+    return {name: read_toml(file, f"binocular {name} table") for name, file in files.items()}
+
+
+def _calibrator2base(station: dict, source: str) -> np.ndarray:
+    """The calibrator's frame from ``station.toml [calibrator]``: P7 at the tracker's distance
+    from the base origin and the given height, the plate facing the robot, tilted upwards."""
+    c = require(station, "calibrator", source)
+    height = c["p7_height_mm"]
+    p7 = np.array([math.sqrt(c["p7_distance_mm"] ** 2 - height**2), 0.0, height])
+    tilt = math.radians(c["plate_tilt_deg"])
+    return plate_frame(p7, np.array([-math.cos(tilt), 0.0, math.sin(tilt)]))
+
+
+def load_scenario(path: str | Path | None = None) -> Scenario:
+    """The station of ``data/binocular/*.toml`` and the robot ``data/robots/<model>.toml``
+    named in ``station.toml [robot]`` (the KR 210 by default).
+
+    ``path`` is a folder with your own ``sensor.toml``, ``calibrator.toml`` and
+    ``station.toml`` (same keys as those of ``data/binocular``) to use in their place.
+
+    Raises
+    ------
+    FileNotFoundError
+        If a file is missing.
+    CalibrationError
+        If a file is not valid TOML or misses a key (naming the file and the key).
+    """
+    files = scenario_files(path)
+    tables = read_tables(path)
+    sensor_t, cal_t, station_t = (tables[n] for n in TABLES)
+    layout, residual = solve_calibrator_layout(
+        require(cal_t, "standard.distance_mm", files["calibrator"]),
+        require(cal_t, "standard.start_angle_deg", files["calibrator"]),
+    )
+    h = np.array(require(station_t, "handeye.matrix", files["station"]), dtype=float)
+    h[:3, :3] = geo.project_to_so3(h[:3, :3])
+    return Scenario(
+        sensor=StereoRig.from_table(sensor_t, str(files["sensor"])),
+        layout=layout,
+        layout_residual=residual,
+        robot=load_robot(require(station_t, "robot.model", files["station"])),
+        sensor2flange=h,
+        calibrator2base=_calibrator2base(station_t, files["station"]),
+        config=tables,
+    )
+
+
+def paper_table(name: str) -> dict:
+    """``data/binocular/<name>.toml`` as the paper gives it (never a scenario folder of yours)."""
+    return read_toml(scenario_file(PAPER, f"{name}.toml"), f"binocular {name} table")
+
+
+def published(name: str, key: str):
+    """A published value from ``data/binocular/<name>.toml [published]``."""
+    return require(paper_table(name), f"published.{key}", f"data/binocular/{name}.toml")
+
+
+__all__ = [
+    "Scenario",
+    "load_scenario",
+    "paper_table",
+    "plate_frame",
+    "published",
+    "read_tables",
+    "scenario_files",
+]

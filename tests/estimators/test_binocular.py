@@ -1,0 +1,73 @@
+"""Tests of calstudy.estimators.binocular: triangulation (Eq. 1), calibrator layout, observed-error
+modification (Eq. 23-25) and the hand-eye checks (Eq. 13)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support import binocular_rig
+
+from calstudy.core import geometry as geo
+from calstudy.core.config import read_toml
+from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import data_path
+from calstudy.estimators import binocular as bino
+
+
+@pytest.fixture(scope="module")
+def sensor():
+    return binocular_rig()
+
+
+@pytest.fixture(scope="module")
+def calibrator():
+    """The calibrator table of ``data/binocular/calibrator.toml`` (Table 2)."""
+    return read_toml(data_path("binocular", "calibrator.toml"), "calibrator")
+
+
+def test_calibrator_layout_matches_table2(calibrator):
+    pts, residual = bino.solve_calibrator_layout(
+        calibrator["standard"]["distance_mm"], calibrator["standard"]["start_angle_deg"]
+    )
+    assert np.abs(residual).max() < 1e-9
+    np.testing.assert_allclose(pts[6], pts[[1, 2, 4]].mean(0), atol=1e-12)
+    np.testing.assert_allclose(pts[7], pts[[0, 3, 5]].mean(0), atol=1e-12)
+
+
+def test_rays_that_do_not_intersect(sensor):
+    p = np.array([[0.0, 0.0, 850.0], [30.0, 10.0, 860.0]])
+    uv_l, uv_r = sensor.project(p)
+    uv_r[1, 1] += 40.0  # 40 px of vertical disparity: about 3 mm of ray gap
+    with pytest.raises(CalibrationError, match="miss each other"):
+        bino.triangulate(sensor, uv_l, uv_r, tol_mm=0.5)
+
+
+def test_modification_removes_distance_errors(calibrator):
+    pts, _ = bino.solve_calibrator_layout(
+        calibrator["standard"]["distance_mm"], calibrator["standard"]["start_angle_deg"]
+    )
+    rng = np.random.default_rng(0)
+    measured = bino.with_virtual(pts[:6] + rng.normal(0, 0.02, (6, 3)))
+    pairs = bino.all_pairs(8)
+    standard = np.linalg.norm(pts[pairs[:, 0]] - pts[pairs[:, 1]], axis=1)
+    modified, _ = bino.modify_observed_error(measured, pairs, standard)
+    before = bino.distances_to_p7(measured) - bino.distances_to_p7(pts)
+    after = bino.distances_to_p7(modified) - bino.distances_to_p7(pts)
+    assert np.abs(after).max() < 0.05 * np.abs(before).max()
+
+
+def test_modification_needs_eight_distances():
+    pts = np.random.default_rng(1).normal(0, 50, (8, 3))
+    pairs = bino.all_pairs(8)[:7]
+    with pytest.raises(CalibrationError, match="at least 8"):
+        bino.modify_observed_error(pts, pairs, np.ones(7))
+
+
+def test_axx_b_needs_two_rotation_axes():
+    rot = geo.rotvec_to_matrix(np.array([[0, 0, a] for a in (0.0, 0.2, 0.4, 0.6)]))
+    poses = geo.make_transform(rot, np.arange(12.0).reshape(4, 3))
+    targets = geo.invert(poses)  # any target poses: the check comes first
+    with pytest.raises(CalibrationError, match="parallel"):
+        bino.preliminary_handeye(poses, targets)
+    with pytest.raises(CalibrationError, match="at least 2 rotations"):
+        bino.check_rotation_axes(geo.make_transform(np.eye(3)[None].repeat(3, 0), np.eye(3)))

@@ -1,0 +1,82 @@
+"""Tests of calstudy.estimators.coc: circle-of-confusion rectification and dot centres."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from support import binocular_rig, disk_image
+
+from calstudy.core.errors import CalibrationError
+from calstudy.estimators import coc
+from calstudy.models import optics
+
+
+@pytest.fixture(scope="module")
+def sensor():
+    return binocular_rig()
+
+
+def test_vectorised_rectification_equals_flowchart_loop():
+    img = disk_image(size=23, radius=6.0, centre=(11.2, 10.7), blur=1.5)
+    fast = coc.rectify_coc(img, 1.5)
+    slow = coc.rectify_coc_reference(img, 1.5)
+    inner = (slice(6, -6), slice(6, -6))  # away from the border handling
+    # cv2.remap quantises sub-pixel positions to 1/32 px: up to |gradient| / 64 apart
+    np.testing.assert_allclose(fast[inner], slow[inner], atol=5e-3)
+    assert np.abs(fast[inner] - slow[inner]).mean() < 1e-3
+    assert np.abs(fast - img).max() > 0.01  # it does change the image
+
+
+def test_rectification_sharpens_and_keeps_a_symmetric_centre():
+    # a dot centred on a pixel corner: the image is symmetric, so the centre must stay exactly
+    blurred = disk_image(centre=(20.5, 19.5), blur=2.5)
+    rect = coc.rectify_coc(blurred, 2.5)
+    grad = lambda a: np.abs(np.diff(a[20])).max()  # noqa: E731
+    assert grad(rect) > 1.3 * grad(blurred)
+    np.testing.assert_allclose(coc.detect_centre(rect), [20.5, 19.5], atol=1e-5)
+
+
+def test_rectification_does_not_depend_on_the_strip_height():
+    img = disk_image(size=41, blur=2.0)
+    np.testing.assert_array_equal(coc.rectify_coc(img, 2.0, 5), coc.rectify_coc(img, 2.0, 1000))
+
+
+def test_rectification_rejects_a_tiny_radius_and_nan_pixels():
+    with pytest.raises(CalibrationError, match="below 1/3 px"):
+        coc.rectify_coc(disk_image(), 0.2)
+    img = disk_image()
+    img[3, 4] = np.nan
+    with pytest.raises(CalibrationError, match="NaN or inf pixels"):
+        coc.rectify_coc(img, 2.0)
+
+
+def test_render_and_detect_recover_the_projected_centre(sensor):
+    camera = sensor.left
+    centre = np.array([60.0, -40.0, 850.0])
+    normal = -centre / np.linalg.norm(centre)  # facing the camera
+    k, dist = camera.K, camera.dist_coeffs
+    uv, _ = cv2.projectPoints(centre[None], np.zeros(3), np.zeros(3), k, dist)
+    uv = uv.reshape(2)
+    origin, shape = optics.roi_around(
+        uv, 2.5 * camera.fx / 850.0, 10, camera.width, camera.height
+    )
+    img = optics.render_dot(k, dist, centre, normal, 2.5, origin, shape)
+    np.testing.assert_allclose(coc.detect_centre(img, origin), uv, atol=0.05)
+
+
+def test_dot_not_found():
+    with pytest.raises(CalibrationError, match="no dot found"):
+        coc.detect_centre(np.full((30, 30), 0.4, np.float32), origin=(100, 200))
+
+
+def test_dot_touching_the_roi_border():
+    img = disk_image(size=41, radius=9.0, centre=(5.0, 20.0))
+    with pytest.raises(CalibrationError, match="touches the border"):
+        coc.detect_centre(img)
+
+
+def test_ellipse_from_too_few_edge_points():
+    img = disk_image(size=21, radius=1.2, centre=(10.0, 10.0))
+    with pytest.raises(CalibrationError, match="edge points"):
+        coc.detect_centre(img, min_points=20)

@@ -1,0 +1,54 @@
+"""Tests of calstudy.papers.binocular.scenario: the station and the published numbers."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import data_path
+from calstudy.papers.binocular import scenario as scn
+
+
+def copy_scenario(folder):
+    for name in scn.TABLES:
+        shutil.copy(data_path("binocular", f"{name}.toml"), folder / f"{name}.toml")
+
+
+def test_load_scenario_from_own_directory(tmp_path):
+    copy_scenario(tmp_path)
+    station = tmp_path / "station.toml"
+    station.write_text(station.read_text().replace("p7_height_mm = 600.0", "p7_height_mm = 650.0"))
+    default, own = scn.load_scenario(), scn.load_scenario(tmp_path)
+    assert np.array_equal(own.layout, default.layout)
+    assert own.calibrator2base[2, 3] == pytest.approx(default.calibrator2base[2, 3] + 50.0)
+    (tmp_path / "calibrator.toml").unlink()
+    with pytest.raises(FileNotFoundError, match=r"calibrator\.toml: no such file"):
+        scn.load_scenario(tmp_path)
+
+
+def test_missing_key_names_the_file_and_the_key(tmp_path):
+    copy_scenario(tmp_path)
+    station = tmp_path / "station.toml"
+    station.write_text(station.read_text().replace('model = "kuka_kr210"', ""))
+    with pytest.raises(CalibrationError, match=r"station\.toml: missing key 'robot.model'"):
+        scn.load_scenario(tmp_path)
+
+
+def test_scenario_derived_values():
+    s = scn.load_scenario()
+    assert s.focal_mm == pytest.approx(12058.0 * 0.0046)
+    assert s.dot_radius_mm == 2.5
+    assert s.coc_radius_px(850.0) == 0.0
+    assert s.detection == {"low": 0.25, "high": 0.5, "min_points": 20}
+    p7 = s.calibrator2base[:3, 3]
+    assert np.linalg.norm(p7) == pytest.approx(2342.949)
+
+
+def test_published_numbers_come_from_data():
+    assert scn.published("station", "fig13_rmse") == [0.192, 0.080]
+    assert scn.published("calibrator", "table2_rmse") == [0.049, 0.041]
+    with pytest.raises(CalibrationError, match="missing key 'published.nothing'"):
+        scn.published("station", "nothing")
