@@ -27,7 +27,7 @@ NOTEBOOKS := $(sort $(wildcard notebooks/[0-9][0-9]_*.ipynb))
 EXECUTED := $(patsubst notebooks/%.ipynb,book/notebooks/%.ipynb,$(NOTEBOOKS))
 LIBRARY := $(sort $(shell find src/calstudy -name '*.py' -not -path '*/__pycache__/*'))
 DATA := $(sort $(shell find data -type f -not -name '.*' -not -path '*/__pycache__/*' 2>/dev/null))
-RESULTS := $(sort $(shell find results -mindepth 2 -type f -not -name '.*' 2>/dev/null))
+RESULTS := $(sort $(shell find results -mindepth 2 -type f -not -path '*/.*' 2>/dev/null))
 BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
 	$(filter-out book/claims.md,$(wildcard book/*.md)) book/claims.md
 BOOK_STAMP := book/_build/html/.built

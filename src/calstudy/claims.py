@@ -18,6 +18,8 @@ import pandas as pd
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import DATA_DIR
 from calstudy.core.stats import bootstrap_interval, percentile_interval, rmse
+from calstudy.core.verdicts import Verdict as RuleVerdict
+from calstudy.core.verdicts import check_null_control
 
 #: The four verdicts of the claims register, in the order the book counts them.
 VERDICTS = ("reproduced", "direction only", "not reproduced", "not testable")
@@ -29,8 +31,26 @@ CLAIM_COLUMNS = (
     "ci_low",
     "ci_high",
     "unit",
+    "n",
+    "replication_rate",
     "verdict",
+    "null_control",
+    "oracle_control",
     "notebook",
+    "note",
+)
+
+#: Columns of ``results/<notebook>/controls.csv``: the null and oracle control of each claim.
+CONTROL_COLUMNS = (
+    "id",
+    "control",
+    "definition",
+    "reproduced",
+    "ci_low",
+    "ci_high",
+    "n",
+    "replication_rate",
+    "verdict",
     "note",
 )
 
@@ -359,6 +379,12 @@ class ClaimRow:
         Stem of the notebook that computed it.
     note : str
         One short line: why this verdict.
+    n : int
+        Trials the verdict rests on (0: not computed from trials).
+    replication_rate : float
+        Share of trials whose own effect has the claimed direction (NaN if not applicable).
+    null_control, oracle_control : str
+        Verdicts of the two controls of the v2 rule (empty where the claim has none).
     """
 
     id: str
@@ -370,11 +396,92 @@ class ClaimRow:
     verdict: str
     notebook: str
     note: str = ""
+    n: int = 0
+    replication_rate: float = float("nan")
+    null_control: str = ""
+    oracle_control: str = ""
+
+
+def claim_row(
+    claim_id: str,
+    verdict: RuleVerdict,
+    *,
+    published: str,
+    unit: str,
+    notebook: str,
+    null: RuleVerdict | None = None,
+    oracle: RuleVerdict | None = None,
+) -> ClaimRow:
+    """The claims-table row of a verdict of the v2 rule (:func:`calstudy.core.verdicts.judge`).
+
+    ``reproduced``/``ci_low``/``ci_high`` are the median over trials and its 95 % confidence
+    interval; ``null``/``oracle`` are the controls judged on the same trials (their verdicts go
+    in the row, their figures in ``controls.csv``, see :func:`control_rows`).
+    """
+    return ClaimRow(
+        id=claim_id,
+        published=published,
+        reproduced=verdict.median,
+        ci_low=verdict.ci_low,
+        ci_high=verdict.ci_high,
+        unit=unit,
+        verdict=verdict.verdict,
+        notebook=notebook,
+        note=verdict.note,
+        n=verdict.n,
+        replication_rate=verdict.replication_rate,
+        null_control="" if null is None else null.verdict,
+        oracle_control="" if oracle is None else oracle.verdict,
+    )
+
+
+def control_rows(claim_id: str, null: RuleVerdict, oracle: RuleVerdict) -> list[dict]:
+    """The two rows of ``controls.csv`` for a claim, with the control definitions of the claims
+    register (columns ``null_control`` and ``oracle_control`` of ``data/claims.csv``).
+
+    Raises
+    ------
+    CalibrationError
+        If the null control is anything but ``not reproduced`` (the test is broken), or the
+        register defines no control for the claim.
+    """
+    check_null_control(null)
+    register = claim_register().set_index("id")
+    if claim_id not in register.index:
+        raise CalibrationError(f"claim id {claim_id!r} is not in the claims register")
+    rows = []
+    for control, v in (("null", null), ("oracle", oracle)):
+        definition = register.at[claim_id, f"{control}_control"]
+        if not definition:
+            raise CalibrationError(
+                f"data/claims.csv defines no {control} control for {claim_id!r}; describe it in "
+                f"the column {control}_control"
+            )
+        rows.append(
+            {
+                "id": claim_id,
+                "control": control,
+                "definition": definition,
+                "reproduced": v.median,
+                "ci_low": v.ci_low,
+                "ci_high": v.ci_high,
+                "n": v.n,
+                "replication_rate": v.replication_rate,
+                "verdict": v.verdict,
+                "note": v.note,
+            }
+        )
+    return rows
+
+
+def claim_register(register: str | Path | None = None) -> pd.DataFrame:
+    """The claims register ``data/claims.csv`` (or ``register``) as text, blanks as ``""``."""
+    path = DATA_DIR / "claims.csv" if register is None else Path(register)
+    if not path.is_file():
+        raise FileNotFoundError(f"claims register not found: {path.name}")
+    return pd.read_csv(path, dtype=str, keep_default_na=False)
 
 
 def claim_ids(register: str | Path | None = None) -> list[str]:
     """Ids of the claims register ``data/claims.csv`` (or ``register``), in file order."""
-    path = DATA_DIR / "claims.csv" if register is None else Path(register)
-    if not path.is_file():
-        raise FileNotFoundError(f"claims register not found: {path.name}")
-    return pd.read_csv(path, dtype=str, keep_default_na=False)["id"].tolist()
+    return claim_register(register)["id"].tolist()

@@ -405,6 +405,11 @@ def test_register_holds_every_claim():
         "published",
         "unit",
         "comparison",
+        "kind",
+        "direction",
+        "reference",
+        "null_control",
+        "oracle_control",
     ]
     assert reg["id"].tolist() == REGISTER_IDS
     assert claim_ids() == REGISTER_IDS

@@ -58,7 +58,7 @@ try:  # optional: caps BLAS threads of libraries already loaded in a process
 except ImportError:  # pragma: no cover - depends on the environment
     threadpool_limits = None
 
-__all__ = ["Experiment", "run", "run_many", "trial_rng"]
+__all__ = ["Experiment", "run", "run_many", "trial_rng", "trial_rows"]
 
 _NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 _SCALARS = (type(None), bool, int, float, str, np.bool_, np.integer, np.floating)
@@ -525,6 +525,47 @@ def _frame(exp: Experiment, done: Mapping[tuple[int, int], Rows]) -> pd.DataFram
     return pd.DataFrame.from_records(records)
 
 
+def trial_rows(experiment: Experiment, seed: int, point: int, trial: int) -> pd.DataFrame:
+    """The rows of one trial, computed here, as :func:`run` would return them.
+
+    For spot checks of stored results: rebuild the experiment, pick a (point, trial) pair and
+    compare these rows with the stored ones.
+
+    Parameters
+    ----------
+    experiment : Experiment
+        The experiment as run.
+    seed : int
+        The run's seed.
+    point : int
+        Index into ``experiment.points``.
+    trial : int
+        Trial index, 0 to ``n_trials - 1``.
+    """
+    if not isinstance(experiment, Experiment):
+        raise CalibrationError(f"experiment must be an Experiment, got {type(experiment).__name__}")
+    seed = _check_index(seed, "seed")
+    if not 0 <= point < len(experiment.points) or not 0 <= trial < experiment.n_trials:
+        raise CalibrationError(
+            f"point {point} / trial {trial} out of range: {len(experiment.points)} points, "
+            f"{experiment.n_trials} trials"
+        )
+    pt = experiment.points[point]
+    job = _PointJob(
+        experiment.trial,
+        experiment.scenario,
+        seed,
+        _spawn_prefix(experiment.name, _point_json(pt)),
+        pt,
+        point,
+    )
+    _, _, rows, error = _run_trial(job, trial, in_worker=False)
+    if error is not None:
+        raise _trial_error(experiment, seed, point, trial, error) from error
+    records = [{**pt, "trial": trial, **row} for row in rows]
+    return pd.DataFrame.from_records(records)
+
+
 def run_many(
     experiments: Sequence[Experiment], seed: int, **kwargs: Any
 ) -> dict[str, pd.DataFrame]:
@@ -554,5 +595,3 @@ def run_many(
     if repeated:
         raise CalibrationError(f"experiment names must be distinct; repeated: {repeated}")
     return {exp.name: run(exp, seed, **kwargs) for exp in experiments}
-
-

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calstudy.claims import CLAIM_COLUMNS, VERDICTS, ClaimRow, claim_ids
+from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS, VERDICTS, ClaimRow, claim_ids
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
 
@@ -47,8 +47,10 @@ PINNED_PACKAGES = (
     "statsmodels",
 )
 
-_CLAIM_TEXT_COLUMNS = ("id", "published", "unit", "verdict", "notebook", "note")
-_CLAIM_FLOAT_COLUMNS = ("reproduced", "ci_low", "ci_high")
+_CLAIM_TEXT_COLUMNS = (
+    "id", "published", "unit", "verdict", "null_control", "oracle_control", "notebook", "note",
+)
+_CLAIM_FLOAT_COLUMNS = ("reproduced", "ci_low", "ci_high", "replication_rate")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -73,7 +75,7 @@ def _atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     return path
 
 
-def write_table(df: pd.DataFrame, path: str | Path) -> Path:
+def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FORMAT) -> Path:
     """Write ``df`` as CSV (no index, floats as ``%.6g``, ``\\n`` line ends), atomically.
 
     Parameters
@@ -82,6 +84,8 @@ def write_table(df: pd.DataFrame, path: str | Path) -> Path:
         The table; its columns become the header.
     path : str or pathlib.Path
         Destination ``.csv`` file; missing parent folders are created.
+    float_format : str, default ``"%.6g"``
+        Format of floats (trial rows keep more digits).
 
     Returns
     -------
@@ -97,7 +101,7 @@ def write_table(df: pd.DataFrame, path: str | Path) -> Path:
         raise CalibrationError(f"write_table needs a pandas DataFrame, got {type(df).__name__}")
     return _atomic_write(
         path,
-        lambda tmp: df.to_csv(tmp, index=False, float_format=FLOAT_FORMAT, lineterminator="\n"),
+        lambda tmp: df.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n"),
     )
 
 
@@ -185,15 +189,50 @@ def staged_dir(final: str | os.PathLike[str]) -> Iterator[Path]:
         The staging folder, to write the results into.
     """
     final = Path(final)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    _recover_staged(final)
-    staging = final.parent / f".{final.name}.staging-{os.getpid()}"
-    staging.mkdir()
+    staging = _begin_staging(final)
     try:
         yield staging
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+    _publish_staging(final, staging)
+
+
+class ResultFolder:
+    """The result folder of one notebook run, filled in a staging folder and published whole.
+
+    A notebook opens it at the start (``run = ResultFolder(results_path_of_its_stem)``), writes
+    every file to ``run.path`` (the staging folder) and calls ``run.publish()`` in its last cell,
+    which swaps the staging folder in place of the final one. A run that stops before (an
+    error, a killed kernel) leaves the committed results untouched; its staging folder is
+    removed by the next run. See :func:`staged_dir`.
+    """
+
+    def __init__(self, final: str | os.PathLike[str]):
+        self.final = Path(final)
+        self.path = _begin_staging(self.final)
+        self.published = False
+
+    def publish(self) -> Path:
+        """Swap the staging folder in as the final one; returns the final folder."""
+        if self.published:
+            raise CalibrationError(f"{self.final} is already published")
+        _publish_staging(self.final, self.path)
+        self.published = True
+        return self.final
+
+
+def _begin_staging(final: Path) -> Path:
+    final.parent.mkdir(parents=True, exist_ok=True)
+    _recover_staged(final)
+    staging = final.parent / f".{final.name}.staging-{os.getpid()}"
+    if staging.exists():
+        _remove(staging)
+    staging.mkdir()
+    return staging
+
+
+def _publish_staging(final: Path, staging: Path) -> None:
     old = final.parent / f".{final.name}.old-{os.getpid()}"
     if final.exists() or final.is_symlink():
         os.rename(final, old)
@@ -415,6 +454,35 @@ def write_claims(
     return write_table(df, Path(out_dir) / "claims.csv")
 
 
+def write_controls(out_dir: str | Path, rows: Iterable[Mapping]) -> Path:
+    """Write ``out_dir/controls.csv``: the null and oracle control of each claim (v2 rule 8).
+
+    ``rows`` come from :func:`calstudy.claims.control_rows`. Raises :class:`CalibrationError`
+    on a missing column, an unknown control kind or verdict, or a null control that is not
+    ``not reproduced`` (a null control that passes means the test is broken).
+    """
+    rows = [dict(r) for r in rows]
+    if not rows:
+        raise CalibrationError("no control rows to write (0 rows)")
+    for row in rows:
+        missing = [c for c in CONTROL_COLUMNS if c not in row]
+        if missing:
+            raise CalibrationError(f"control row of {row.get('id')!r} lacks columns {missing}")
+        if row["control"] not in ("null", "oracle"):
+            raise CalibrationError(
+                f"control {row['control']!r} of {row['id']!r} is not 'null' or 'oracle'"
+            )
+        if row["verdict"] not in VERDICTS:
+            raise CalibrationError(f"control verdict {row['verdict']!r} of {row['id']!r} unknown")
+        if row["control"] == "null" and row["verdict"] != "not reproduced":
+            raise CalibrationError(
+                f"the null control of {row['id']!r} came out {row['verdict']!r}: the test is "
+                "broken (doing nothing must not reproduce the claim)"
+            )
+    df = pd.DataFrame(rows, columns=list(CONTROL_COLUMNS))
+    return write_table(df, Path(out_dir) / "controls.csv")
+
+
 def read_claims(path: str | Path) -> pd.DataFrame:
     """Read a claims table written by :func:`write_claims` (text stays text, blanks are NaN)."""
     return pd.read_csv(
@@ -447,7 +515,10 @@ def aggregate_claims(results_root: str | Path | None = None) -> pd.DataFrame:
         If two notebooks report the same claim id.
     """
     root = RESULTS_DIR if results_root in (None, "") else Path(results_root)
-    frames = [read_claims(p) for p in sorted(root.glob("*/claims.csv"))]
+    if not root.is_dir():
+        raise FileNotFoundError(f"results folder not found: {root}")
+    found = sorted(p for p in root.glob("*/claims.csv") if not p.parent.name.startswith("."))
+    frames = [read_claims(p) for p in found]
     if frames:
         df = pd.concat(frames, ignore_index=True)[list(CLAIM_COLUMNS)]
     else:

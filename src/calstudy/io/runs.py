@@ -1,0 +1,129 @@
+"""Running a notebook's Monte Carlo experiments and storing their trial rows.
+
+A notebook declares each experiment by a *factory*: a module-level function of the paper's
+``experiments`` module that takes JSON-able keyword arguments (the notebook's parameters) and
+returns a :class:`calstudy.core.montecarlo.Experiment`. :func:`run_experiments` builds and runs
+them with the Monte Carlo engine, writes ``trials_<name>.csv`` per experiment into the result
+folder and records in ``experiments.json`` how to build each one again: with it, the tests
+recompute a few stored trials of every experiment (chosen by the seed) and compare them with the
+committed rows, without rerunning the notebook.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from calstudy.core import montecarlo
+from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import RESULTS_DIR
+from calstudy.io.results import _atomic_write, write_table
+
+#: Float format of the stored trial rows: enough digits to recompute every table from them.
+TRIALS_FLOAT_FORMAT = "%.10g"
+MANIFEST = "experiments.json"
+
+Spec = tuple[Callable[..., montecarlo.Experiment], Mapping[str, Any]]
+
+
+def factory_name(factory: Callable) -> str:
+    """``module:qualname`` of a module-level function (what ``experiments.json`` stores)."""
+    module, qualname = getattr(factory, "__module__", None), getattr(factory, "__qualname__", "")
+    if not module or "<" in qualname or "." in qualname:
+        raise CalibrationError(
+            f"experiment factory {factory!r} must be a module-level function, so that it can be "
+            "found again by name"
+        )
+    return f"{module}:{qualname}"
+
+
+def load_factory(name: str) -> Callable[..., montecarlo.Experiment]:
+    """The function named ``module:qualname`` by :func:`factory_name`."""
+    module, _, qualname = name.partition(":")
+    try:
+        return getattr(importlib.import_module(module), qualname)
+    except (ImportError, AttributeError) as exc:
+        raise CalibrationError(f"experiment factory {name!r} not found ({exc})") from exc
+
+
+def default_cache_dir(results_dir: str | Path | None = "") -> Path:
+    """Where trial rows are cached while a run goes on: ``.cache/montecarlo`` beside the
+    repository's ``results/`` (git-ignored), or inside a user's ``results_dir``."""
+    root = RESULTS_DIR.parent if results_dir in (None, "") else Path(results_dir)
+    return root / ".cache" / "montecarlo"
+
+
+def run_experiments(
+    out_dir: str | Path,
+    seed: int,
+    specs: Sequence[Spec],
+    *,
+    n_jobs: int | None = None,
+    scheduler: str | None = None,
+    cache_dir: str | Path | None = None,
+    progress: bool = True,
+) -> dict[str, pd.DataFrame]:
+    """Build, run and store experiments; returns their trial rows by experiment name.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        The notebook's result folder (usually its staging folder).
+    seed : int
+        The notebook's seed.
+    specs : sequence of (factory, kwargs)
+        ``factory(**kwargs)`` must return an Experiment; ``kwargs`` must be JSON-able.
+    n_jobs, scheduler, cache_dir, progress
+        As for :func:`calstudy.core.montecarlo.run` (an empty ``scheduler`` or ``cache_dir``
+        means none).
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        The rows of every experiment, as the engine returned them (full precision).
+    """
+    out = Path(out_dir)
+    manifest_path = out / MANIFEST
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
+    if manifest and manifest.get("seed") != seed:
+        raise CalibrationError(f"{manifest_path} was written with seed {manifest.get('seed')}")
+    entries = dict(manifest.get("experiments", {}))
+    frames = {}
+    for factory, kwargs in specs:
+        name = factory_name(factory)
+        try:
+            text = json.dumps(dict(kwargs), sort_keys=True)
+        except TypeError as exc:
+            raise CalibrationError(f"arguments of {name} are not JSON-able: {exc}") from exc
+        exp = factory(**kwargs)
+        if exp.name in entries or exp.name in frames:
+            raise CalibrationError(f"two experiments are named {exp.name!r}")
+        frames[exp.name] = montecarlo.run(
+            exp,
+            seed,
+            n_jobs=n_jobs,
+            scheduler=scheduler or None,
+            cache_dir=cache_dir or None,
+            progress=progress,
+        )
+        write_table(frames[exp.name], out / f"trials_{exp.name}.csv", TRIALS_FLOAT_FORMAT)
+        entries[exp.name] = {
+            "factory": name,
+            "kwargs": json.loads(text),
+            "n_trials": exp.n_trials,
+            "points": len(exp.points),
+        }
+    record = {"seed": seed, "experiments": dict(sorted(entries.items()))}
+    body = json.dumps(record, indent=2, sort_keys=True) + "\n"
+    _atomic_write(manifest_path, lambda tmp: tmp.write_text(body))
+    return frames
+
+
+def rebuild(entry: Mapping[str, Any]) -> montecarlo.Experiment:
+    """The Experiment of one ``experiments.json`` entry, built again from its factory."""
+    return load_factory(entry["factory"])(**entry["kwargs"])
