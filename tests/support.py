@@ -10,7 +10,7 @@ import yaml
 
 from calstudy.core.paths import REPO_ROOT
 from calstudy.models.targets import ManufacturedHoleTarget
-from calstudy.papers.hybrid import station as st
+from calstudy.papers.hybrid import simulate
 
 NOTEBOOK_DIR = REPO_ROOT / "notebooks"
 CI_PARAMS = NOTEBOOK_DIR / "ci-params.yml"
@@ -38,6 +38,7 @@ def ci_parameters(stem: str) -> dict:
         pytest.fail(f"ci-params.yml has no mapping for {stem}")
     return dict(data[stem])
 
+
 def run(path: Path, parameters: dict, tmp_path: Path) -> Path:
     """Execute ``path`` with papermill as ``make reproduce`` does; return its results folder."""
     import papermill
@@ -55,7 +56,7 @@ def run(path: Path, parameters: dict, tmp_path: Path) -> Path:
 def ideal_station(seed=0, robot_errors=False):
     """A hybrid station with every noise source off and a perfectly made target."""
     rng = np.random.default_rng(seed)
-    s = st.make_station(
+    s = simulate.make_station(
         rng, robot_errors=robot_errors, sigma_point_mm=0.0, pixel_sigma=0.0, repeatability_mm=0.0
     )
     perfect = ManufacturedHoleTarget(
@@ -63,4 +64,6 @@ def ideal_station(seed=0, robot_errors=False):
         back_points=s.target.back_points(),
         back2front=s.target.back2front(),
     )
-    return st.with_overrides(s, target_made=perfect, back2front_cmm=s.target.back2front()), rng
+    return simulate.with_overrides(
+        s, target_made=perfect, back2front_cmm=s.target.back2front()
+    ), rng
