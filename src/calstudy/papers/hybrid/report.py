@@ -393,12 +393,10 @@ def production_claims(
 
 def _systematic_claim(systematic: pd.DataFrame, published_mm, notebook: str):
     lo_pub, hi_pub = published_mm
+    size = systematic["systematic_median_mm"].to_numpy()
+    scatter = systematic["scatter_median_mm"].to_numpy()
     v = verdict_vs_published(
-        (lo_pub + hi_pub) / 2.0,
-        systematic["systematic_median_mm"].to_numpy(),
-        systematic["scatter_median_mm"].to_numpy(),
-        kind="value",
-        direction="higher",
+        (lo_pub + hi_pub) / 2.0, size, scatter, kind="value", direction="higher"
     )
     lf = np.median(systematic["lilliefors_not_rejected"])
     nz = np.median(systematic["mean_nonzero"])
@@ -412,13 +410,8 @@ def _systematic_claim(systematic: pd.DataFrame, published_mm, notebook: str):
 
 
 def _deviation_claim(sub: pd.DataFrame, published: float, n_compensation: int, notebook: str):
-    v = verdict_vs_published(
-        published,
-        sub["within_0p3"].to_numpy(),
-        sub["within_0p3_uncompensated"].to_numpy(),
-        kind="percent",
-        direction="higher",
-    )
+    within, raw = sub["within_0p3"].to_numpy(), sub["within_0p3_uncompensated"].to_numpy()
+    v = verdict_vs_published(published, within, raw, kind="percent", direction="higher")
     v = replace(
         v,
         note=f"offset from {n_compensation} products; {v.note}; beyond 0.5 mm: "
@@ -428,13 +421,8 @@ def _deviation_claim(sub: pd.DataFrame, published: float, n_compensation: int, n
 
 
 def _correlation_claim(sub: pd.DataFrame, published: float, notebook: str):
-    v = verdict_vs_published(
-        published,
-        sub["r_above_0p7"].to_numpy(),
-        0.0,
-        kind="percent",
-        direction="higher",
-    )
+    r_above = sub["r_above_0p7"].to_numpy()
+    v = verdict_vs_published(published, r_above, 0.0, kind="percent", direction="higher")
     v = replace(
         v,
         note=f"{v.note}; share of the {_n_vectors(sub) - int(np.median(sub['n_fixed']))} "

@@ -147,6 +147,21 @@ class Published:
     systematic_mm: tuple
 
 
+#: field of :class:`Published` -> key of ``published.toml``
+_PUBLISHED_KEYS = {
+    **{
+        f"{half}_{what}": f"table1.{half}_{what}"
+        for half in ("deviation", "correlation")
+        for what in ("bins", "counts", "percent")
+    },
+    "deviation_edges_mm": "table1.deviation_edges_mm",
+    "correlation_edges": "table1.correlation_edges",
+    "within_0p3_percent": "table1.within_0p3_percent",
+    "r_above_0p7_percent": "table1.r_above_0p7_percent",
+    "systematic_mm": "systematic.range_mm",
+}
+
+
 def load_published(path: str | Path | None = None) -> Published:
     """The published numbers (default ``data/hybrid/published.toml``; read once per path)."""
     return _published(str(scenario_file(PAPER, PUBLISHED_FILE, path)))
@@ -156,23 +171,8 @@ def load_published(path: str | Path | None = None) -> Published:
 def _published(path: str) -> Published:
     table = read_toml(path, "published numbers of the hybrid paper")
 
-    def get(key: str):
-        value = require(table, key, path)
-        return tuple(value) if isinstance(value, list) else value
-
-    return Published(
-        deviation_bins=get("table1.deviation_bins"),
-        deviation_edges_mm=get("table1.deviation_edges_mm"),
-        deviation_counts=get("table1.deviation_counts"),
-        deviation_percent=get("table1.deviation_percent"),
-        correlation_bins=get("table1.correlation_bins"),
-        correlation_edges=get("table1.correlation_edges"),
-        correlation_counts=get("table1.correlation_counts"),
-        correlation_percent=get("table1.correlation_percent"),
-        within_0p3_percent=get("table1.within_0p3_percent"),
-        r_above_0p7_percent=get("table1.r_above_0p7_percent"),
-        systematic_mm=get("systematic.range_mm"),
-    )
+    values = {name: require(table, key, path) for name, key in _PUBLISHED_KEYS.items()}
+    return Published(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
 
 # ---------------------------------------------------------------------------------------------
@@ -216,6 +216,19 @@ class Scenario:
         return replace(self, **changes)
 
 
+#: field of :class:`Scenario` -> key of ``production.toml`` (the repeatability is the station's)
+_SCENARIO_KEYS = {
+    "part_sigma_mm": "variation.part_sigma_mm",
+    "feature_sigma_mm": "sensors.feature_sigma_mm",
+    "drift_sigma_mm": "drift.sigma_mm",
+    "cmm_sigma_mm": "cmm.sigma_mm",
+    "n_before": "protocol.n_before",
+    "n_compensation": "protocol.n_compensation",
+    "n_compensation_max": "protocol.n_compensation_max",
+    "n_follow_up": "protocol.n_follow_up",
+}
+
+
 def load_scenario(
     path: str | Path | None = None, station_path: str | Path | None = None
 ) -> Scenario:
@@ -223,22 +236,9 @@ def load_scenario(
     robot repeatability of ``station_path`` (default ``data/hybrid/station.toml``)."""
     source = scenario_file(PAPER, PRODUCTION_FILE, path)
     cfg = read_toml(source, "hybrid production description")
-    station = load_station(station_path)
-
-    def get(key: str):
-        return require(cfg, key, source)
-
-    return Scenario(
-        part_sigma_mm=get("variation.part_sigma_mm"),
-        feature_sigma_mm=get("sensors.feature_sigma_mm"),
-        repeatability_mm=station["robot"]["repeatability_mm"],
-        drift_sigma_mm=get("drift.sigma_mm"),
-        cmm_sigma_mm=get("cmm.sigma_mm"),
-        n_before=get("protocol.n_before"),
-        n_compensation=get("protocol.n_compensation"),
-        n_compensation_max=get("protocol.n_compensation_max"),
-        n_follow_up=get("protocol.n_follow_up"),
-    )
+    values = {name: require(cfg, key, source) for name, key in _SCENARIO_KEYS.items()}
+    repeatability = load_station(station_path)["robot"]["repeatability_mm"]
+    return Scenario(repeatability_mm=repeatability, **values)
 
 
 # ---------------------------------------------------------------------------------------------

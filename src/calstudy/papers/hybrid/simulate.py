@@ -290,12 +290,7 @@ def make_station(
         else LineLaserSensor(sigma_point_mm=sigma_point_mm)
     )
     sphere = Sphere(centre=np.array(cfg["sphere"]["centre_mm"], dtype=float))
-    target = HoleTarget()
-    made = target.manufactured(rng)
-    tcfg = cfg["target"]
-    back2front_cmm = geo.perturb(
-        made.back2front, np.deg2rad(tcfg["cmm_sigma_deg"]), tcfg["cmm_sigma_mm"], rng
-    )
+    target, made, back2front_cmm = _make_target(cfg["target"], rng)
     standoff = cfg["sensor"]["standoff_mm"]
     wcfg = cfg["workpiece"]
     base2work_nominal, work2base_true = _place_workpiece(wcfg, rng)
@@ -350,16 +345,22 @@ def _draw_robots(
     return nominal, true
 
 
+def _make_target(
+    tcfg: dict, rng: np.random.Generator
+) -> tuple[HoleTarget, ManufacturedHoleTarget, np.ndarray]:
+    """The hole target as designed and as made, and its ``back2front`` as the CMM measured it
+    (``[target]``)."""
+    target = HoleTarget()
+    made = target.manufactured(rng)
+    back2front_cmm = geo.perturb(
+        made.back2front, np.deg2rad(tcfg["cmm_sigma_deg"]), tcfg["cmm_sigma_mm"], rng
+    )
+    return target, made, back2front_cmm
+
+
 def _camera(cam: dict) -> PinholeCamera:
     """The sensors' camera of ``[cameras]``."""
-    return PinholeCamera(
-        fx=cam["fx"],
-        fy=cam["fy"],
-        cx=cam["cx"],
-        cy=cam["cy"],
-        width=cam["width"],
-        height=cam["height"],
-    )
+    return PinholeCamera(**{k: cam[k] for k in ("fx", "fy", "cx", "cy", "width", "height")})
 
 
 def _stationary_sensors(st: dict) -> np.ndarray:
