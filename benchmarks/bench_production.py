@@ -11,27 +11,30 @@ from __future__ import annotations
 import numpy as np
 from timing import best_ms
 
-from calstudy.papers.hybrid import production as pr
+from calstudy.papers.hybrid import compensation, experiments, simulate_production
+from calstudy.papers.hybrid.scenario import load_scenario
 
 BUDGET_S = 90.0
 REPEATS = 5
 
 
 def main() -> None:
-    scenario = pr.default_scenario()
+    scenario = load_scenario()
     rng = np.random.default_rng(0)
-    ps = pr.calibrated_station(rng)  # the first call also writes the robot program (IK, cached)
-    run = pr.simulate_run(ps, scenario, rng)
+    # the first call also writes the robot program (IK, cached)
+    ps = experiments.calibrated_station(rng)
+    run = simulate_production.simulate_run(ps, scenario, rng)
     timings = {
         "station drawn and calibrated (sphere + homography)": best_ms(
-            lambda: pr.calibrated_station(np.random.default_rng(1)), REPEATS
+            lambda: experiments.calibrated_station(np.random.default_rng(1)), REPEATS
         ),
         "protocol run, 50 products x 58 points": best_ms(
-            lambda: pr.simulate_run(ps, scenario, np.random.default_rng(2)), REPEATS
+            lambda: simulate_production.simulate_run(ps, scenario, np.random.default_rng(2)),
+            REPEATS,
         ),
-        "Table 1 analysis of one run": best_ms(lambda: pr.analyse_run(run, 10), REPEATS),
+        "Table 1 analysis of one run": best_ms(lambda: compensation.analyse_run(run, 10), REPEATS),
         "before compensation, 168 Lilliefors tests": best_ms(
-            lambda: pr.before_compensation(run, scenario.n_before), REPEATS
+            lambda: compensation.before_compensation(run, scenario.n_before), REPEATS
         ),
     }
     print(f"production: best of {REPEATS} (budget {BUDGET_S:g} s for the default notebook run)")

@@ -10,7 +10,7 @@ import yaml
 
 from calstudy.core.paths import REPO_ROOT
 from calstudy.models.targets import ManufacturedHoleTarget
-from calstudy.papers.hybrid import station as st
+from calstudy.papers.hybrid import simulate
 
 NOTEBOOK_DIR = REPO_ROOT / "notebooks"
 CI_PARAMS = NOTEBOOK_DIR / "ci-params.yml"
@@ -58,6 +58,7 @@ def binocular_rig():
 
     return StereoRig.from_table(read_toml(data_path("binocular", "sensor.toml"), "sensor"))
 
+
 def run(path: Path, parameters: dict, tmp_path: Path) -> Path:
     """Execute ``path`` with papermill as ``make reproduce`` does; return its results folder."""
     import papermill
@@ -75,7 +76,7 @@ def run(path: Path, parameters: dict, tmp_path: Path) -> Path:
 def ideal_station(seed=0, robot_errors=False):
     """A hybrid station with every noise source off and a perfectly made target."""
     rng = np.random.default_rng(seed)
-    s = st.make_station(
+    s = simulate.make_station(
         rng, robot_errors=robot_errors, sigma_point_mm=0.0, pixel_sigma=0.0, repeatability_mm=0.0
     )
     perfect = ManufacturedHoleTarget(
@@ -83,4 +84,6 @@ def ideal_station(seed=0, robot_errors=False):
         back_points=s.target.back_points(),
         back2front=s.target.back2front(),
     )
-    return st.with_overrides(s, target_made=perfect, back2front_cmm=s.target.back2front()), rng
+    return simulate.with_overrides(
+        s, target_made=perfect, back2front_cmm=s.target.back2front()
+    ), rng

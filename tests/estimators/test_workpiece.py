@@ -69,3 +69,14 @@ def test_bad_input():
     bad[0, 0] = np.inf
     with pytest.raises(CalibrationError, match="non-finite"):
         wp.rps_frame_so3(bad, DATUMS_WORK, NOMINAL)
+
+
+def test_rps_batch_matches_the_so3_solver():
+    rng = np.random.default_rng(7)
+    work2base = geo.perturb(np.broadcast_to(geo.invert(NOMINAL), (5, 4, 4)), 0.01, 2.0, rng)
+    datums = np.einsum("nij,kj->nki", work2base[:, :3, :3], DATUMS_WORK) + work2base[:, None, :3, 3]
+    datums += rng.normal(0, 0.05, datums.shape)
+    batch = wp.rps_frame_batch(datums, DATUMS_WORK, NOMINAL)
+    for k in range(5):
+        ref = wp.rps_frame_so3(datums[k], DATUMS_WORK, NOMINAL).value
+        np.testing.assert_allclose(batch[k], ref, atol=1e-7)

@@ -165,3 +165,44 @@ def median_and_spread(samples, level: float = 0.95) -> tuple[float, float, float
     a = _finite_samples("samples", samples, min_count=1).reshape(-1)
     lo, hi = percentile_interval(a, level) if a.size >= 2 else (float(a[0]), float(a[0]))
     return float(np.median(a)), lo, hi
+
+
+def lilliefors_test(samples) -> tuple[float, float]:
+    """Lilliefors test for normality (statsmodels, table p-values): ``(statistic, p_value)``.
+
+    The Kolmogorov-Smirnov distance of the samples from the normal distribution with their own
+    mean and standard deviation, with the p-value of Lilliefors' table (hybrid paper, section
+    4.3, tests the deviations of each coordinate before compensation this way).
+
+    Parameters
+    ----------
+    samples : array_like, shape (n,)
+        At least 4 values (statsmodels' minimum).
+
+    Returns
+    -------
+    (float, float)
+        The statistic and its p-value.
+
+    Raises
+    ------
+    CalibrationError
+        With fewer than 4 samples, a shape other than (n,), non-finite values, or constant data
+        (the normal fit has zero spread).
+    """
+    from statsmodels.stats.diagnostic import lilliefors
+
+    x = np.asarray(samples, dtype=float)
+    n = 0 if x.ndim == 0 else x.shape[0]
+    if n < 4:
+        raise CalibrationError(f"a Lilliefors test needs at least 4 samples; samples holds {n}")
+    _finite_samples("samples", x)
+    if x.ndim != 1:
+        raise CalibrationError(f"samples has shape {x.shape}; expected (n,)")
+    if np.ptp(x) <= 1e-12 * max(1.0, float(np.abs(x).max())):
+        raise CalibrationError(
+            f"all {x.size} samples equal {x[0]:.6g}: a normal fit and the Lilliefors test are "
+            "undefined for constant data"
+        )
+    stat, p = lilliefors(x, dist="norm", pvalmethod="table")
+    return float(stat), float(p)

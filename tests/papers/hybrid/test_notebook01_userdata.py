@@ -1,26 +1,24 @@
 """Notebook 01 calibrates from a user's CSV when one is given, and says so."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import papermill as pm
 import pytest
-from support import ci_parameters
+from support import NOTEBOOK_DIR, ci_parameters
 
 from calstudy.estimators import handeye as he
-from calstudy.papers.hybrid import station as st
+from calstudy.papers.hybrid import simulate
 
-ROOT = Path(__file__).resolve().parents[1]
-NOTEBOOK = ROOT / "notebooks" / "01_hybrid_global_calibration.ipynb"
+NOTEBOOK = NOTEBOOK_DIR / "01_hybrid_global_calibration.ipynb"
 
 
 @pytest.mark.slow
 def test_notebook01_runs_on_user_csv(tmp_path):
     rng = np.random.default_rng(11)
-    station = st.make_station(rng)
-    meas, _ = st.simulate_sphere_measurements(station, 4, 6, rng)
+    station = simulate.make_station(rng)
+    meas, _ = simulate.simulate_sphere_measurements(station, 4, 6, rng)
     csv = tmp_path / "my_cell.csv"
     he.write_sphere_measurements(meas, csv)
     params = ci_parameters(NOTEBOOK.stem)

@@ -1,0 +1,230 @@
+"""The hybrid study's figures, each drawn from a results table (never from raw simulation state).
+
+Notebook 01: errors by method, against noise and move count, per stationary sensor, and the
+penalty factor of the 3-2-1 frame. Notebook 02: Fig. 6 of the paper, the Table 1 headline shares
+against the number of products in the offset, against each assumption and against the size of
+the robot's manufacturing errors. Published values are read from ``data/hybrid/published.toml``.
+"""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from scipy.stats import norm  # noqa: E402
+
+from calstudy.core.errors import CalibrationError  # noqa: E402
+from calstudy.papers.hybrid.scenario import (  # noqa: E402
+    AXES,
+    SWEEP_LABELS,
+    Scenario,
+    load_published,
+)
+
+#: axis label of the sweep of the robot's manufacturing errors
+ROBOT_ERROR_LABEL = "factor on the robot's kinematic tolerances"
+
+ERROR_COLUMNS = (
+    ("rot_deg_rms", "RMS rotation error (deg)"),
+    ("trans_mm_rms", "RMS translation error (mm)"),
+)
+
+
+def method_bars(summary: pd.DataFrame, group: str, hue: str, title: str):
+    """Grouped bars of RMS rotation and translation errors (log scale), one panel each.
+
+    ``summary`` comes from :func:`calstudy.papers.hybrid.report.summarise_errors` with columns
+    ``group`` and ``hue`` among its keys.
+    """
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    groups = list(dict.fromkeys(summary[group]))
+    hues = list(dict.fromkeys(summary[hue]))
+    width = 0.8 / len(hues)
+    for ax, (col, label) in zip(axes, ERROR_COLUMNS, strict=True):
+        for j, h in enumerate(hues):
+            sub = summary[summary[hue] == h].set_index(group).reindex(groups)
+            ax.bar(
+                np.arange(len(groups)) + (j - (len(hues) - 1) / 2) * width,
+                sub[col],
+                width,
+                label=str(h),
+            )
+        ax.set_xticks(np.arange(len(groups)), groups, rotation=30, ha="right")
+        ax.set_yscale("log")
+        ax.set_ylabel(label)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title)
+    return fig
+
+
+def sweep_lines(summary: pd.DataFrame, x: str, xlabel: str, title: str, logx: bool = False):
+    """RMS errors against a swept quantity, one line per method, rotation and translation."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    for ax, (col, label) in zip(axes, ERROR_COLUMNS, strict=True):
+        for method, sub in summary.groupby("method", sort=False):
+            style = "k--" if method == "CRB" else "o-"
+            ax.plot(sub[x], sub[col], style, label=method)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(label)
+        ax.set_yscale("log")
+        if logx:
+            ax.set_xscale("log")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title)
+    return fig
+
+
+def per_sensor_bars(summary: pd.DataFrame, title: str):
+    """RMS errors of each stationary sensor, one bar per variant."""
+    return method_bars(
+        summary.assign(sensor=summary["sensor"].astype(str)), "sensor", "variant", title
+    )
+
+
+def penalty_plot(sweep: pd.DataFrame, title: str):
+    """Solver evaluations and orthogonality defect of the penalty LM against ``M``."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    for start, sub in sweep.groupby("start", sort=False):
+        axes[0].plot(sub["penalty"], sub["evaluations"], "o-", label=start)
+        axes[1].plot(
+            sub["penalty"], sub["orthogonality_defect"].clip(lower=1e-17), "o-", label=start
+        )
+    axes[0].set_ylabel("mean function evaluations")
+    axes[1].set_ylabel("max |R^T R - I| (mean over trials)")
+    axes[1].set_yscale("log")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xlabel("penalty factor M")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title)
+    return fig
+
+
+def fig6_figure(deviations, ids, point_id: str):
+    """Fig. 6 of the paper for one point: (a) the deviations of each panel along x, y, z;
+    (b) the normal densities fitted to them.
+
+    ``deviations`` is ``(n, F, 3)`` in mm (``before_compensation(...)["deviations"]``), its
+    points in the order of ``ids``; ``point_id`` names the point shown.
+    """
+    ids = list(ids)
+    if point_id not in ids:
+        raise CalibrationError(
+            f"featured point {point_id!r} is not among the {len(ids)} feature points "
+            f"(first ones: {ids[:5]})"
+        )
+    d = np.asarray(deviations, dtype=float)[:, ids.index(point_id)]
+    fig, (ax_a, ax_b) = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    panels = np.arange(1, d.shape[0] + 1)
+    for k, axis in enumerate(AXES):
+        ax_a.plot(panels, d[:, k], "o-", label=axis)
+        mu, sd = d[:, k].mean(), d[:, k].std(ddof=1)
+        grid = np.linspace(mu - 4 * sd, mu + 4 * sd, 200)
+        ax_b.plot(grid, norm.pdf(grid, mu, sd), label=f"{axis}: mean {mu:.2f}, sd {sd:.3f} mm")
+        ax_b.plot(d[:, k], np.zeros(d.shape[0]), "|", color=ax_b.lines[-1].get_color(), ms=12)
+    ax_a.axhline(0.0, color="k", lw=0.8)
+    ax_a.set_xlabel("panel")
+    ax_a.set_ylabel("hybrid - CMM (mm)")
+    ax_a.set_title(f"(a) deviations of point {point_id}, {d.shape[0]} panels")
+    ax_a.legend(fontsize=8)
+    ax_b.set_xlabel("hybrid - CMM (mm)")
+    ax_b.set_ylabel("fitted normal density (1/mm)")
+    ax_b.set_title("(b) normal fits")
+    ax_b.legend(fontsize=8)
+    for ax in (ax_a, ax_b):
+        ax.grid(alpha=0.3)
+    return fig
+
+
+def n_sweep_figure(summary: pd.DataFrame):
+    """The two headline shares against the number of products in the offset (Eq. 24)."""
+    fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
+    _headline_shares(ax, summary["n_compensation"], summary)
+    ax.set_xlabel("products in the offset estimate (n of Eq. 24)")
+    ax.set_ylabel("share of the vectors (%)")
+    ax.set_title("Table 1 headline shares against n (median, 95 % interval over stations)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def _headline_shares(ax, x, summary: pd.DataFrame) -> None:
+    """Both headline shares of ``summary`` against ``x`` with their 95 % intervals, the published
+    values dashed."""
+    published = load_published()
+    for col, label, pub in (
+        ("within_0p3", "within +-0.3 mm", published.within_0p3_percent),
+        ("r_above_0p7", "r > 0.7", published.r_above_0p7_percent),
+    ):
+        line = ax.plot(x, summary[col], "o-", label=label)[0]
+        ax.fill_between(x, summary[f"{col}_low"], summary[f"{col}_high"], alpha=0.2)
+        ax.axhline(pub, color=line.get_color(), ls="--", lw=1, label=f"published {pub} %")
+
+
+def sensitivity_figure(summary: pd.DataFrame, scenario: Scenario):
+    """One panel per swept assumption: both headline shares, the published values dashed, the
+    default value dotted."""
+    names = list(dict.fromkeys(summary["parameter"]))
+    fig, axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 3.8), squeeze=False)
+    fig.set_layout_engine("constrained")
+    for ax, name in zip(axes[0], names, strict=True):
+        sub = summary[summary["parameter"] == name]
+        _headline_shares(ax, sub["value"], sub)
+        ax.axvline(getattr(scenario, name), color="k", ls=":", lw=1)
+        ax.set_xlabel(SWEEP_LABELS[name])
+        ax.set_ylim(-3, 103)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("share of the vectors (%)")
+    axes[0][0].legend(fontsize=8, loc="lower left")
+    fig.suptitle(
+        "Table 1 headline shares as each assumption moves (dashed: published; dotted: default)"
+    )
+    return fig
+
+
+def robot_error_figure(summary: pd.DataFrame, default: float = 1.0):
+    """The sweep of the robot's manufacturing errors (:func:`summarise_robot_error_sweep`):
+    (a) the systematic size before compensation against the published 2-4 mm, each factor
+    labelled with its ``hybrid.systematic`` verdict; (b) the two headline shares after
+    compensation, and the share within +-0.3 mm of the same products uncompensated ("raw").
+    The default factor is dotted."""
+    fig, (ax_a, ax_b) = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    x = summary["robot_error_scale"]
+    lo, hi = load_published().systematic_mm
+    mid = (lo + hi) / 2.0
+    ax_a.axhspan(lo, hi, color="0.85", label=f"published {lo:g}-{hi:g} mm")
+    # the magnitude band of the verdict: the middle of the range within the register's factor 1.5
+    for k, edge in enumerate((mid / 1.5, mid * 1.5)):
+        label = f"verdict band {mid / 1.5:g}-{mid * 1.5:g} mm" if k == 0 else None
+        ax_a.axhline(edge, color="0.4", ls="--", lw=1, label=label)
+    y = summary["systematic_median_mm"]
+    ax_a.plot(x, y, "o-", label="median point, median over stations")
+    ax_a.fill_between(
+        x, summary["systematic_median_mm_low"], summary["systematic_median_mm_high"], alpha=0.2
+    )
+    for xi, yi, verdict in zip(x, y, summary["systematic_verdict"], strict=True):
+        ax_a.annotate(
+            verdict, (xi, yi), textcoords="offset points", xytext=(-6, 8), fontsize=7, rotation=30
+        )
+    ax_a.set_ylabel("systematic size before compensation (mm)")
+    ax_a.set_title("(a) hybrid.systematic (95 % interval over stations)")
+    ax_a.legend(fontsize=8, loc="upper left")
+    _headline_shares(ax_b, x, summary)
+    ax_b.plot(
+        x, summary["within_0p3_uncompensated"], "s:", color="0.4", label="within +-0.3 mm, raw"
+    )
+    ax_b.set_ylim(-3, 103)
+    ax_b.set_ylabel("share of the vectors (%)")
+    ax_b.set_title("(b) Table 1 headline shares after compensation")
+    ax_b.legend(fontsize=8, loc="lower left")
+    for ax in (ax_a, ax_b):
+        ax.axvline(default, color="k", ls=":", lw=1)
+        ax.set_xlabel(ROBOT_ERROR_LABEL)
+        ax.grid(alpha=0.3)
+    return fig

@@ -1,0 +1,45 @@
+"""Notebook 02 analyses a user's hybrid and CMM tables when both are given, and says so."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import papermill as pm
+import pytest
+from support import NOTEBOOK_DIR, ci_parameters
+
+from calstudy.papers.hybrid import compensation, experiments, report, scenario, simulate_production
+
+NOTEBOOK = NOTEBOOK_DIR / "02_hybrid_production_compensation.ipynb"
+
+
+@pytest.mark.slow
+def test_notebook02_runs_on_user_csvs(tmp_path):
+    notebook = NOTEBOOK
+    rng = np.random.default_rng(12)
+    ps = experiments.calibrated_station(rng)
+    run = simulate_production.simulate_run(ps, scenario.load_scenario(), rng)
+    paths = {}
+    for which, name in ((0, "hybrid"), (1, "cmm")):
+        paths[name] = tmp_path / f"{name}.csv"
+        compensation.measurements_frame(ps.features.ids, run, which).to_csv(
+            paths[name], index=False
+        )
+    params = ci_parameters(notebook.stem)
+    params |= {
+        "n_trials": 2,
+        "n_sweep_trials": 2,
+        "hybrid_csv": str(paths["hybrid"]),
+        "cmm_csv": str(paths["cmm"]),
+        "results_dir": str(tmp_path / "out"),
+    }
+    out_nb = tmp_path / "out.ipynb"
+    pm.execute_notebook(
+        str(notebook), str(out_nb), parameters=params, cwd=str(notebook.parent), progress_bar=False
+    )
+    assert f"measurements: measured tables {paths['hybrid']}" in json.dumps(
+        json.loads(out_nb.read_text())
+    )
+    table = pd.read_csv(tmp_path / "out" / notebook.stem / "table1_station.csv")
+    expected = report.station_table1(run, scenario.load_scenario().n_compensation)
+    assert table["count"].tolist() == expected["count"].tolist()

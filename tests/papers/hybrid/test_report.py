@@ -1,0 +1,109 @@
+"""Tables and claims of the hybrid study: verdicts from trial tables, Table 1 over trials and of
+one station."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from calstudy import CalibrationError
+from calstudy.papers.hybrid import compensation, report
+
+
+def _claim_inputs(size_mm, scatter_mm, within, uncompensated, r_above):
+    n = 20
+    rng = np.random.default_rng(11)
+    systematic = pd.DataFrame(
+        {
+            "trial": np.arange(n),
+            "systematic_median_mm": size_mm + rng.normal(0, 0.01, n),
+            "scatter_median_mm": scatter_mm + rng.normal(0, 0.001, n),
+            "lilliefors_not_rejected": 95.0,
+            "mean_nonzero": 90.0,
+        }
+    )
+    trials = pd.DataFrame(
+        {
+            "trial": np.arange(n),
+            "n_compensation": 10,
+            "within_0p3": within + rng.normal(0, 0.5, n),
+            "within_0p3_uncompensated": uncompensated + rng.normal(0, 0.5, n),
+            "r_above_0p7": r_above + rng.normal(0, 0.5, n),
+            "beyond_0p5": 0.0,
+            "n_vectors": 174,
+            "n_fixed": 6,
+        }
+    )
+    return systematic, trials
+
+
+def test_claims_reproduced_when_the_trials_match_the_paper():
+    rows = report.production_claims(*_claim_inputs(3.0, 0.06, 96.0, 30.0, 86.0), 10, "nb")
+    assert [r.id for r in rows] == ["hybrid.systematic", "hybrid.deviation", "hybrid.correlation"]
+    assert [r.verdict for r in rows] == ["reproduced"] * 3
+    assert "168 coordinates" in rows[2].note
+
+
+def test_claims_not_reproduced_without_an_effect():
+    # a mean deviation no larger than the scatter is not systematic; compensation that gains
+    # nothing over the raw readings is no effect
+    rows = report.production_claims(*_claim_inputs(0.05, 0.06, 96.0, 96.0, 86.0), 10, "nb")
+    assert [r.verdict for r in rows[:2]] == ["not reproduced", "not reproduced"]
+    rows = report.production_claims(*_claim_inputs(1.0, 0.06, 80.0, 30.0, 100.0), 10, "nb")
+    assert [r.verdict for r in rows] == ["direction only"] * 3
+
+
+def test_robot_error_sweep_summary_uses_the_claims_verdicts():
+    parts = []
+    for scale, size in ((1.0, 1.0), (1.5, 3.0)):
+        systematic, trials = _claim_inputs(size, 0.06, 96.0, 30.0, 86.0)
+        parts.append(systematic.merge(trials, on="trial").assign(robot_error_scale=scale))
+    summary = report.summarise_robot_error_sweep(pd.concat(parts), 10, "nb")
+    assert summary["robot_error_scale"].tolist() == [1.0, 1.5]
+    assert summary["systematic_verdict"].tolist() == ["direction only", "reproduced"]
+    assert summary["deviation_verdict"].tolist() == ["reproduced"] * 2
+    expected = np.median(parts[1]["systematic_median_mm"])
+    assert summary["systematic_median_mm"].iloc[1] == pytest.approx(expected)
+    assert (summary["stations"] == 20).all()
+
+
+def test_table1_from_csv_files_equals_table1_from_arrays(tmp_path):
+    rng = np.random.default_rng(10)
+    c = rng.normal(0, 0.5, (25, 4, 3))
+    h = c + rng.normal(0, 0.1, c.shape) + 1.5
+    run = {"compensation": (h[:10], c[:10]), "follow-up": (h[10:], c[10:])}
+    ids = ["A", "B", "C", "D"]
+    compensation.measurements_frame(ids, run, 0).to_csv(tmp_path / "h.csv", index=False)
+    compensation.measurements_frame(ids, run, 1).to_csv(tmp_path / "c.csv", index=False)
+    source, ids_read, run_read = compensation.station_data(
+        tmp_path / "h.csv", tmp_path / "c.csv", [], {}
+    )
+    assert "measured tables" in source and ids_read == ids
+    pd.testing.assert_frame_equal(
+        report.station_table1(run_read, 10), report.station_table1(run, 10)
+    )
+
+
+def _trials(dev_counts, corr_counts, n_fixed):
+    rows = []
+    for t, (d, c, f) in enumerate(zip(dev_counts, corr_counts, n_fixed, strict=True)):
+        row = {"trial": t, "n_compensation": 10, "n_vectors": sum(d), "n_fixed": f}
+        row |= {f"deviation_bin{k}": d[k] for k in range(5)}
+        row |= {f"correlation_bin{k}": c[k] for k in range(5)}
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def test_table1_shares_are_of_the_station_coordinates_not_a_fixed_174():
+    # a 10-point station: 30 coordinates, 6 of them fixed by the frame
+    trials = _trials([(20, 6, 2, 1, 1)] * 3, [(15, 5, 2, 1, 1)] * 3, [6] * 3)
+    deviation, correlation = report.table1(trials, 10)
+    assert deviation["percent_median"].tolist() == pytest.approx(
+        [100 * c / 30 for c in (20, 6, 2, 1, 1)]
+    )
+    assert correlation["percent_median"].iloc[-1] == pytest.approx(20.0)
+
+
+def test_table1_rejects_trials_with_different_coordinate_counts():
+    trials = _trials([(20, 6, 2, 1, 1), (20, 6, 2, 1, 2)], [(15, 5, 2, 1, 1)] * 2, [6, 6])
+    with pytest.raises(CalibrationError, match="disagree on the number of coordinates"):
+        report.table1(trials, 10)

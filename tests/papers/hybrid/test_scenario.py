@@ -1,0 +1,78 @@
+"""What the hybrid study reads from data/hybrid: the published Table 1, the feature points, the
+production scenario, and the errors of a missing file or key."""
+
+import numpy as np
+import pytest
+
+from calstudy import CalibrationError
+from calstudy.papers.hybrid import scenario
+
+published = scenario.load_published()
+
+
+def test_published_table1_counts_match_its_percentages():
+    for counts, percent in (
+        (published.deviation_counts, published.deviation_percent),
+        (published.correlation_counts, published.correlation_percent),
+    ):
+        assert sum(counts) == 174
+        # the paper prints 10 / 174 = 5.747 % as 5.74 (truncated), hence 0.01 and not 0.005
+        np.testing.assert_allclose(100 * np.array(counts) / 174, percent, atol=0.01)
+
+
+def test_duplicated_feature_ids_in_the_data_file_raise():
+    cfg = scenario.load_production()
+    cfg["flexible"]["features"][1]["id"] = cfg["flexible"]["features"][0]["id"]
+    with pytest.raises(
+        CalibrationError, match=r"duplicated feature points in production.toml: \['H01'\]"
+    ):
+        scenario.load_features(cfg)
+
+
+def test_scenario_checks_its_values():
+    sc = scenario.load_scenario()
+    with pytest.raises(CalibrationError, match="n_compensation is 2; at least 3 products"):
+        sc.with_(n_compensation=2)
+    with pytest.raises(CalibrationError, match="part_sigma_mm is -0.1"):
+        sc.with_(part_sigma_mm=-0.1)
+
+
+def test_features_match_the_paper_counts():
+    f = scenario.load_features()
+    assert len(f.ids) == 58 and len(f.flexible) == 48 and len(f.stationary) == 10
+    assert int(f.fixed.sum()) == 6
+    assert [f.ids[i] for i in np.argwhere(f.fixed)[:, 0]] == [
+        "S01",
+        "S01",
+        "S02",
+        "S02",
+        "S02",
+        "S03",
+    ]
+
+
+def test_station_reads_the_move_ranges_and_the_panel_size_from_the_data():
+    cfg = scenario.load_station()
+    assert cfg["calibration_moves"]["across_plane_range_mm"] == 2.0
+    assert cfg["calibration_moves"]["rotation_min_deg"] == 10.0
+    assert cfg["workpiece"]["size_mm"] == [1500.0, 1200.0]
+
+
+def test_published_numbers_are_the_papers():
+    assert published.within_0p3_percent == 96.55 and published.r_above_0p7_percent == 85.64
+    assert published.systematic_mm == (2.0, 4.0)
+    assert published.deviation_edges_mm == (0.1, 0.2, 0.3, 0.5)
+    assert published.correlation_edges == (0.6, 0.7, 0.8, 0.9)
+
+
+def test_missing_file_and_missing_key_raise(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        scenario.load_scenario(tmp_path / "none.toml")
+    path = tmp_path / "production.toml"
+    path.write_text("[protocol]\nn_before = 10\n")
+    with pytest.raises(CalibrationError, match=r"missing key 'variation'"):
+        scenario.load_scenario(path)
+    bad = tmp_path / "station.toml"
+    bad.write_text("[robot]\nrepeatability_mm = 0.06\n")
+    with pytest.raises(CalibrationError, match=r"missing key 'handeye'"):
+        scenario.load_station(bad)

@@ -1,0 +1,53 @@
+"""Panels measured on the simulated station and the CMM: exact without robot error and noise,
+a repeatable millimetre deviation with it, and the paper's layout."""
+
+import numpy as np
+from support import ideal_station
+
+from calstudy.papers.hybrid import (
+    compensation,
+    experiments,
+    scenario,
+    simulate,
+    simulate_production,
+)
+
+
+def _noise_free(robot_errors: bool):
+    # notebook 01's noise-free station: no sensor, pixel or robot noise, a perfectly made target
+    s, rng = ideal_station(seed=8, robot_errors=robot_errors)
+    s = simulate.with_overrides(s, datum_sigma=0.0)
+    sc = scenario.load_scenario().with_(
+        feature_sigma_mm=0.0, repeatability_mm=0.0, drift_sigma_mm=0.0, cmm_sigma_mm=0.0
+    )
+    return experiments.calibrate(s, rng), sc, rng
+
+
+def test_systematic_error_disappears_when_true_and_nominal_robots_coincide():
+    ps, sc, rng = _noise_free(robot_errors=False)
+    hybrid, cmm = simulate_production.simulate_products(ps, sc, 5, rng)
+    assert np.abs(hybrid - cmm).max() < 1e-5
+
+
+def test_robot_model_error_gives_a_repeatable_millimetre_deviation():
+    ps, sc, rng = _noise_free(robot_errors=True)
+    hybrid, cmm = simulate_production.simulate_products(ps, sc, 5, rng)
+    d = hybrid - cmm
+    assert np.median(np.linalg.norm(d.mean(axis=0), axis=1)) > 0.5
+    # repeatable: without noise, the panels differ only by their variation and clamping
+    assert np.abs(d - d.mean(axis=0)).max() < 0.02 * np.abs(d).max()
+
+
+def test_simulated_run_has_the_paper_layout_and_frame_fixed_coordinates():
+    rng = np.random.default_rng(9)
+    ps = experiments.calibrated_station(rng)
+    sc = scenario.load_scenario()
+    run = simulate_production.simulate_run(ps, sc, rng)
+    assert run["compensation"][0].shape == (sc.n_compensation_max, 58, 3)
+    assert run["follow-up"][1].shape == (sc.n_follow_up, 58, 3)
+    h = np.concatenate([run[p][0] for p in scenario.PHASES])
+    c = np.concatenate([run[p][1] for p in scenario.PHASES])
+    np.testing.assert_array_equal(compensation.frame_fixed(h, c), ps.features.fixed)
+    # each program pose puts its feature near the middle of the sensor's field
+    p = simulate_production.sensor_pose_check(ps)
+    assert np.abs(p[:, :2]).max() < 20.0 and np.abs(p[:, 2] - 250.0).max() < 20.0
