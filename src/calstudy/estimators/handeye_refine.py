@@ -40,30 +40,12 @@ PARAM_NAMES = ["X_rx", "X_ry", "X_rz", "X_tx", "X_ty", "X_tz"] + [
 
 
 # ----------------------------------------------------------------------------------------------
-# SO(3) Jacobians, batched
+# SO(3) maps and Jacobians, batched
 
 
 def _so3_jr(phi: np.ndarray) -> np.ndarray:
     """Right Jacobian of SO(3), ``exp(phi + e) = exp(phi) exp(Jr(phi) e)``: (N, 3) -> (N, 3, 3)."""
-    phi = np.atleast_2d(phi)
-    th = np.linalg.norm(phi, axis=1)
-    k = geo.skew(phi)
-    small = th < 1e-8
-    ths = np.where(small, 1.0, th)
-    a = np.where(small, 0.5, (1.0 - np.cos(ths)) / ths**2)
-    b = np.where(small, 1.0 / 6.0, (ths - np.sin(ths)) / ths**3)
-    return np.eye(3) - a[:, None, None] * k + b[:, None, None] * (k @ k)
-
-
-def _so3_jr_inv(phi: np.ndarray) -> np.ndarray:
-    """Inverse of the right Jacobian of SO(3): (N, 3) -> (N, 3, 3)."""
-    phi = np.atleast_2d(phi)
-    th = np.linalg.norm(phi, axis=1)
-    k = geo.skew(phi)
-    small = th < 1e-6
-    ths = np.where(small, 1.0, th)
-    c = np.where(small, 1.0 / 12.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
-    return np.eye(3) + 0.5 * k + c[:, None, None] * (k @ k)
+    return geo.so3_left_jacobian(-np.atleast_2d(phi))
 
 
 def log_so3(rot: np.ndarray) -> np.ndarray:
@@ -289,7 +271,7 @@ class PoseProblem:
         e = log_so3(np.einsum("nji,njk->nik", r_hat, self.b[:, :3, :3]))
         jl_y = _so3_jr(p[0:3])[0].T
         jr_z = _so3_jr(p[6:9])[0]
-        jl_inv_e = np.swapaxes(_so3_jr_inv(e), 1, 2)
+        jl_inv_e = np.swapaxes(geo.so3_right_jacobian_inverse(e), 1, 2)
         jac = np.zeros((n, 6, 12))
         jac[:, :3, 0:3] = geo.skew(u) @ jl_y
         jac[:, :3, 3:6] = -np.eye(3)

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from calstudy.core import geometry as geo
+from calstudy.core.config import check_ids, parse_number
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.handeye_inputs import (
     CAMERA_CONVENTIONS,
@@ -140,29 +141,8 @@ def _values(path, header, rows, cols, index) -> np.ndarray:
                 f"{path}: row {line} has {len(row)} cells; the header has {len(header)}"
             )
         for j, (col, k) in enumerate(zip(cols, index, strict=True)):
-            text = row[k].strip()
-            try:
-                values[i, j] = float(text)
-            except ValueError:
-                raise CalibrationError(
-                    f"{path}: row {line}, column {col!r}: {text!r} is not a number"
-                ) from None
-            if not np.isfinite(values[i, j]):
-                raise CalibrationError(
-                    f"{path}: row {line}, column {col!r}: {text!r} is not finite"
-                )
+            values[i, j] = parse_number(path, line, col, row[k].strip())
     return values
-
-
-def _ids(path, ids: np.ndarray) -> np.ndarray:
-    """The id column, checked to hold distinct integers."""
-    if np.any(ids != np.round(ids)):
-        bad = int(np.argmax(ids != np.round(ids)))
-        raise CalibrationError(f"{path}: row {bad + 2}, column 'id': {ids[bad]} is not an integer")
-    uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        raise CalibrationError(f"{path}: id {int(uniq[counts > 1][0])} appears more than once")
-    return ids
 
 
 def read_pose_list(path) -> PoseList:
@@ -210,7 +190,7 @@ def read_pose_list(path) -> PoseList:
     if not rows:
         raise CalibrationError(f"{path}: no pose rows")
     values = _values(path, header, rows, cols, index)
-    ids = _ids(path, values[:, 0])
+    ids = check_ids(path, values[:, 0])
     nr = len(rrot)
     robot = geo.make_transform(_rotations(rform, values[:, 4 : 4 + nr]), values[:, 1:4])
     c0 = 4 + nr
