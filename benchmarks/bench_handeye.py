@@ -1,7 +1,7 @@
 """Hand-eye from pose lists: accuracy of OpenCV's closed forms and of the ML refinement against
 the Cramer-Rao bound, and time per call.
 
-Standard scenario: :func:`calstudy.estimators.handeye_poses.simulate_cell` with 15 poses,
+Standard scenario: :func:`calstudy.estimators.handeye_sim.simulate_cell` with 15 poses,
 camera-pose noise 1e-3 rad and 0.2 mm, 200 trials (each its own cell). Goals of the issue: ML RMS
 error within 10 % of the bound, ML median error at least 2x below the best closed form, one
 refinement on 100 poses within 50 ms.
@@ -13,19 +13,23 @@ import numpy as np
 from timing import best_ms
 
 from calstudy.core import geometry as geo
+from calstudy.estimators import handeye as he
+from calstudy.estimators import handeye_inputs as hi
 from calstudy.estimators import handeye_poses as hp
+from calstudy.estimators import handeye_refine as hr
+from calstudy.estimators import handeye_sim as hs
 
 N_POSES, SIGMA_ROT, SIGMA_TRANS, TRIALS = 15, 1e-3, 0.2, 200
-METHODS = list(hp.OPENCV_METHODS) + list(hp.OPENCV_RWHE_METHODS)
+METHODS = list(he.OPENCV_METHODS) + list(hr.OPENCV_RWHE_METHODS)
 BUDGET_MS = 50.0
 REPEATS = 10
 
 
 def trial(seed: int) -> tuple[dict, np.ndarray]:
     """Errors ``{method: (rot rad, trans mm)}`` of one cell, and its CRB of ``X``."""
-    cell = hp.simulate_cell(np.random.default_rng(seed), N_POSES, SIGMA_ROT, SIGMA_TRANS)
-    prep = hp.prepare_poses(cell.flange2base, cell.target2camera)
-    forms = hp.closed_forms(prep.a, prep.b, METHODS)
+    cell = hs.simulate_cell(np.random.default_rng(seed), N_POSES, SIGMA_ROT, SIGMA_TRANS)
+    prep = hi.prepare_poses(cell.flange2base, cell.target2camera)
+    forms = hr.closed_forms(prep.a, prep.b, METHODS)
     out = {}
     for c in forms:
         if c.x is not None:
@@ -34,14 +38,14 @@ def trial(seed: int) -> tuple[dict, np.ndarray]:
                 geo.translation_error(c.x, cell.camera2flange),
             )
     start = min((c for c in forms if not c.refused), key=lambda c: c.score)
-    est = hp.refine_ml(prep.a, prep.b, start.x, start.z, SIGMA_ROT, SIGMA_TRANS)
+    est = hr.refine_ml(prep.a, prep.b, start.x, start.z, SIGMA_ROT, SIGMA_TRANS)
     x = est.value[0]
     out["ML"] = (
         geo.rotation_error(x, cell.camera2flange),
         geo.translation_error(x, cell.camera2flange),
     )
-    truth = hp.prepare_poses(cell.flange2base, cell.target2camera_true)
-    crb = hp.handeye_crb(
+    truth = hi.prepare_poses(cell.flange2base, cell.target2camera_true)
+    crb = hr.handeye_crb(
         truth.a, truth.b, cell.camera2flange, cell.target2base, SIGMA_ROT, SIGMA_TRANS
     )
     return out, crb
@@ -85,17 +89,17 @@ def main() -> None:
         f"({best_rot}), translation {medians[best_t][0][1] / ml_med[1]:.2f} ({best_t})   "
         "(goal: >= 2)"
     )
-    cell = hp.simulate_cell(np.random.default_rng(0), 100, SIGMA_ROT, SIGMA_TRANS)
-    prep = hp.prepare_poses(cell.flange2base, cell.target2camera)
-    forms = {c.method: c for c in hp.closed_forms(prep.a, prep.b, METHODS)}
+    cell = hs.simulate_cell(np.random.default_rng(0), 100, SIGMA_ROT, SIGMA_TRANS)
+    prep = hi.prepare_poses(cell.flange2base, cell.target2camera)
+    forms = {c.method: c for c in hr.closed_forms(prep.a, prep.b, METHODS)}
     x0, z0 = forms["Park"].x, forms["Park"].z
-    small = hp.simulate_cell(np.random.default_rng(1), N_POSES, SIGMA_ROT, SIGMA_TRANS)
-    sp = hp.prepare_poses(small.flange2base, small.target2camera)
+    small = hs.simulate_cell(np.random.default_rng(1), N_POSES, SIGMA_ROT, SIGMA_TRANS)
+    sp = hi.prepare_poses(small.flange2base, small.target2camera)
     print(f"time per call, best of {REPEATS}:")
     for name in METHODS:
-        ms = best_ms(lambda name=name: hp.closed_forms(sp.a, sp.b, [name]), REPEATS)
+        ms = best_ms(lambda name=name: hr.closed_forms(sp.a, sp.b, [name]), REPEATS)
         print(f"  {name:<40s} {ms:8.2f} ms   ({N_POSES} poses)")
-    ms = best_ms(lambda: hp.refine_ml(prep.a, prep.b, x0, z0, SIGMA_ROT, SIGMA_TRANS), REPEATS)
+    ms = best_ms(lambda: hr.refine_ml(prep.a, prep.b, x0, z0, SIGMA_ROT, SIGMA_TRANS), REPEATS)
     print(
         f"  {'ML refinement (refine_ml)':<40s} {ms:8.2f} ms   (100 poses; budget {BUDGET_MS:g} ms)"
     )

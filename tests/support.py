@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from calstudy.core.paths import REPO_ROOT
+from calstudy.estimators.handeye_sim import simulate_cell
 from calstudy.models.targets import ManufacturedHoleTarget
 from calstudy.papers.hybrid import simulate
 
@@ -87,3 +88,13 @@ def ideal_station(seed=0, robot_errors=False):
     return simulate.with_overrides(
         s, target_made=perfect, back2front_cmm=s.target.back2front()
     ), rng
+
+
+#: camera pose noise of the hand-eye test cells, rad and mm
+HANDEYE_SIGMA_ROT, HANDEYE_SIGMA_TRANS = 1e-3, 0.2
+
+
+def handeye_cell(seed=0, n=15, noise=True, **kw):
+    """A simulated eye-in-hand cell of ``n`` poses (noise-free if ``noise`` is False)."""
+    s = (HANDEYE_SIGMA_ROT, HANDEYE_SIGMA_TRANS) if noise else (0.0, 0.0)
+    return simulate_cell(np.random.default_rng(seed), n, *s, **kw)

@@ -10,7 +10,8 @@ import pytest
 from support import ci_parameters
 
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye_poses as hp
+from calstudy.estimators.handeye_sim import simulate_cell
+from calstudy.estimators.posefile import write_pose_list
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOK = ROOT / "notebooks" / "06_handeye_your_cell.ipynb"
@@ -18,8 +19,8 @@ NOTEBOOK = ROOT / "notebooks" / "06_handeye_your_cell.ipynb"
 
 @pytest.mark.slow
 def test_notebook06_runs_on_user_pose_list(tmp_path):
-    cell = hp.simulate_cell(np.random.default_rng(3), 12, 1e-3, 0.2)
-    csv = hp.write_pose_list(
+    cell = simulate_cell(np.random.default_rng(3), 12, 1e-3, 0.2)
+    csv = write_pose_list(
         tmp_path / "my_cell.csv",
         cell.flange2base,
         cell.target2camera,

@@ -111,6 +111,34 @@ def skew(v) -> np.ndarray:
     return out
 
 
+def _so3_terms(rotvec, small_angle: float):
+    """Cross-product matrices, the mask of angles below ``small_angle`` and the angles (1 where
+    small) of rotation vectors: (N, 3) -> (N, 3, 3), (N,), (N,)."""
+    rotvec = np.atleast_2d(rotvec)
+    theta = np.linalg.norm(rotvec, axis=1)
+    small = theta < small_angle
+    return skew(rotvec), small, np.where(small, 1.0, theta)
+
+
+def so3_left_jacobian(rotvec) -> np.ndarray:
+    """Left Jacobian ``(N, 3, 3)`` of SO(3): ``exp(w + d) = exp(J_l(w) d) exp(w)``, first order.
+
+    The right Jacobian, ``exp(w + d) = exp(w) exp(J_r(w) d)``, is ``J_l(-w)``.
+    """
+    k, small, th = _so3_terms(rotvec, 1e-8)
+    a = np.where(small, 0.5, (1 - np.cos(th)) / th**2)
+    b = np.where(small, 1.0 / 6.0, (th - np.sin(th)) / th**3)
+    return np.eye(3) + a[:, None, None] * k + b[:, None, None] * (k @ k)
+
+
+def so3_right_jacobian_inverse(rotvec) -> np.ndarray:
+    """Inverse of the right Jacobian of SO(3) (:func:`so3_left_jacobian` of ``-w``): (N, 3) ->
+    (N, 3, 3)."""
+    k, small, th = _so3_terms(rotvec, 1e-6)
+    c = np.where(small, 1.0 / 12.0, 1.0 / th**2 - (1.0 + np.cos(th)) / (2.0 * th * np.sin(th)))
+    return np.eye(3) + 0.5 * k + c[:, None, None] * (k @ k)
+
+
 def make_transform(rotation, translation) -> np.ndarray:
     """Build 4 x 4 transforms from rotations ``(..., 3, 3)`` and translations ``(..., 3)`` in mm."""
     r = np.asarray(rotation, dtype=float)

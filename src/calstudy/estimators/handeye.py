@@ -27,6 +27,7 @@ import numpy as np
 import pinocchio as pin
 
 from calstudy.core import geometry as geo
+from calstudy.core.config import check_ids, parse_number
 from calstudy.core.errors import CalibrationError
 from calstudy.core.estimation import Estimate, condition_number, levenberg_marquardt
 from calstudy.estimators.fitting import fit_rotation
@@ -551,30 +552,14 @@ def read_sphere_measurements(path) -> SphereMeasurements:
         line = i + 2
         row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
         for j, col in enumerate(numeric):
-            text = row.get(col, "")
-            try:
-                values[i, j] = float(text)
-            except ValueError:
-                raise CalibrationError(
-                    f"{path}: row {line}, column {col!r}: {text!r} is not a number"
-                ) from None
-            if not np.isfinite(values[i, j]):
-                raise CalibrationError(
-                    f"{path}: row {line}, column {col!r}: {text!r} is not finite"
-                )
+            values[i, j] = parse_number(path, line, col, row.get(col, ""))
         if row["group"] not in SPHERE_CSV_GROUPS:
             raise CalibrationError(
                 f"{path}: row {line}, column 'group': {row['group']!r} is not one of "
                 f"{', '.join(SPHERE_CSV_GROUPS)}"
             )
         groups.append(row["group"])
-    ids = values[:, 0]
-    if np.any(ids != np.round(ids)):
-        bad = int(np.argmax(ids != np.round(ids)))
-        raise CalibrationError(f"{path}: row {bad + 2}, column 'id': {ids[bad]} is not an integer")
-    uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        raise CalibrationError(f"{path}: id {int(uniq[counts > 1][0])} appears more than once")
+    ids = check_ids(path, values[:, 0])
     rot = geo.euler_zyx_to_matrix(values[:, 4], values[:, 5], values[:, 6])
     return SphereMeasurements(
         ids=ids.astype(int),

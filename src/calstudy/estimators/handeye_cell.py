@@ -12,6 +12,8 @@ import pandas as pd
 
 from calstudy.core import geometry as geo
 from calstudy.estimators import handeye_poses as hp
+from calstudy.estimators.handeye_sim import SimulatedCell, simulate_cell
+from calstudy.estimators.posefile import PoseList
 
 
 def example_cell(
@@ -22,10 +24,10 @@ def example_cell(
     sigma_rot: float = 1e-3,
     sigma_trans: float = 0.2,
     round_rotations: int = 7,
-) -> hp.SimulatedCell:
+) -> SimulatedCell:
     """The notebook's synthetic cell: ``n_poses`` views, ``n_duplicates`` repeated orientations,
     the last pose a gross outlier, rotation entries rounded to ``round_rotations`` decimals."""
-    return hp.simulate_cell(
+    return simulate_cell(
         np.random.default_rng(seed),
         n_poses,
         sigma_rot,
@@ -36,7 +38,7 @@ def example_cell(
     )
 
 
-def input_table(pose_list: hp.PoseList, result: hp.HandEyeResult, source: str) -> pd.DataFrame:
+def input_table(pose_list: PoseList, result: hp.HandEyeResult, source: str) -> pd.DataFrame:
     """One row describing the input: source, poses, conventions, units, SO(3) correction."""
     prep = result.prepared
     return pd.DataFrame(
@@ -54,7 +56,7 @@ def input_table(pose_list: hp.PoseList, result: hp.HandEyeResult, source: str) -
 
 
 def conditioning_table(result: hp.HandEyeResult) -> pd.DataFrame:
-    """The conditioning of the motions (:class:`~calstudy.estimators.handeye_poses.Conditioning`)
+    """The conditioning of the motions (:class:`~calstudy.estimators.handeye_inputs.Conditioning`)
     as one row."""
     c = result.conditioning
     return pd.DataFrame([vars(c)])

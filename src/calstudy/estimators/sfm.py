@@ -402,17 +402,6 @@ def _residual_blocks(rig, rot, trans, points, view_idx, marker_idx, uv_l, uv_r, 
     return reproj, euclid
 
 
-def _left_jacobian(rotvec: np.ndarray) -> np.ndarray:
-    """Left Jacobian ``(N, 3, 3)`` of SO(3): ``exp(w + d) = exp(J_l(w) d) exp(w)``, first order."""
-    theta = np.linalg.norm(rotvec, axis=1)
-    k = geo.skew(rotvec)
-    small = theta < 1e-8
-    th = np.where(small, 1.0, theta)
-    a = np.where(small, 0.5, (1 - np.cos(th)) / th**2)
-    b = np.where(small, 1.0 / 6.0, (th - np.sin(th)) / th**3)
-    return np.eye(3) + a[:, None, None] * k + b[:, None, None] * (k @ k)
-
-
 def _projection_derivative(camera: PinholeCamera, p: np.ndarray) -> np.ndarray:
     """``d(u, v)/d(p)`` ``(N, 2, 3)`` of the pinhole projection at camera-frame points ``p``."""
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
@@ -560,7 +549,8 @@ def bundle_adjust(
         rot = Rotation.from_rotvec(rv).as_matrix()
         p = np.full_like(pts, np.nan)
         p[used] = x[6 * len(free) :].reshape(-1, 3)
-        vals = _jacobian_blocks(rig, rot, tr, _left_jacobian(rv), p, view_idx, marker_idx, p_cam)
+        jac_l = geo.so3_left_jacobian(rv)
+        vals = _jacobian_blocks(rig, rot, tr, jac_l, p, view_idx, marker_idx, p_cam)
         vals *= weights[:, :, None]
         return csr_matrix((vals[keep], (rows_k, cols_k)), shape=(7 * n_obs, x0.size))
 

@@ -1,0 +1,89 @@
+"""Noise level and outliers of a hand-eye calibration.
+
+A robust noise level from per-pose residuals (:func:`robust_sigmas`), the per-pose outlier
+score and its flag limit, the weights of the Huber and Cauchy losses, and RANSAC over pose
+triplets (:func:`ransac_inliers`), as :func:`calstudy.estimators.handeye_poses.calibrate_handeye`
+uses them.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.stats import chi2
+
+from calstudy.core.errors import CalibrationError
+from calstudy.estimators.handeye import opencv_handeye
+from calstudy.estimators.handeye_refine import (
+    check_proper,
+    pose_residuals,
+    pose_scale,
+    target_in_world,
+)
+
+#: median of the chi-square distribution with 3 degrees of freedom (robust noise estimate)
+_CHI2_3_MEDIAN = float(chi2.median(3))
+
+
+def outlier_limit(alpha: float = 1e-3) -> float:
+    """Outlier flag limit: the ``1 - alpha`` quantile of chi-square with 6 degrees of freedom."""
+    return float(chi2.ppf(1.0 - alpha, 6))
+
+
+def robust_sigmas(res: np.ndarray, alpha: float = 1e-3) -> tuple[float, float]:
+    """Noise level ``(sigma_rot, sigma_trans)`` from per-pose residuals ``(N, 6)``, robustly.
+
+    A median-based start (each part is ``sigma^2 chi2(3)`` for an inlier) marks the poses beyond
+    the ``1 - alpha`` quantile; the RMS of the others, corrected for the 12 fitted parameters,
+    is the estimate (reweighted least-median: efficient on clean data, robust to outliers).
+    """
+    n = res.shape[0]
+    rr = np.sum(res[:, 3:] ** 2, 1)
+    tt = np.sum(res[:, :3] ** 2, 1)
+    keep = (n - 2.0) / n  # 12 parameters take 2 of the 6 N degrees of freedom per pose
+    s_r = np.sqrt(max(np.median(rr) / (_CHI2_3_MEDIAN * keep), 1e-30))
+    s_t = np.sqrt(max(np.median(tt) / (_CHI2_3_MEDIAN * keep), 1e-30))
+    inl = rr / s_r**2 + tt / s_t**2 <= chi2.ppf(1.0 - alpha, 6)
+    m = int(inl.sum())
+    if m > 2:
+        s_r = np.sqrt(max(rr[inl].sum() / (3.0 * (m - 2)), 1e-30))
+        s_t = np.sqrt(max(tt[inl].sum() / (3.0 * (m - 2)), 1e-30))
+    return float(s_r), float(s_t)
+
+
+def outlier_scores(res, sigma_rot, sigma_trans):
+    """Whitened squared residual of each pose ``(N,)``: chi-square with 6 degrees of freedom for
+    an inlier."""
+    return np.sum(res[:, :3] ** 2, 1) / sigma_trans**2 + np.sum(res[:, 3:] ** 2, 1) / sigma_rot**2
+
+
+def robust_weights(score: np.ndarray, loss: str, c: float = 2.0) -> np.ndarray:
+    """Iteratively reweighted least-squares weights of the ``"huber"`` or ``"cauchy"`` loss."""
+    u = np.sqrt(score / 6.0)
+    if loss == "huber":
+        return np.where(u <= c, 1.0, c / np.maximum(u, 1e-300))
+    return 1.0 / (1.0 + (u / c) ** 2)
+
+
+def ransac_inliers(a, b, rng, n_samples: int) -> np.ndarray:
+    """Inlier mask by least-median-of-squares over random pose triplets (Park closed form)."""
+    n = a.shape[0]
+    scale = pose_scale(b)
+    best, best_med = None, np.inf
+    for _ in range(n_samples):
+        idx = rng.choice(n, 3, replace=False)
+        try:
+            x = check_proper("Park", opencv_handeye(a[idx], b[idx], "Park"))
+            z = target_in_world(a[idx], b[idx], x)
+            res = pose_residuals(a, b, x, z)
+        except (CalibrationError, cv2.error):
+            continue
+        per = np.sum(res[:, 3:] ** 2, 1) + np.sum(res[:, :3] ** 2, 1) / scale**2
+        med = float(np.median(per))
+        if np.isfinite(med) and med < best_med:
+            best, best_med = per, med
+    if best is None:
+        raise CalibrationError(f"RANSAC: none of the {n_samples} pose triplets gave a solution")
+    # LMedS scale with the small-sample correction of Rousseeuw and Leroy
+    s0 = 1.4826 * (1.0 + 5.0 / max(n - 3, 1)) * np.sqrt(best_med)
+    return best <= (2.5 * s0) ** 2

@@ -1,0 +1,276 @@
+"""Pose-list CSV files: robot and camera poses with self-naming columns.
+
+:func:`read_pose_list` reads a user's poses as stored (convention and unit named by the columns),
+:func:`write_pose_list` writes them; :meth:`PoseList.arguments` passes them to
+:func:`calstudy.estimators.handeye_poses.calibrate_handeye`.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from calstudy.core import geometry as geo
+from calstudy.core.config import check_ids, parse_number
+from calstudy.core.errors import CalibrationError
+from calstudy.estimators.handeye_inputs import (
+    CAMERA_CONVENTIONS,
+    ROBOT_CONVENTIONS,
+    UNITS_MM,
+    check_pose_array,
+    unit_factor,
+)
+
+#: rotation forms of a pose-list file: column suffixes after ``<prefix>_``
+ROTATION_FORMS = {
+    "quaternion": ("qw", "qx", "qy", "qz"),
+    "rotvec_rad": ("rx_rad", "ry_rad", "rz_rad"),
+    "zyx_deg": ("a_deg", "b_deg", "c_deg"),
+    "matrix": ("r11", "r12", "r13", "r21", "r22", "r23", "r31", "r32", "r33"),
+}
+
+
+@dataclass
+class PoseList:
+    """Robot and camera poses read from a pose-list file, as stored (not yet converted).
+
+    Attributes
+    ----------
+    ids : (N,) int array
+    robot : (N, 4, 4) array
+        Robot poses in the file's convention and unit.
+    camera : (N, 4, 4) array
+        Camera poses in the file's convention and unit.
+    robot_convention, camera_convention : str
+        Named by the column prefixes (e.g. ``flange2base``, ``target2camera``).
+    robot_unit, camera_unit : str
+        Named by the translation columns (e.g. ``_x_mm``).
+    """
+
+    ids: np.ndarray
+    robot: np.ndarray
+    camera: np.ndarray
+    robot_convention: str
+    camera_convention: str
+    robot_unit: str
+    camera_unit: str
+
+    def arguments(self) -> dict:
+        """Keyword arguments for :func:`calibrate_handeye` and
+        :func:`calibrate_robot_world_handeye`."""
+        return {
+            "flange2base": self.robot,
+            "target2camera": self.camera,
+            "convention": (self.robot_convention, self.camera_convention),
+            "robot_unit": self.robot_unit,
+            "camera_unit": self.camera_unit,
+            "ids": self.ids,
+        }
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices of scalar-first quaternions, without normalising (a non-unit quaternion
+    gives a scaled matrix that the orthonormality check then reports)."""
+    w, x, y, z = q.T
+    return np.stack(
+        [
+            [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z],
+        ]
+    ).transpose(2, 0, 1)
+
+
+def _find_prefix(path, header, names, what):
+    found = [p for p in names if any(h.startswith(p + "_") for h in header)]
+    if len(found) != 1:
+        raise CalibrationError(
+            f"{path}: header must name the {what} poses by exactly one prefix of "
+            f"{', '.join(names)} (e.g. {names[0]}_x_mm); found {found or 'none'}"
+        )
+    return found[0]
+
+
+def _pose_columns(path, header, prefix):
+    units = [u for u in UNITS_MM if f"{prefix}_x_{u}" in header]
+    if len(units) != 1:
+        raise CalibrationError(
+            f"{path}: no translation columns {prefix}_x_<unit>, {prefix}_y_<unit>, "
+            f"{prefix}_z_<unit> with one unit of {', '.join(UNITS_MM)}"
+        )
+    unit = units[0]
+    trans = [f"{prefix}_{c}_{unit}" for c in "xyz"]
+    forms = [f for f, cols in ROTATION_FORMS.items() if f"{prefix}_{cols[0]}" in header]
+    if len(forms) != 1:
+        raise CalibrationError(
+            f"{path}: the {prefix} rotation must be given in exactly one form, columns "
+            + "; ".join(f"{prefix}_" + f", {prefix}_".join(c) for c in ROTATION_FORMS.values())
+            + f"; found {forms or 'none'}"
+        )
+    rot = [f"{prefix}_{c}" for c in ROTATION_FORMS[forms[0]]]
+    missing = [c for c in trans + rot if c not in header]
+    if missing:
+        raise CalibrationError(f"{path}: missing column(s) {', '.join(missing)}")
+    return unit, forms[0], trans, rot
+
+
+def _rotations(form: str, v: np.ndarray) -> np.ndarray:
+    if form == "quaternion":
+        return _quat_matrix(v)
+    if form == "rotvec_rad":
+        return geo.rotvec_to_matrix(v)
+    if form == "zyx_deg":
+        return geo.euler_zyx_to_matrix(v[:, 0], v[:, 1], v[:, 2])
+    return v.reshape(-1, 3, 3)
+
+
+def _values(path, header, rows, cols, index) -> np.ndarray:
+    """The numbers ``(rows, cols)`` of a pose list; CalibrationError naming row and column."""
+    values = np.zeros((len(rows), len(cols)))
+    for i, row in enumerate(rows):
+        line = i + 2
+        if len(row) != len(header):
+            raise CalibrationError(
+                f"{path}: row {line} has {len(row)} cells; the header has {len(header)}"
+            )
+        for j, (col, k) in enumerate(zip(cols, index, strict=True)):
+            values[i, j] = parse_number(path, line, col, row[k].strip())
+    return values
+
+
+def read_pose_list(path) -> PoseList:
+    """Read a pose-list CSV (schema in the README and :func:`write_pose_list`).
+
+    One row per pose: ``id``; the robot pose as ``<robot>_x_<unit>, _y_<unit>, _z_<unit>`` and a
+    rotation in one self-naming form; the camera pose likewise. ``<robot>`` is one of
+    ``gripper2base, flange2base, base2gripper, base2flange`` and ``<camera>`` one of
+    ``target2camera, camera2target``: the prefixes state the storage convention. ``<unit>`` is
+    ``mm, cm, m`` or ``in``. Rotation forms (:data:`ROTATION_FORMS`): ``_qw, _qx, _qy, _qz``
+    (unit quaternion, scalar first), ``_rx_rad, _ry_rad, _rz_rad`` (rotation vector),
+    ``_a_deg, _b_deg, _c_deg`` (``R = Rz(a) Ry(b) Rx(c)``, KUKA) or ``_r11 ... _r33`` (matrix,
+    row by row). Lines starting with ``#`` are comments.
+
+    Returns
+    -------
+    PoseList
+        The poses as stored; :meth:`PoseList.arguments` passes them with their convention and
+        units to the calibration.
+
+    Raises
+    ------
+    CalibrationError
+        For a header that names no or two conventions, units or rotation forms, a missing
+        column, no rows, a cell that is empty, not a number or not finite (naming the row, 1-based
+        with the header as row 1, and the column), a non-integer or repeated id.
+    """
+    path = Path(path)
+    with open(path, newline="") as handle:
+        lines = [ln for ln in handle if not ln.lstrip().startswith("#")]
+    reader = csv.reader(lines)
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise CalibrationError(f"{path}: the file is empty") from None
+    if "id" not in header:
+        raise CalibrationError(f"{path}: missing column 'id'")
+    rprefix = _find_prefix(path, header, list(ROBOT_CONVENTIONS), "robot")
+    cprefix = _find_prefix(path, header, list(CAMERA_CONVENTIONS), "camera")
+    runit, rform, rtrans, rrot = _pose_columns(path, header, rprefix)
+    cunit, cform, ctrans, crot = _pose_columns(path, header, cprefix)
+    cols = ["id"] + rtrans + rrot + ctrans + crot
+    index = [header.index(c) for c in cols]
+    rows = [r for r in reader if any(cell.strip() for cell in r)]
+    if not rows:
+        raise CalibrationError(f"{path}: no pose rows")
+    values = _values(path, header, rows, cols, index)
+    ids = check_ids(path, values[:, 0])
+    nr = len(rrot)
+    robot = geo.make_transform(_rotations(rform, values[:, 4 : 4 + nr]), values[:, 1:4])
+    c0 = 4 + nr
+    camera = geo.make_transform(_rotations(cform, values[:, c0 + 3 :]), values[:, c0 : c0 + 3])
+    return PoseList(ids.astype(int), robot, camera, rprefix, cprefix, runit, cunit)
+
+
+def _rotation_columns(rotation: str, rot: np.ndarray) -> np.ndarray:
+    """Rotations ``(N, 3, 3)`` as the columns of the form ``rotation`` (:data:`ROTATION_FORMS`);
+    quaternions scalar first with ``qw >= 0``."""
+    if rotation == "quaternion":
+        q = Rotation.from_matrix(rot).as_quat()  # scalar last
+        r = np.concatenate([q[:, 3:], q[:, :3]], 1)
+        r *= np.where(r[:, :1] < 0, -1.0, 1.0)
+    elif rotation == "rotvec_rad":
+        r = geo.matrix_to_rotvec(rot)
+    elif rotation == "zyx_deg":
+        r = geo.matrix_to_euler_zyx(rot)
+    else:
+        r = rot.reshape(-1, 9)
+    return r
+
+
+def write_pose_list(
+    path,
+    flange2base,
+    target2camera,
+    *,
+    ids=None,
+    rotation: str = "quaternion",
+    robot_convention: str = "flange2base",
+    camera_convention: str = "target2camera",
+    unit: str = "mm",
+    digits: int = 10,
+    comment: str = "",
+) -> Path:
+    """Write poses as a pose-list CSV that :func:`read_pose_list` reads.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    flange2base, target2camera : (N, 4, 4) arrays
+        Poses in the study's convention (mm); written in ``robot_convention`` /
+        ``camera_convention`` (inverted if those say so) and ``unit``.
+    ids : (N,) int array, optional
+    rotation : str
+        One of :data:`ROTATION_FORMS`.
+    digits : int
+        Significant digits of every number.
+    comment : str
+        Written as ``#`` lines above the header.
+    """
+    if rotation not in ROTATION_FORMS:
+        raise CalibrationError(
+            f"unknown rotation form {rotation!r}; use one of {list(ROTATION_FORMS)}"
+        )
+    robot = check_pose_array("robot poses", flange2base)
+    camera = check_pose_array("camera poses", target2camera)
+    if ROBOT_CONVENTIONS.get(robot_convention) is None:
+        raise CalibrationError(f"unknown robot convention {robot_convention!r}")
+    if CAMERA_CONVENTIONS.get(camera_convention) is None:
+        raise CalibrationError(f"unknown camera convention {camera_convention!r}")
+    robot = geo.invert(robot) if ROBOT_CONVENTIONS[robot_convention] else robot
+    camera = geo.invert(camera) if CAMERA_CONVENTIONS[camera_convention] else camera
+    factor = unit_factor("file", unit)
+    ids = np.arange(1, len(robot) + 1) if ids is None else np.asarray(ids, dtype=int)
+    header = ["id"]
+    blocks = [ids[:, None].astype(float)]
+    for prefix, poses in ((robot_convention, robot), (camera_convention, camera)):
+        header += [f"{prefix}_{c}_{unit}" for c in "xyz"]
+        header += [f"{prefix}_{c}" for c in ROTATION_FORMS[rotation]]
+        blocks += [poses[:, :3, 3] / factor, _rotation_columns(rotation, poses[:, :3, :3])]
+    table = np.concatenate(blocks, 1)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as handle:
+        for line in comment.splitlines():
+            handle.write(f"# {line}\n")
+        handle.write(",".join(header) + "\n")
+        for row in table:
+            cells = [str(int(row[0]))] + [f"{v:.{digits}g}" for v in row[1:]]
+            handle.write(",".join(cells) + "\n")
+    return path

@@ -1,0 +1,117 @@
+"""Input handling of hand-eye calibration: conventions, units, SO(3) re-projection, motions."""
+
+import numpy as np
+import pytest
+from support import handeye_cell as _cell
+
+from calstudy import CalibrationError
+from calstudy.core import geometry as geo
+from calstudy.estimators import handeye as he
+from calstudy.estimators import handeye_poses as hp
+
+# ----------------------------------------------------------------------------------------------
+# conventions and units
+
+
+def test_convention_check_catches_inverted_robot_poses():
+    cell = _cell(8)
+    base2gripper = geo.invert(cell.flange2base)
+    with pytest.raises(CalibrationError, match="robot poses inverted .*base-to-gripper"):
+        hp.calibrate_handeye(base2gripper, cell.target2camera)
+    res = hp.calibrate_handeye(base2gripper, cell.target2camera, convention="base2gripper")
+    assert np.rad2deg(geo.rotation_error(res.x, cell.camera2flange)) < 0.1
+
+
+def test_convention_check_catches_inverted_camera_poses():
+    cell = _cell(9)
+    camera2target = geo.invert(cell.target2camera)
+    with pytest.raises(CalibrationError, match="camera poses inverted .*camera-to-target"):
+        hp.calibrate_robot_world_handeye(cell.flange2base, camera2target)
+    res = hp.calibrate_handeye(cell.flange2base, camera2target, convention="camera2target")
+    assert np.rad2deg(geo.rotation_error(res.x, cell.camera2flange)) < 0.1
+
+
+def test_convention_check_catches_metres_against_millimetres():
+    cell = _cell(10)
+    robot_m = cell.flange2base.copy()
+    robot_m[:, :3, 3] /= 1000.0
+    with pytest.raises(CalibrationError, match="camera translations times 0.001 .*units"):
+        hp.calibrate_handeye(robot_m, cell.target2camera)
+    with pytest.warns(UserWarning, match="times 0.001"):
+        hp.calibrate_handeye(robot_m, cell.target2camera, check_convention="warn")
+    res = hp.calibrate_handeye(robot_m, cell.target2camera, robot_unit="m")
+    assert geo.translation_error(res.x, cell.camera2flange) < 1.0
+
+
+# ----------------------------------------------------------------------------------------------
+# near-orthonormal input
+
+
+def test_rounded_rotations_are_reprojected_and_reported():
+    cell = _cell(12, round_rotations=6)
+    with pytest.raises(CalibrationError, match="re-project them to SO.3."):
+        he.opencv_handeye(cell.flange2base, cell.target2camera, "Park")
+    assert np.all(
+        np.isfinite(he.opencv_handeye(cell.flange2base, cell.target2camera, "Park", tol=1e-5))
+    )
+    res = hp.calibrate_handeye(cell.flange2base, cell.target2camera)
+    assert 1e-8 < res.prepared.max_correction < 1e-5
+    assert np.rad2deg(geo.rotation_error(res.x, cell.camera2flange)) < 0.1
+
+
+def test_rotation_beyond_tolerance_is_refused_naming_the_pose():
+    cell = _cell(13)
+    bad = cell.target2camera.copy()
+    bad[4, :3, :3] *= 1.001  # a scale error of 1e-3: max |R^T R - I| about 2e-3
+    msg = r"camera rotation of pose 4 .*max \|R\^T R - I\| = 0.002 exceeds"
+    with pytest.raises(CalibrationError, match=msg):
+        hp.calibrate_handeye(cell.flange2base, bad)
+    res = hp.calibrate_handeye(cell.flange2base, bad, ortho_tol=3e-3)
+    assert res.prepared.worst_pose == 4
+
+
+def test_reflection_is_refused():
+    cell = _cell(14)
+    bad = cell.flange2base.copy()
+    bad[2, :3, 0] *= -1
+    with pytest.raises(CalibrationError, match="pose 2 .*reflection"):
+        hp.calibrate_handeye(bad, cell.target2camera)
+
+
+# ----------------------------------------------------------------------------------------------
+# degenerate motions
+
+
+def test_pure_translations_are_refused():
+    cell = _cell(15)
+    a = cell.flange2base.copy()
+    a[:, :3, :3] = a[0, :3, :3]
+    b = geo.invert(a @ cell.camera2flange) @ cell.target2base
+    with pytest.raises(CalibrationError, match="pure translations: .* 0 deg"):
+        hp.calibrate_handeye(a, b)
+
+
+def test_rotations_about_one_axis_are_refused():
+    cell = _cell(16, noise=False)
+    angles = np.deg2rad(np.linspace(-40, 40, 10))
+    a = cell.flange2base[0] @ geo.make_transform(
+        geo.rotvec_to_matrix(np.outer(angles, [0.0, 0.0, 1.0])), np.zeros(3)
+    )
+    b = geo.perturb(
+        geo.invert(a @ cell.camera2flange) @ cell.target2base,
+        1e-3,
+        0.2,
+        np.random.default_rng(0),
+    )
+    with pytest.raises(CalibrationError, match=r"rotations about one axis only: .*axis spread"):
+        hp.calibrate_robot_world_handeye(a, b)
+
+
+def test_duplicate_poses_only_are_refused():
+    cell = _cell(17)
+    a = np.concatenate([cell.flange2base[:2]] * 5)
+    b = np.concatenate([cell.target2camera[:2]] * 5)
+    with pytest.raises(CalibrationError, match="10 poses are duplicates of only 2 distinct"):
+        hp.calibrate_handeye(a, b)
+    with pytest.raises(CalibrationError, match="at least 3 poses; got 2"):
+        hp.calibrate_handeye(cell.flange2base[:2], cell.target2camera[:2])

@@ -1,0 +1,88 @@
+"""Hand-eye residuals, closed forms and refinement: Jacobian, Cramer-Rao bound, refusals."""
+
+import numpy as np
+import pytest
+from support import HANDEYE_SIGMA_ROT as SIGMA_ROT
+from support import HANDEYE_SIGMA_TRANS as SIGMA_TRANS
+from support import handeye_cell as _cell
+
+from calstudy import CalibrationError
+from calstudy.core import geometry as geo
+from calstudy.estimators import handeye as he
+from calstudy.estimators import handeye_inputs as hi
+from calstudy.estimators import handeye_poses as hp
+from calstudy.estimators import handeye_refine as hr
+
+# ----------------------------------------------------------------------------------------------
+# the refinement: Jacobian, Cramer-Rao bound
+
+
+def test_analytic_jacobian_matches_finite_differences():
+    cell = _cell(4)
+    prep = hi.prepare_poses(cell.flange2base, cell.target2camera)
+    x = cell.camera2flange @ geo.pose_from_vector([1.0, -2.0, 3.0, 0.01, -0.02, 0.03])
+    prob = hr.PoseProblem.build(prep.a, prep.b, x, cell.target2base, 1e-3, 0.2, np.ones(15))
+    p = prob.x0(x, cell.target2base) + np.random.default_rng(0).normal(0, 0.05, 12)
+    num = np.zeros((90, 12))
+    for k in range(12):
+        e = np.zeros(12)
+        e[k] = 1e-6
+        num[:, k] = (prob.residuals(p + e) - prob.residuals(p - e)) / 2e-6
+    np.testing.assert_allclose(prob.jacobian(p), num, atol=1e-5 * np.abs(num).max())
+
+
+def test_monte_carlo_covariance_of_ml_matches_crb():
+    """Sample covariance of 600 ML estimates against (J^T J)^-1 at the truth: the trace of each
+    3 x 3 block (rotation and translation of X and of Z) within 10 %."""
+    cell = _cell(5, noise=False)
+    prep = hi.prepare_poses(cell.flange2base, cell.target2camera)
+    x_t, z_t = cell.camera2flange, cell.target2base
+    crb = hr.handeye_crb(prep.a, prep.b, x_t, z_t, SIGMA_ROT, SIGMA_TRANS)
+    rng = np.random.default_rng(6)
+    errs = []
+    for _ in range(600):
+        b = geo.perturb(prep.b, SIGMA_ROT, SIGMA_TRANS, rng)
+        x0 = he.opencv_handeye(prep.a, b, "Park")
+        est = hr.refine_ml(prep.a, b, x0, hr.target_in_world(prep.a, b, x0), 1e-3, 0.2)
+        x, z = est.value
+        errs.append(
+            np.concatenate(
+                [
+                    geo.matrix_to_rotvec(x_t[:3, :3].T @ x[:3, :3]),
+                    x[:3, 3] - x_t[:3, 3],
+                    geo.matrix_to_rotvec(z_t[:3, :3].T @ z[:3, :3]),
+                    z[:3, 3] - z_t[:3, 3],
+                ]
+            )
+        )
+    errs = np.array(errs)
+    sample = errs.T @ errs / len(errs)  # about the truth: includes any bias
+    for blk in range(4):
+        s = slice(3 * blk, 3 * blk + 3)
+        ratio = np.trace(sample[s, s]) / np.trace(crb[s, s])
+        assert abs(ratio - 1.0) < 0.10, f"block {blk}: MC / CRB = {ratio:.3f}"
+    # the covariance the estimator reports (given sigma) is the bound at its estimate
+    ratio = np.trace(est.covariance[:3, :3]) / np.trace(crb[:3, :3])
+    assert abs(ratio - 1.0) < 0.05
+
+
+# ----------------------------------------------------------------------------------------------
+# closed forms far off the data are refused
+
+
+def test_inconsistent_closed_form_is_refused(monkeypatch):
+    cell = _cell(18)
+    real = hr.opencv_handeye
+    wrong = geo.make_transform(geo.rotvec_to_matrix([0.0, np.deg2rad(27.0), 0.0]), [2300.0, 0, 0])
+
+    def broken(a, b, method, tol=geo.ORTHONORMAL_TOL):
+        x = real(a, b, method, tol)
+        return x @ wrong if method == "Daniilidis" else x
+
+    monkeypatch.setattr(hr, "opencv_handeye", broken)
+    res = hp.calibrate_handeye(cell.flange2base, cell.target2camera)
+    daniilidis = next(c for c in res.closed_forms if c.method == "Daniilidis")
+    assert daniilidis.refused.startswith("inconsistent with the data")
+    assert not res.method.startswith("Daniilidis")
+    with pytest.raises(CalibrationError, match="OpenCV Daniilidis result refused"):
+        hp.calibrate_handeye(cell.flange2base, cell.target2camera, method="Daniilidis")
