@@ -32,7 +32,7 @@ BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
 	$(filter-out book/claims.md,$(wildcard book/*.md)) book/claims.md
 BOOK_STAMP := book/_build/html/.built
 
-.PHONY: help venv reproduce notebooks test lint book bench clean
+.PHONY: help venv reproduce notebooks test verify lint book bench clean
 
 help: ## list the targets
 	@echo "calstudy: make <target>"
@@ -78,6 +78,9 @@ test: $(STAMP) ## ruff, the import layers, then pytest (unit tests, notebook run
 	$(BIN)/ruff check src tests notebooks benchmarks
 	$(BIN)/lint-imports
 	$(BIN)/pytest
+
+verify: $(STAMP) ## rerun every notebook at its defaults and compare with the committed results/
+	$(BIN)/pytest -m verify tests/test_notebooks.py
 
 lint: $(STAMP) ## ruff check of src, tests, notebooks and benchmarks; the import layers
 	$(BIN)/ruff check src tests notebooks benchmarks

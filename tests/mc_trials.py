@@ -113,3 +113,8 @@ def calls(state: Path) -> list[int]:
 
 def firsts(name, point, trials, seed=SEED):
     return sorted(expected_first(seed, name, point, t) for t in trials)
+
+
+def toy_experiment(n_trials: int = 4, scale: float = 1.0) -> Experiment:
+    """A named experiment factory with JSON-able arguments (for calstudy.io.runs)."""
+    return Experiment("toy", noisy_solve, Scenario(scale=scale), n_trials, POINTS)

@@ -198,7 +198,7 @@ def compare_tables(committed: Path, fresh: Path) -> None:
             assert b.astype(str).tolist() == a.astype(str).tolist(), f"{name}: column {col!r}"
 
 
-@pytest.mark.slow
+@pytest.mark.verify
 @pytest.mark.parametrize("path", ALL)
 def test_default_run_reproduces_committed_results(path, tmp_path):
     committed_dir = RESULTS_DIR / path.stem
