@@ -1,4 +1,4 @@
-"""Time one selfcal identification: 24 sphere-centre measurements, 30 parameters (budget 10 ms, issue 12).
+"""Time one selfcal identification: 24 sphere-centre measurements, 30 parameters (budget 10 ms).
 
 Prints the best of several repeats (wall clock) of ``calstudy.papers.selfcal.identify.identify``
 from the good initial estimate and from the very poor one, and of one model evaluation with its
