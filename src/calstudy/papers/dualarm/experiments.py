@@ -168,6 +168,7 @@ def icp_correct(scn: Scenario, clouds: list[np.ndarray]) -> list[np.ndarray]:
             z_threshold_mm=scn.icp_z_threshold_mm,
             max_iterations=scn.icp_max_iterations,
             max_pair_mm=scn.icp_max_pair_mm,
+            stop_below_noise=True,
             tree=tree,
         )
         out.append(geo.apply(res.transform, p))
