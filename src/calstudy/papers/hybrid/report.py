@@ -379,9 +379,9 @@ def summarise_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
     for (name, value), sub in sweep.groupby(["parameter", "value"], sort=False):
         row = {"parameter": name, "value": value, "trials": len(sub)}
         bound = kolmogorov_bound(168)
-        row["correlation_verdict"] = judge(
-            sub["r_distance"], kind="bound", direction="lower", bound=bound, min_trials=30
-        ).verdict
+        row["correlation_verdict"] = _verdict_text(
+            lambda: judge(sub["r_distance"], kind="bound", direction="lower", bound=bound)
+        )
         for col in ("within_0p3", "r_above_0p7", "r_distance"):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
         rows.append(row)
@@ -397,10 +397,15 @@ def summarise_robot_error_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
     pub = load_published()
     for scale, sub in sweep.groupby("robot_error_scale", sort=False):
         row = {"robot_error_scale": scale, "stations": len(sub)}
-        for col in ("systematic_coord_median_mm", "systematic_median_mm", "within_0p3"):
+        for col in (
+            "systematic_coord_median_mm",
+            "systematic_median_mm",
+            "within_0p3",
+            "r_above_0p7",
+        ):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
-        row["systematic_verdict"] = _systematic_verdict(sub, pub)[0].verdict
-        row["deviation_verdict"] = _deviation_verdicts(sub, pub)[0].verdict
+        row["systematic_verdict"] = _verdict_text(lambda: _systematic_verdict(sub, pub)[0])
+        row["deviation_verdict"] = _verdict_text(lambda: _deviation_verdicts(sub, pub)[0])
         row["within_0p3_uncompensated"] = float(np.median(sub["within_0p3_uncompensated"]))
         rows.append(row)
     return pd.DataFrame(rows)
@@ -428,6 +433,16 @@ def station_table1(run: dict, n_compensation: int) -> pd.DataFrame:
                 }
             )
     return pd.DataFrame(rows)
+
+
+def _verdict_text(make) -> str:
+    """The verdict of ``make()``, or why there is none (too few trials for an interval)."""
+    try:
+        return make().verdict
+    except CalibrationError as exc:
+        if "interval for the median" not in str(exc):
+            raise
+        return "too few trials"
 
 
 def bin_distance(counts: np.ndarray, published_percent) -> np.ndarray:
