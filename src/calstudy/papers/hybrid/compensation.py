@@ -280,8 +280,9 @@ def analyse_run(run: dict, n_compensation: int) -> dict:
     ``deviation_uncompensated`` (F, 3), ``r`` (F, 3) with NaN at the coordinates fixed by the
     frame, ``fixed`` (F, 3), ``deviation_counts`` (5,), ``correlation_counts`` (5,),
     ``n_vectors``, ``n_fixed``, and the shares (%) ``within_0p3``, ``beyond_0p5``,
-    ``within_0p3_uncompensated``, ``within_0p3_oracle`` (offset of the follow-up itself), ``single_within_0p3`` (all single readings) and ``r_above_0p7``
-    (of the coordinates where r is defined).
+    ``within_0p3_uncompensated``, ``within_0p3_oracle`` (offset of the follow-up itself),
+    ``single_within_0p3`` (all single readings) and ``r_above_0p7`` (of the coordinates where r
+    is defined).
     """
     comp_h, comp_c = run["compensation"]
     fu_h, fu_c = run["follow-up"]

@@ -128,7 +128,10 @@ def handeye_trial(
     chain = actual @ truth
     clean = np.einsum("nji,nj->ni", chain[:, :3, :3], station.sphere.centre - chain[:, :3, 3])
     crb = sphere_handeye_crb(
-        meas.flange2base, clean, station.laser.centre_covariance(clean, radius), truth,
+        meas.flange2base,
+        clean,
+        station.laser.centre_covariance(clean, radius),
+        truth,
         station.sphere.centre,
     )
     out["CRB"] = (

@@ -147,8 +147,13 @@ def calibration_claims(handeye, stationary, notebook: str):
     rows = [
         _with_note(
             claim_row(
-                "hybrid.handeye", he_final, published=f"<= {CRB_MULTIPLE:g} x CRB",
-                unit="x CRB RMS", notebook=notebook, null=null, oracle=oracle,
+                "hybrid.handeye",
+                he_final,
+                published=f"<= {CRB_MULTIPLE:g} x CRB",
+                unit="x CRB RMS",
+                notebook=notebook,
+                null=null,
+                oracle=oracle,
             ),
             note,
         )
@@ -159,8 +164,11 @@ def calibration_claims(handeye, stationary, notebook: str):
     rows.append(
         _with_note(
             claim_row(
-                "hybrid.stationary", v, published=f"<= {ML_MULTIPLE:g} x PnP",
-                unit="field error ratio", notebook=notebook,
+                "hybrid.stationary",
+                v,
+                published=f"<= {ML_MULTIPLE:g} x PnP",
+                unit="field error ratio",
+                notebook=notebook,
             ),
             f"homography / PnP chain, images only, RMS field error over 10 sensors: {v.note}; "
             f"full chain (calibrated hand-eye, reported poses) ratio median "
@@ -174,12 +182,16 @@ def calibration_claims(handeye, stationary, notebook: str):
     reason = (
         "identical by construction: 6 datum coordinates fix the 6 unknowns of the frame, so the "
         "penalty LM (Eq. 5) and the SO(3) solution solve the same exactly determined system; "
-        f"largest difference of their frame errors {diff:.2g} mm over {len(pen)} trials"
+        f"their frame errors differ by {'less than 1e-6' if diff < 1e-6 else f'up to {diff:.2g}'}"
+        f" mm over {len(pen)} trials"
     )
     rows.append(
         claim_row(
-            "hybrid.rps", not_testable(reason, kind="ratio", n=len(pen)), published="",
-            unit="frame error ratio", notebook=notebook,
+            "hybrid.rps",
+            not_testable(reason, kind="ratio", n=len(pen)),
+            published="",
+            unit="frame error ratio",
+            notebook=notebook,
         )
     )
     return rows, controls
@@ -380,7 +392,7 @@ def summarise_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
         row = {"parameter": name, "value": value, "trials": len(sub)}
         bound = kolmogorov_bound(168)
         row["correlation_verdict"] = _verdict_text(
-            lambda: judge(sub["r_distance"], kind="bound", direction="lower", bound=bound)
+            lambda s=sub, b=bound: judge(s["r_distance"], kind="bound", direction="lower", bound=b)
         )
         for col in ("within_0p3", "r_above_0p7", "r_distance"):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
@@ -404,8 +416,8 @@ def summarise_robot_error_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
             "r_above_0p7",
         ):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
-        row["systematic_verdict"] = _verdict_text(lambda: _systematic_verdict(sub, pub)[0])
-        row["deviation_verdict"] = _verdict_text(lambda: _deviation_verdicts(sub, pub)[0])
+        row["systematic_verdict"] = _verdict_text(lambda s=sub: _systematic_verdict(s, pub)[0])
+        row["deviation_verdict"] = _verdict_text(lambda s=sub: _deviation_verdicts(s, pub)[0])
         row["within_0p3_uncompensated"] = float(np.median(sub["within_0p3_uncompensated"]))
         rows.append(row)
     return pd.DataFrame(rows)
@@ -464,20 +476,30 @@ def kolmogorov_bound(n_vectors: int) -> float:
 def _systematic_verdict(sub: pd.DataFrame, pub):
     lo_pub, hi_pub = pub.systematic_mm
     v = judge(
-        sub["systematic_coord_median_mm"], kind="value", direction="higher",
-        published=(lo_pub + hi_pub) / 2.0, baseline=sub["scatter_median_mm"],
+        sub["systematic_coord_median_mm"],
+        kind="value",
+        direction="higher",
+        published=(lo_pub + hi_pub) / 2.0,
+        baseline=sub["scatter_median_mm"],
     )
     v3 = judge(
-        sub["systematic_median_mm"], kind="value", direction="higher",
-        published=(lo_pub + hi_pub) / 2.0, baseline=sub["scatter_median_mm"],
+        sub["systematic_median_mm"],
+        kind="value",
+        direction="higher",
+        published=(lo_pub + hi_pub) / 2.0,
+        baseline=sub["scatter_median_mm"],
     )
     return v, v3
 
 
 def _deviation_verdicts(sub: pd.DataFrame, pub):
     return judge_controls(
-        sub["within_0p3"], sub["within_0p3_uncompensated"], sub["within_0p3_oracle"],
-        published=pub.within_0p3_percent, kind="percent", direction="higher",
+        sub["within_0p3"],
+        sub["within_0p3_uncompensated"],
+        sub["within_0p3_oracle"],
+        published=pub.within_0p3_percent,
+        kind="percent",
+        direction="higher",
         baseline=sub["within_0p3_uncompensated"],
     )
 
@@ -508,8 +530,13 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     lo_pub, hi_pub = pub.systematic_mm
     rows = [
         _with_note(
-            claim_row("hybrid.systematic", v, published=f"{lo_pub:g}-{hi_pub:g}", unit="mm",
-                      notebook=notebook),
+            claim_row(
+                "hybrid.systematic",
+                v,
+                published=f"{lo_pub:g}-{hi_pub:g}",
+                unit="mm",
+                notebook=notebook,
+            ),
             f"per-coordinate reading, size minus panel-to-panel scatter: {v.note}; share of "
             f"coordinates >= 2 mm {np.median(sub['coord_above_2mm']):.3g} %; 3-D reading "
             f"(length of the mean vector per point): median {v3.median:.3g} mm, {v3.verdict}; "
@@ -520,12 +547,20 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     ]
     dev, null, oracle = _deviation_verdicts(sub, pub)
     dev_final = oracle_gate(dev, oracle, "a systematic error that an offset can remove")
-    dist = bin_distance(sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy(),
-                        pub.deviation_percent)
+    dist = bin_distance(
+        sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy(), pub.deviation_percent
+    )
     rows.append(
         _with_note(
-            claim_row("hybrid.deviation", dev_final, published=f"{pub.within_0p3_percent}",
-                      unit="%", notebook=notebook, null=null, oracle=oracle),
+            claim_row(
+                "hybrid.deviation",
+                dev_final,
+                published=f"{pub.within_0p3_percent}",
+                unit="%",
+                notebook=notebook,
+                null=null,
+                oracle=oracle,
+            ),
             f"offset from {n_compensation} products; {dev_final.note}; beyond 0.5 mm "
             f"{np.median(sub['beyond_0p5']):.3g} % (published 0); Kolmogorov distance of the "
             f"5 bins to the published ones {np.median(dist):.3g} (5 % critical "
@@ -534,17 +569,43 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     )
     controls = control_rows("hybrid.deviation", null, oracle)
     n_defined = _n_vectors(sub) - int(np.median(sub["n_fixed"]))
-    dist_r = bin_distance(sub[[f"correlation_bin{k}" for k in range(5)]].to_numpy(),
-                          pub.correlation_percent)
+    dist_r = bin_distance(
+        sub[[f"correlation_bin{k}" for k in range(5)]].to_numpy(), pub.correlation_percent
+    )
     bound = kolmogorov_bound(n_defined)
     vr = judge(dist_r, kind="bound", direction="lower", bound=bound)
     rows.append(
         _with_note(
-            claim_row("hybrid.correlation", vr, published=f"bins {pub.correlation_percent}",
-                      unit="Kolmogorov distance", notebook=notebook),
+            claim_row(
+                "hybrid.correlation",
+                vr,
+                published=f"bins {pub.correlation_percent}",
+                unit="Kolmogorov distance",
+                notebook=notebook,
+            ),
             f"Kolmogorov distance of the correlation bins to the published ones, {n_defined} "
             f"coordinates where r is defined: {vr.note}; share above 0.7 median "
             f"{np.median(sub['r_above_0p7']):.3g} % (published {pub.r_above_0p7_percent})",
         )
     )
     return rows, controls
+
+
+def chapter_numbers(claims, **extra) -> dict:
+    """The numbers the chapter quotes, by name (glued in the notebooks, ``{glue:text}`` in
+    ``book/hybrid.md``): per claim row ``<claim>_verdict``, ``_median``, ``_low``, ``_high``,
+    ``_rate``, ``_n`` (``<claim>`` the id without ``hybrid.``), and the ``extra`` figures."""
+    out = {}
+    for row in claims:
+        key = row.id.split(".", 1)[1]
+        out[f"{key}_verdict"] = row.verdict
+        for name, value in (
+            ("median", row.reproduced),
+            ("low", row.ci_low),
+            ("high", row.ci_high),
+            ("rate", row.replication_rate),
+        ):
+            out[f"{key}_{name}"] = float(value)
+        out[f"{key}_n"] = int(row.n)
+    out |= {k: (v if isinstance(v, str) else float(v)) for k, v in extra.items()}
+    return out
