@@ -104,10 +104,10 @@ def handeye_trial(
     Methods: the paper's (``"sphere"``); the maximum likelihood of the sensor noise model
     (``"ML"``: every centre weighted by its full covariance from the sensor model, the strong
     y-z correlation of the line laser included); the Cramer-Rao bound of that model at the
-    truth (``"CRB"``, an expected RMS); the controls: the design mounting (``"null"``, doing
-    nothing) and the paper's method on noise-free centres (``"oracle"``); with ``baselines``
-    the five OpenCV AX = XB methods fed with the hole target's pose seen at the same robot
-    poses.
+    truth (``"CRB"``, an expected RMS); the controls: the design mounting (``"null control"``,
+    doing nothing) and the paper's method on noise-free centres (``"oracle control"``); with
+    ``baselines`` the five OpenCV AX = XB methods fed with the hole target's pose seen at the
+    same robot poses.
     """
     meas, actual = simulate_sphere_measurements(station, n_trans, n_rot, rng)
     truth = station.sensor2flange_true
@@ -138,12 +138,12 @@ def handeye_trial(
         float(np.rad2deg(np.sqrt(np.trace(crb[3:6, 3:6])))),
         float(np.sqrt(np.trace(crb[:3, :3]))),
     )
-    out["null"] = err(design_mounting(truth))
+    out["null control"] = err(design_mounting(truth))
     is_t = meas.group == "translation"
     oracle = sphere_handeye(
         meas.flange2base[is_t], clean[is_t], meas.flange2base[~is_t], clean[~is_t]
     )
-    out["oracle"] = err(oracle.value)
+    out["oracle control"] = err(oracle.value)
     if baselines:
         target2base = geo.make_transform(np.eye(3), station.sphere.centre)
         t2s = station.observe_target_pose(actual, target2base, rng)

@@ -137,7 +137,9 @@ def calibration_claims(handeye, stationary, notebook: str):
     """
     fig = handeye_figures(handeye)
     rule = {"kind": "bound", "direction": "lower", "bound": CRB_MULTIPLE}
-    he, null, oracle = judge_controls(fig["sphere"], fig["null"], fig["oracle"], **rule)
+    he, null, oracle = judge_controls(
+        fig["sphere"], fig["null control"], fig["oracle control"], **rule
+    )
     ml = judge(fig["ML"], **rule)
     he_final = oracle_gate(he, oracle, "sensor noise on the sphere centres")
     note = (
