@@ -215,11 +215,31 @@ def sphere_centre_in_base(flange2base, centres, sensor2flange) -> np.ndarray:
     return (np.einsum("nij,nj->ni", chain[:, :3, :3], x_f) + chain[:, :3, 3]).mean(axis=0)
 
 
+def _whitening(sensor_sigma, n: int) -> np.ndarray:
+    """(n, 3, 3) whitening matrices ``W`` (``W^T W = cov^-1``) of a sigma or a covariance."""
+    if np.ndim(sensor_sigma) <= 1:
+        sigma = _check_sigma(sensor_sigma)
+        return np.broadcast_to(np.diag(1.0 / sigma), (n, 3, 3)).copy()
+    a = np.asarray(sensor_sigma, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise CalibrationError(f"sensor covariance must be finite; got {a}")
+    if a.shape not in ((3, 3), (n, 3, 3)):
+        raise CalibrationError(
+            f"sensor covariance has shape {a.shape}; expected (3, 3) or ({n}, 3, 3)"
+        )
+    cov = np.broadcast_to(a, (n, 3, 3))
+    try:
+        chol = np.linalg.cholesky(0.5 * (cov + np.swapaxes(cov, 1, 2)))
+    except np.linalg.LinAlgError as exc:
+        raise CalibrationError(f"a sensor covariance is not positive definite ({exc})") from exc
+    return np.linalg.inv(chol)
+
+
 @dataclass
 class _SphereProblem:
     poses: np.ndarray
     x_f: np.ndarray
-    sigma: np.ndarray
+    whiten: np.ndarray  # (N, 3, 3): W_i with W_i^T W_i the inverse covariance of centre i
     base: np.ndarray  # rotation around which the correction is parametrised
 
     def unpack(self, x):
@@ -232,7 +252,7 @@ class _SphereProblem:
         chain = self.poses @ s2f
         rt = np.swapaxes(chain[:, :3, :3], 1, 2)
         pred = np.einsum("nij,nj->ni", rt, x_b - chain[:, :3, 3])
-        return ((pred - self.x_f) / self.sigma).ravel()
+        return np.einsum("nij,nj->ni", self.whiten, pred - self.x_f).ravel()
 
     def jacobian(self, x):
         s2f, x_b = self.unpack(x)
@@ -248,7 +268,7 @@ class _SphereProblem:
         pred = q @ r_f
         jac[:, :, 3:6] = geo.skew(pred) @ pin.Jexp3(np.asarray(x[3:6], dtype=float))
         jac[:, :, 6:9] = np.einsum("ji,njk->nik", r_f, r0.transpose(0, 2, 1))
-        return (jac / self.sigma[None, :, None]).reshape(n * 3, 9)
+        return (self.whiten @ jac).reshape(n * 3, 9)
 
 
 def _check_sigma(sensor_sigma) -> np.ndarray:
@@ -285,8 +305,11 @@ def sphere_handeye_ml(
         All flange poses (translations and pose changes), mm.
     centres : (N, 3) array
         Measured sphere centres in the sensor frame, mm.
-    sensor_sigma : float or (3,) array
-        Standard deviation of a measured centre along the sensor axes, mm.
+    sensor_sigma : float, (3,), (3, 3) or (N, 3, 3) array
+        The sensor noise of a measured centre: a standard deviation (mm) for all axes, one per
+        sensor axis (independent axes), or the full covariance (mm^2) shared by all
+        measurements or one per measurement. Only the full covariance makes this the maximum
+        likelihood when the axes are correlated (the line laser's y and z are, strongly).
     initial : (4, 4) array
         Starting ``sensor2flange`` (for example :func:`sphere_handeye`).
     ids : (N,) array, optional
@@ -318,7 +341,6 @@ def sphere_handeye_ml(
     """
     poses, x_f = _check_measurements("ML", flange2base, centres)
     init = geo.check_transform("initial sensor2flange", initial)
-    sigma = _check_sigma(sensor_sigma)
     names = None
     if ids is not None:
         id_arr = np.asarray(ids).ravel()
@@ -327,7 +349,7 @@ def sphere_handeye_ml(
         names = [f"id {i}" for i in id_arr]
     if poses.shape[0] < 3:
         raise CalibrationError(f"ML hand-eye needs at least 3 poses; got {poses.shape[0]}")
-    problem = _SphereProblem(poses, x_f, sigma, init[:3, :3])
+    problem = _SphereProblem(poses, x_f, _whitening(sensor_sigma, poses.shape[0]), init[:3, :3])
     x_b0 = sphere_centre_in_base(poses, x_f, init)
     x0 = np.concatenate([init[:3, 3], np.zeros(3), x_b0])
     est = levenberg_marquardt(
@@ -364,8 +386,7 @@ def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x
     """
     poses, x_f = _check_measurements("CRB", flange2base, centres_true)
     t = geo.check_transform("sensor2flange", sensor2flange)
-    sigma = _check_sigma(sensor_sigma)
-    problem = _SphereProblem(poses, x_f, sigma, t[:3, :3])
+    problem = _SphereProblem(poses, x_f, _whitening(sensor_sigma, poses.shape[0]), t[:3, :3])
     x = np.concatenate([t[:3, 3], np.zeros(3), geo.check_shape("x_b", x_b, (3,))])
     jac = problem.jacobian(x)
     check_condition(
