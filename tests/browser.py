@@ -92,9 +92,12 @@ class Chromium:
             self.send(f"{domain}.enable")
         self.send("Network.setBlockedURLs", urls=["http://*", "https://*", "ws://*", "wss://*"])
         self.send("Network.setCacheDisabled", cacheDisabled=True)
+        self._metrics(height)
+
+    def _metrics(self, height: int) -> None:
         self.send(
             "Emulation.setDeviceMetricsOverride",
-            width=width, height=height, deviceScaleFactor=1, mobile=False,
+            width=self.width, height=height, deviceScaleFactor=1, mobile=False,
         )
 
     def _port(self, timeout: float = 30.0) -> int:
@@ -205,12 +208,12 @@ class Chromium:
         """Write a PNG of the whole page at the window width."""
         size = self.send("Page.getLayoutMetrics")["cssContentSize"]
         height = min(int(size["height"]) + 1, max_height)
-        shot = self.send(
-            "Page.captureScreenshot",
-            format="png",
-            captureBeyondViewport=True,
-            clip={"x": 0, "y": 0, "width": self.width, "height": height, "scale": 1},
-        )
+        # a window as tall as the page, so that fixed sidebars are laid out as a reader sees them
+        self._metrics(height)
+        try:
+            shot = self.send("Page.captureScreenshot", format="png")
+        finally:
+            self._metrics(self.height)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(base64.b64decode(shot["data"]))
         return path

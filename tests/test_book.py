@@ -5,8 +5,8 @@ The book is built into a temporary folder from the notebooks executed at their C
 and checked: no console error, no request leaving the machine, all math typeset by the shipped
 MathJax (no raw ``$``, ``\\(`` or ``\\[`` left in the text), every image loaded, no absolute path
 of the build machine in the text; on the pages of :data:`FIT_COLUMN` no element is wider than
-the article column. Screenshots of the claims page and a notebook page go to
-``book/_build/screenshots/`` (git-ignored) for a reviewer.
+the article column and no table cell holds more than its width. Screenshots of the claims page
+and a notebook page go to ``book/_build/screenshots/`` (git-ignored) for a reviewer.
 
 Without Chromium the tests fail and say how to install it.
 """
@@ -69,6 +69,12 @@ _INSPECT = r"""
         ? '.' + e.className.trim().split(/\s+/).join('.') : '');
       wide.push(`${name} ${Math.round(r.width)} px wide, ${Math.round(r.left - box.left)}`
         + `..${Math.round(r.right - box.left)} px in a ${Math.round(box.width)} px column`);
+    }
+  }
+  for (const cell of art.querySelectorAll('td, th')) {
+    if (cell.scrollWidth > cell.clientWidth + 1) {
+      wide.push(`a ${cell.tagName.toLowerCase()} holds ${cell.scrollWidth} px in `
+        + `${cell.clientWidth} px: ${cell.textContent.trim().slice(0, 60)}`);
     }
   }
   return {text: body.textContent + ' ' + alts.join(' '), raw_math: raw, broken: broken,
@@ -156,7 +162,9 @@ def test_no_absolute_path_of_the_build_machine(seen, build):
 @pytest.mark.parametrize("page", FIT_COLUMN)
 def test_nothing_wider_than_the_column(seen, page):
     wide = seen[page]["wide"]
-    assert not wide, f"{page}: {len(wide)} element(s) overflow the column:\n" + "\n".join(wide[:20])
+    assert not wide, f"{page}: {len(wide)} element(s) overflow the column or their cell:\n" + (
+        "\n".join(wide[:20])
+    )
 
 
 def test_screenshots_written(seen):

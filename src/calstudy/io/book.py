@@ -79,8 +79,9 @@ difference of 0, or a stated reference).
 The *replication rate* is the share of trials whose own effect has the paper's direction: what
 one rerun of the paper's single experiment would see. The *null control* replaces the method by
 doing nothing and must come out not reproduced; the *oracle control* removes the error source
-the method targets and must reach significance. Claims without a published figure are judged
-against a reference method on the same trials (the note names it).
+the method targets and must reach significance. Claims without a published figure ("none in
+the paper") are judged against a reference method on the same trials (the statement and the
+note name it).
 """
 
 _UNICODE = ((r"\+-", "±"), (r"(?<=\d)\s?um\b", " µm"), (r"<=", "≤"), (r">=", "≥"), (r"->", "→"))
@@ -172,8 +173,8 @@ def _published_html(claim: pd.Series, row: pd.Series | None) -> str:
     if row is None and typeset(claim["published"]):
         return f"{_cell(claim['published'])} {_cell(claim['unit'])}"
     return ('<span class="why" title="the paper gives no figure; the claim is judged against a '
-            'reference method on the same trials (see the statement)">none in the paper: '
-            "judged against a reference</span>")
+            'reference method on the same trials (see the statement)">none in the paper'
+            "</span>")
 
 
 def _reproduced_html(row: pd.Series) -> str:
