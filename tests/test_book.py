@@ -1,12 +1,13 @@
 """The book as a reader sees it: every page opened in headless Chromium (``make check-book``).
 
 The book is built into a temporary folder from the notebooks executed at their CI values
-(:mod:`booksite`); then every page is loaded in Chromium at a 1,400 px window (:mod:`browser`)
-and checked: no console error, no request leaving the machine, all math typeset by the shipped
-MathJax (no raw ``$``, ``\\(`` or ``\\[`` left in the text), every image loaded, no absolute path
-of the build machine in the text; on the pages of :data:`FIT_COLUMN` no element is wider than
-the article column and no table cell holds more than its width. Screenshots of the claims page
-and a notebook page go to ``book/_build/screenshots/`` (git-ignored) for a reviewer.
+(:mod:`booksite`; the session's ``ci_runs``, shared with ``test_notebooks.py``); then every
+page is loaded in Chromium at a 1,400 px window (:mod:`browser`) and checked: no console error,
+no request leaving the machine, all math typeset by the shipped MathJax (no raw ``$``, ``\\(``
+or ``\\[`` left in the text), every image loaded, no absolute path of the build machine in the
+text; on the pages of :data:`FIT_COLUMN` no element is wider than the article column and no
+table cell holds more than its width. Screenshots of the claims page and a notebook page go to
+``book/_build/screenshots/`` (git-ignored) for a reviewer.
 
 Without Chromium the tests fail and say how to install it.
 """
@@ -93,14 +94,14 @@ def chromium_binary() -> str:
 
 
 @pytest.fixture(scope="session")
-def build(tmp_path_factory) -> tuple[Path, Path]:
-    """``(html folder, temporary root)`` of the book built from CI-valued notebooks."""
+def build(tmp_path_factory, ci_runs) -> tuple[Path, Path]:
+    """``(html folder, temporary root)`` of the book built from the CI-valued notebook runs."""
     root = tmp_path_factory.mktemp("book-check")
-    return build_ci_book(root), root
+    return build_ci_book(root, ci_runs), root
 
 
 @pytest.fixture(scope="session")
-def seen(build, chromium_binary) -> dict[str, dict]:
+def seen(chromium_binary, build) -> dict[str, dict]:
     """Every page opened once: ``{relative path: report and inspection}``."""
     html, _ = build
     out = {}
@@ -149,9 +150,10 @@ def test_every_image_loads(seen):
     )
 
 
-def test_no_absolute_path_of_the_build_machine(seen, build):
+def test_no_absolute_path_of_the_build_machine(seen, build, ci_runs):
     _, root = build
-    leaks = (str(REPO_ROOT), str(root))
+    results = {str(run.results.parent) for run in ci_runs.values()}
+    leaks = (str(REPO_ROOT), str(root), *sorted(results))
 
     def problems(_, info):
         return [f"page text holds {leak}" for leak in leaks if leak in info["text"]]
