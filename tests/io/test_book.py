@@ -140,3 +140,23 @@ def test_typeset_and_published_value():
 def test_results_frame_roundtrip(results):
     res = read_results(results)
     assert isinstance(res, pd.DataFrame) and len(res) == 4
+
+
+def test_book_extension_keeps_one_copy_of_each_head_script():
+    import importlib.util
+
+    from calstudy.core.paths import REPO_ROOT
+
+    spec = importlib.util.spec_from_file_location(
+        "calstudy_book", REPO_ROOT / "book" / "_ext" / "calstudy_book.py"
+    )
+    ext = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ext)
+    page = (
+        "<head>\n<script>const A = 1;</script>\n<script src='x.js'></script>\n"
+        "<script>const A = 1;</script>\n</head>\n<body><script>const A = 1;</script></body>"
+    )
+    fixed = ext.dedupe_head(page)
+    assert fixed.count("const A = 1;") == 2  # one in the head, the body's untouched
+    assert fixed.startswith("<head>\n<script>const A = 1;</script>\n<script src='x.js'>")
+    assert ext.dedupe_head("no head") == "no head"
