@@ -267,10 +267,8 @@ def claims_figure(res: pd.DataFrame, path: str | Path) -> tuple[Path, str]:
     tuple of (pathlib.Path, str)
         The PNG written and a one-sentence description of it (the image's alt text).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # a bare Figure, not pyplot: no backend is chosen or switched for the caller
+    from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     from matplotlib.ticker import FuncFormatter, NullFormatter
 
@@ -281,9 +279,9 @@ def claims_figure(res: pd.DataFrame, path: str | Path) -> tuple[Path, str]:
     order = [k for k in ("ratio", "mm", "%") if k in set(res["kind"])]
     order += sorted(set(res["kind"]) - set(order))
     sizes = [int((res["kind"] == k).sum()) for k in order]
-    fig, axes = plt.subplots(
-        len(order), 1, figsize=(7.8, 0.9 + 0.3 * sum(sizes) + 0.55 * len(order)),
-        gridspec_kw={"height_ratios": [s + 1.2 for s in sizes]}, squeeze=False,
+    fig = Figure(figsize=(7.8, 0.9 + 0.3 * sum(sizes) + 0.55 * len(order)))
+    axes = fig.subplots(
+        len(order), 1, gridspec_kw={"height_ratios": [s + 1.2 for s in sizes]}, squeeze=False
     )
     for ax, kind in zip(axes[:, 0], order, strict=True):
         group = res[res["kind"] == kind].sort_values("id", ascending=False)
