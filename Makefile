@@ -29,14 +29,15 @@ LIBRARY := $(sort $(shell find src/calstudy -name '*.py' -not -path '*/__pycache
 DATA := $(sort $(shell find data -type f -not -name '.*' -not -path '*/__pycache__/*' 2>/dev/null))
 RESULTS := $(sort $(shell find results -mindepth 2 -type f -not -path '*/.*' 2>/dev/null))
 BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
-	$(filter-out book/claims.md,$(wildcard book/*.md)) book/claims.md
+	$(filter-out book/claims.md,$(wildcard book/*.md)) book/claims.md \
+	$(wildcard book/_ext/*.py) $(wildcard book/_static/*)
 BOOK_STAMP := book/_build/html/.built
 
-.PHONY: help venv reproduce notebooks test verify lint book bench clean
+.PHONY: help venv reproduce notebooks test check-book verify lint book bench clean
 
 help: ## list the targets
 	@echo "calstudy: make <target>"
-	@grep -E '^[a-z]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/^([a-z]+):.*## /  \1\t/' | expand -t 14
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/^([a-z-]+):.*## /  \1\t/' | expand -t 14
 
 venv: $(STAMP) ## create .venv with the pinned dependencies and calstudy (editable)
 
@@ -74,10 +75,14 @@ $(BOOK_STAMP): $(BOOK_SOURCES) $(EXECUTED) $(RESULTS) | $(STAMP)
 
 book: $(BOOK_STAMP) ## build the book (same as reproduce)
 
-test: $(STAMP) ## ruff, the import layers, then pytest (unit tests, notebook runs, reproducibility)
+test: $(STAMP) ## ruff, the import layers, then pytest (unit tests, notebook runs, the book in Chromium)
 	$(BIN)/ruff check src tests notebooks benchmarks
 	$(BIN)/lint-imports
 	$(BIN)/pytest
+
+# pytest in `make test` runs tests/test_book.py too; this target runs only the browser check.
+check-book: $(STAMP) ## build the book from CI-valued notebook runs in a temporary folder, open every page in headless Chromium
+	$(BIN)/pytest -m book tests/test_book.py
 
 verify: $(STAMP) ## rerun every notebook at its defaults and compare with the committed results/
 	$(BIN)/pytest -m verify tests/test_notebooks.py
@@ -90,4 +95,5 @@ bench: $(STAMP) ## time the speed budgets of the issues (prints; writes nothing)
 	@for b in $(sort $(wildcard benchmarks/bench_*.py)); do echo "== $$b"; $(BIN)/python $$b; done
 
 clean: ## remove the built book and executed notebooks (results/ and .venv stay)
-	rm -rf book/_build book/notebooks book/claims.md
+	rm -rf book/_build book/notebooks book/claims.md book/claims-verdicts.png \
+		book/claims-register.csv book/claims-results.csv

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import json
 
 import matplotlib.pyplot as plt
@@ -20,8 +21,6 @@ from calstudy.claims import (
 )
 from calstudy.core.paths import DATA_DIR
 from calstudy.core.stats import bootstrap_interval, percentile_interval, rmse
-from calstudy.io.book import main as book_main
-from calstudy.io.book import render_claims_page
 from calstudy.io.results import (
     PINNED_PACKAGES,
     aggregate_claims,
@@ -140,15 +139,21 @@ def test_write_figure_deterministic_and_closed(tmp_path):
 
 def test_notebook_writers_write_into_the_folder_and_show_the_saved_file(tmp_path, monkeypatch):
     shown = []
-    monkeypatch.setattr("IPython.display.display", shown.append)
+    monkeypatch.setattr("IPython.display.display", lambda obj, **kw: shown.append(obj))
     save_table, show_figure = notebook_writers(tmp_path / "nb")
     df = sample_table()
     assert save_table(df, "t") is df
     assert (tmp_path / "nb" / "t.csv").read_bytes() == write_table(
         df, tmp_path / "t.csv"
     ).read_bytes()
-    assert show_figure(make_figure(), "f") is None  # a cell ending with it shows no path
-    assert shown[0].data == (tmp_path / "nb" / "f.png").read_bytes()
+    # a cell ending with it shows no path; the image carries its description as alt text
+    assert show_figure(make_figure(), "f", alt="A line rising from 0 to 1.") is None
+    png = base64.b64encode((tmp_path / "nb" / "f.png").read_bytes()).decode()
+    assert png in shown[0]["text/html"]
+    assert 'alt="A line rising from 0 to 1."' in shown[0]["text/html"]
+    assert str(tmp_path) not in str(shown[0])
+    show_figure(make_figure(), "noise_sweep")
+    assert 'alt="figure noise sweep"' in shown[1]["text/html"]
 
 
 def test_write_figure_is_atomic(tmp_path, monkeypatch):
@@ -478,48 +483,6 @@ def test_aggregate_claims_empty(tmp_path):
     df = aggregate_claims(tmp_path)
     assert df.empty
     assert (tmp_path / "claims.csv").read_text() == ",".join(CLAIM_COLUMNS) + "\n"
-
-
-# ----------------------------------------------------------------------------------------------
-# claims page
-
-
-def test_claims_page_pending_and_computed(tmp_path):
-    write_claims(tmp_path / "results" / "03_binocular", [row("binocular.coc")])
-    results = tmp_path / "results" / "claims.csv"
-    aggregate_claims(tmp_path / "results")
-    page = render_claims_page(tmp_path / "book" / "claims.md", results=results)
-    text = page.read_text()
-    assert text.startswith("# Claims and verdicts\n")
-    assert f"**{len(REGISTER_IDS)} claims: 1 reproduced, 0 direction only" in text
-    assert f"{len(REGISTER_IDS) - 1} pending" in text
-    lines = {ln.split("`")[1]: ln for ln in text.splitlines() if ln.startswith("| `")}
-    assert set(lines) == set(REGISTER_IDS)
-    assert "**reproduced**" in lines["binocular.coc"]
-    assert "0.84 [0.8, 0.88] ratio" in lines["binocular.coc"]
-    assert "`03_binocular`" in lines["binocular.coc"]  # not in a toc: plain name, no link
-    for claim_id in set(REGISTER_IDS) - {"binocular.coc"}:
-        assert "*pending*" in lines[claim_id]
-    for paper in ("hybrid", "selfcal", "binocular", "dualarm"):
-        assert f"\n## {paper}\n" in text and f"{{cite:p}}`{paper}`" in text
-
-    toc = "format: jb-book\nroot: intro\nchapters:\n  - file: notebooks/03_binocular\n"
-    (tmp_path / "book" / "_toc.yml").write_text(toc)
-    linked = render_claims_page(tmp_path / "book" / "claims.md", results=results).read_text()
-    assert "{doc}`03_binocular <notebooks/03_binocular>`" in linked
-
-
-def test_claims_page_without_results_is_all_pending(tmp_path):
-    out = tmp_path / "claims.md"
-    assert book_main(["claims", str(out), "--results", str(tmp_path / "none.csv")]) == 0
-    first = out.read_bytes()
-    text = first.decode()
-    assert f"0 not testable, {len(REGISTER_IDS)} pending" in text
-    assert text.count("*pending*") == len(REGISTER_IDS)
-    render_claims_page(out, results=tmp_path / "none.csv")
-    assert out.read_bytes() == first
-    assert leftovers(tmp_path) == []
-
 
 
 def test_verdict_direction():

@@ -10,16 +10,20 @@ to its chapter when the table of contents lists it), so it is byte-deterministic
 from __future__ import annotations
 
 import argparse
+import html
 import math
+import re
+import shutil
 import sys
 from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import yaml
 
-from calstudy.claims import VERDICTS
+from calstudy.claims import CLAIM_COLUMNS, VERDICTS
 from calstudy.core.paths import DATA_DIR, RESULTS_DIR
 from calstudy.io.results import read_claims
 
@@ -43,44 +47,87 @@ PAPERS = {
 
 PENDING = "pending"
 
+#: Files written beside the page: the figure and copies of the two tables it is made from.
+FIGURE_NAME = "claims-verdicts.png"
+REGISTER_COPY = "claims-register.csv"
+RESULTS_COPY = "claims-results.csv"
+
+#: Badge and figure colour of each verdict (the CSS classes in book/_static/calstudy.css).
+VERDICT_COLOURS = {
+    "reproduced": "#1a7f37",
+    "direction only": "#b35900",
+    "not reproduced": "#c62828",
+    "not testable": "#57606a",
+    PENDING: "#8c959f",
+}
+
 _RULE = """\
-A verdict is computed by the notebook from its Monte Carlo trials, never typed in:
+Each verdict is computed by the notebook from its Monte Carlo trials (rule v2 of the claims
+register), never typed in. The reproduced figure is the **median over N trials** with its 95 %
+confidence interval; the *effect* compares it with "no effect" (a ratio after / before of 1, a
+difference of 0, or a stated reference).
 
-- **reproduced**: the effect has the paper's direction, its 95 % interval over the trials
-  excludes "no effect", and the reproduced figure is within a factor 1.5 of the published one
-  (for a percentage, within 10 percentage points);
-- **direction only**: significant and in the paper's direction, but outside that band;
-- **not reproduced**: not significant, or the opposite direction;
-- **not testable**: the claim needs hardware a simulation cannot stand in for (the note says
-  why).
+- **reproduced**: the interval of the effect excludes no effect on the paper's side, and the
+  median is within a factor 1.5 of the published figure (10 percentage points for a percentage);
+  a requirement ("within 0.42 mm") is reproduced when the 95th percentile of the trials meets it;
+- **direction only**: significant on the paper's side, but outside that band (for a requirement:
+  the median meets it, the 95th percentile does not);
+- **not reproduced**: not significant, or significant on the wrong side;
+- **not testable**: the claim needs hardware a simulation cannot stand in for, the simulation
+  lacks the mechanism (its oracle control fails), or both sides are identical by construction.
 
-Where the paper gives no number, the method is compared with a maximum-likelihood estimate on
-the same simulated data: reproduced when its RMS error is within a factor 1.5 of it, direction
-only when it works but is worse, not reproduced when it fails.
-
-The interval shown is the central 95 % of the reproduced figure over the trials: the spread of
-the result from one simulated repetition of the paper's experiment to the next, so a verdict
-does not become more favourable by running more trials (for the ratio to maximum likelihood it
-is a bootstrap interval of the RMS ratio). *Pending* means no notebook has computed the claim
-yet.
+The *replication rate* is the share of trials whose own effect has the paper's direction: what
+one rerun of the paper's single experiment would see. The *null control* replaces the method by
+doing nothing and must come out not reproduced; the *oracle control* removes the error source
+the method targets and must reach significance. Claims without a published figure ("none in
+the paper") are judged against a reference method on the same trials (the statement and the
+note name it).
 """
+
+_UNICODE = ((r"\+-", "±"), (r"(?<=\d)\s?um\b", " µm"), (r"<=", "≤"), (r">=", "≥"), (r"->", "→"))
+_LEADING_NUMBER = re.compile(r"^\s*([-+]?\d+(?:\.\d+)?)(?:\s*-\s*(\d+(?:\.\d+)?))?(.*)$")
+
+
+def typeset(text: object) -> str:
+    """Plain text with ``+-``, ``um``, ``<=``, ``>=`` and ``->`` written as ± µm ≤ ≥ →."""
+    s = "" if text is None or (isinstance(text, float) and math.isnan(text)) else str(text)
+    for pattern, repl in _UNICODE:
+        s = re.sub(pattern, repl, s)
+    return s.strip()
 
 
 def _cell(text: object) -> str:
-    """Text safe inside a markdown table cell."""
-    s = "" if text is None or (isinstance(text, float) and math.isnan(text)) else str(text)
-    return s.replace("|", "\\|").replace("\n", " ").strip()
+    """Text safe inside an HTML table cell."""
+    return html.escape(typeset(text).replace("\n", " "))
 
 
-def _number(x: float) -> str:
-    return "" if x is None or not math.isfinite(float(x)) else f"{float(x):.3g}"
-
-
-def _reproduced(row: pd.Series) -> str:
-    value, lo, hi = _number(row["reproduced"]), _number(row["ci_low"]), _number(row["ci_high"])
-    if not value:
+def _number(x: object) -> str:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
         return ""
-    return f"{value} [{lo}, {hi}]" if lo and hi else value
+    return f"{x:.3g}" if math.isfinite(x) else ""
+
+
+def published_value(text: object) -> tuple[float, float] | None:
+    """The published figure of a result row as ``(low, high)`` (equal unless a range
+    ``"2-4"``), or None if the text does not start with a number."""
+    m = _LEADING_NUMBER.match(typeset(text).replace("±", "+-"))
+    if not m:
+        return None
+    low = float(m.group(1))
+    return low, float(m.group(2)) if m.group(2) else low
+
+
+def _short(statement: str, limit: int = 64) -> str:
+    """The first clause of ``statement``, cut at a word before ``limit`` characters."""
+    s = typeset(statement)
+    for stop in (": ", "; ", ". "):
+        if stop in s:
+            s = s.split(stop)[0]
+    if len(s) <= limit:
+        return s.rstrip(".")
+    return s[:limit].rsplit(" ", 1)[0].rstrip(",;:") + " …"
 
 
 def _toc_files(node) -> set[str]:
@@ -93,12 +140,201 @@ def _toc_files(node) -> set[str]:
     return set()
 
 
-def _notebook(stem: str, toc: set[str]) -> str:
-    if not stem:
-        return ""
-    if f"notebooks/{stem}" in toc:
-        return f"{{doc}}`{stem} <notebooks/{stem}>`"
-    return f"`{stem}`"
+def _badge(verdict: str) -> str:
+    cls = verdict.replace(" ", "-")
+    return f'<span class="verdict verdict-{cls}">{html.escape(verdict)}</span>'
+
+
+def read_results(path: str | Path) -> pd.DataFrame:
+    """``results/claims.csv`` with every column of :data:`CLAIM_COLUMNS`; rows written before
+    rule v2 get ``n = 0``, no replication rate and empty controls."""
+    res = read_claims(path)
+    defaults = {"n": 0, "replication_rate": float("nan"), "null_control": "",
+                "oracle_control": ""}
+    for col, value in defaults.items():
+        if col not in res.columns:
+            res[col] = value
+    res["n"] = pd.to_numeric(res["n"], errors="coerce").fillna(0).astype(int)
+    return res[list(CLAIM_COLUMNS)]
+
+
+def _published_html(claim: pd.Series, row: pd.Series | None) -> str:
+    if row is not None and typeset(row["published"]):
+        value = published_value(row["published"])
+        text = typeset(row["published"])
+        unit = html.escape(typeset(row["unit"]))
+        if value is None:
+            return f"{html.escape(text)} {unit}"
+        m = _LEADING_NUMBER.match(text.replace("±", "+-"))
+        head = text[: len(text) - len(m.group(3))].strip()
+        rest = m.group(3).strip()
+        extra = f'<br><span class="why">{html.escape(rest)}</span>' if rest else ""
+        return f"{html.escape(head)} {unit}{extra}"
+    if row is None and typeset(claim["published"]):
+        return f"{_cell(claim['published'])} {_cell(claim['unit'])}"
+    return ('<span class="why" title="the paper gives no figure; the claim is judged against a '
+            'reference method on the same trials (see the statement)">none in the paper'
+            "</span>")
+
+
+def _reproduced_html(row: pd.Series) -> str:
+    value, lo, hi = _number(row["reproduced"]), _number(row["ci_low"]), _number(row["ci_high"])
+    if not value:
+        return '<span class="why">not computed</span>' if row["verdict"] != "not testable" else "—"
+    unit = html.escape(typeset(row["unit"]))
+    interval = f'<br><span class="why">[{lo}, {hi}]</span>' if lo and hi else ""
+    return f"{value} {unit}{interval}"
+
+
+def _rate_html(row: pd.Series) -> str:
+    rate = row["replication_rate"]
+    if rate is None or not math.isfinite(float(rate)):
+        return "—"
+    return f"{100 * float(rate):.0f} %"
+
+
+def _controls_html(row: pd.Series) -> str:
+    parts = [
+        f"{name}: {html.escape(typeset(row[col]))}"
+        for name, col in (("null", "null_control"), ("oracle", "oracle_control"))
+        if typeset(row[col])
+    ]
+    return "<br>".join(parts) if parts else "—"
+
+
+def _details(claim: pd.Series, row: pd.Series | None) -> str:
+    parts = [f"<p>{_cell(claim['statement'])}</p>"]
+    parts.append(f"<p><em>Where in the paper:</em> {_cell(claim['where'])}. "
+                 f"<em>Published:</em> {_cell(claim['published']) or 'no figure'}"
+                 f"{' ' + _cell(claim['unit']) if typeset(claim['published']) else ''}.</p>")
+    if typeset(claim.get("comparison", "")):
+        parts.append(f"<p><em>Compared:</em> {_cell(claim['comparison'])}</p>")
+    if row is not None and typeset(row["note"]):
+        parts.append(f"<p><em>Note:</em> {_cell(row['note'])}</p>")
+    return "".join(parts)
+
+
+def _table(group: pd.DataFrame, computed: dict, toc: set[str]) -> list[str]:
+    lines = [
+        '<table class="claims">',
+        '<colgroup><col class="c-claim"><col class="c-pub"><col class="c-rep">'
+        '<col class="c-rate"><col class="c-n"><col class="c-verdict"><col class="c-controls">'
+        '<col class="c-nb"></colgroup>',
+        "<thead><tr><th>claim (click for the statement)</th><th>published</th>"
+        "<th>reproduced [95 % CI]</th><th>repl. rate</th><th>N</th><th>verdict</th>"
+        "<th>controls</th><th>nb</th></tr></thead>",
+        "<tbody>",
+    ]
+    for _, claim in group.iterrows():
+        row = computed.get(claim["id"])
+        short = html.escape(_short(claim["statement"]))
+        summary = f"<code>{html.escape(claim['id'])}</code><br>{short}"
+        claim_cell = f"<details><summary>{summary}</summary>{_details(claim, row)}</details>"
+        if row is None:
+            cells = [claim_cell, _published_html(claim, None), "—", "—", "—", _badge(PENDING),
+                     "—", "—"]
+        else:
+            stem = typeset(row["notebook"])
+            nb = html.escape(stem.split("_")[0]) if stem else "—"
+            if stem and f"notebooks/{stem}" in toc:
+                safe = html.escape(stem)
+                nb = f'<a href="notebooks/{safe}.html" title="{safe}">{nb}</a>'
+            n = int(row["n"])
+            cells = [claim_cell, _published_html(claim, row), _reproduced_html(row),
+                     _rate_html(row), str(n) if n > 0 else "—", _badge(typeset(row["verdict"])),
+                     _controls_html(row), nb]
+        classes = ["", "", "num", "num", "num", "", "", ""]
+        tds = "".join(f'<td class="{c}">{v}</td>' if c else f"<td>{v}</td>"
+                      for c, v in zip(classes, cells, strict=True))
+        lines.append(f"<tr>{tds}</tr>")
+    lines += ["</tbody>", "</table>"]
+    return lines
+
+
+def _kind(unit: str) -> str:
+    unit = typeset(unit)
+    return "ratio" if unit == "ratio" or unit.endswith(" ratio") else unit or "value"
+
+
+def claims_figure(res: pd.DataFrame, path: str | Path) -> tuple[Path, str]:
+    """Draw published against reproduced, one panel per unit (ratios on a log axis around 1).
+
+    Each claim is a row: the reproduced median with its 95 % interval, coloured by verdict,
+    and the published figure (a black diamond, a bar for a published range).
+
+    Returns
+    -------
+    tuple of (pathlib.Path, str)
+        The PNG written and a one-sentence description of it (the image's alt text).
+    """
+    # a bare Figure, not pyplot: no backend is chosen or switched for the caller
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+
+    from calstudy.io.results import write_figure
+
+    res = res[np.isfinite(res["reproduced"].astype(float))].copy()
+    res["kind"] = res["unit"].map(_kind)
+    order = [k for k in ("ratio", "mm", "%") if k in set(res["kind"])]
+    order += sorted(set(res["kind"]) - set(order))
+    sizes = [int((res["kind"] == k).sum()) for k in order]
+    fig = Figure(figsize=(7.8, 0.9 + 0.3 * sum(sizes) + 0.55 * len(order)))
+    axes = fig.subplots(
+        len(order), 1, gridspec_kw={"height_ratios": [s + 1.2 for s in sizes]}, squeeze=False
+    )
+    for ax, kind in zip(axes[:, 0], order, strict=True):
+        group = res[res["kind"] == kind].sort_values("id", ascending=False)
+        y = np.arange(len(group))
+        values = []
+        for yi, (_, row) in zip(y, group.iterrows(), strict=True):
+            colour = VERDICT_COLOURS.get(row["verdict"], "#000000")
+            med, lo, hi = (float(row[c]) for c in ("reproduced", "ci_low", "ci_high"))
+            if math.isfinite(lo) and math.isfinite(hi):
+                ax.plot([lo, hi], [yi, yi], color=colour, lw=2.2, solid_capstyle="butt")
+                values += [lo, hi]
+            ax.plot(med, yi, "o", color=colour, ms=6)
+            values.append(med)
+            pub = published_value(row["published"])
+            if pub is not None:
+                if pub[1] > pub[0]:
+                    ax.plot(pub, [yi, yi], color="black", lw=5, alpha=0.25)
+                ax.plot(np.mean(pub), yi, "D", mfc="none", mec="black", ms=6, mew=1.3)
+                values += list(pub)
+        ax.set_yticks(y, group["id"].tolist(), fontsize=8)
+        ax.set_ylim(-0.7, len(group) - 0.3)
+        ax.tick_params(axis="x", labelsize=8)
+        values = np.array([v for v in values if math.isfinite(v)])
+        if kind == "ratio":
+            ax.set_xscale("log")
+            ax.axvline(1.0, color="0.5", lw=0.8, ls="--")
+            span = max(abs(np.log10(values[values > 0])).max(initial=0.3), 0.3) * 1.15
+            ax.set_xlim(10 ** -span, 10 ** span)
+            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+            ax.xaxis.set_minor_formatter(NullFormatter())
+            ax.set_xlabel("ratio (log scale; 1 = no effect or as good as the reference)",
+                          fontsize=8)
+        else:
+            pad = 0.08 * (values.max() - min(values.min(), 0.0) or 1.0)
+            ax.set_xlim(min(values.min(), 0.0) - pad, values.max() + pad)
+            ax.set_xlabel(f"{kind}", fontsize=8)
+        ax.grid(axis="x", color="0.9", lw=0.6)
+        ax.set_axisbelow(True)
+    handles = [Line2D([], [], color=VERDICT_COLOURS[v], marker="o", lw=2.2, label=v)
+               for v in VERDICTS if v in set(res["verdict"])]
+    handles.append(Line2D([], [], color="black", marker="D", mfc="none", lw=0,
+                          label="published"))
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8,
+               frameon=False)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    out = write_figure(fig, path, dpi=150)
+    alt = (
+        f"Published against reproduced figure for the {len(res)} computed claims, one panel "
+        f"per unit ({', '.join(order)}; ratios on a log axis with 1 marked): the reproduced "
+        "median as a dot with its 95 % interval as a bar, coloured by verdict, the published "
+        "figure as an open diamond."
+    )
+    return out, alt
 
 
 def render_claims_page(
@@ -107,6 +343,10 @@ def render_claims_page(
     results: str | Path | None = None,
 ) -> Path:
     """Write the MyST page summarising every claim and its verdict.
+
+    Beside the page it writes the figure (:data:`FIGURE_NAME`) and copies of the register and
+    the results table (:data:`REGISTER_COPY`, :data:`RESULTS_COPY`), which the page offers
+    for download.
 
     Parameters
     ----------
@@ -125,34 +365,51 @@ def render_claims_page(
         ``out_path``.
     """
     out_path = Path(out_path)
-    reg = pd.read_csv(
-        DATA_DIR / "claims.csv" if register is None else register, dtype=str, keep_default_na=False
-    )
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    reg_path = DATA_DIR / "claims.csv" if register is None else Path(register)
+    reg = pd.read_csv(reg_path, dtype=str, keep_default_na=False)
     res_path = RESULTS_DIR / "claims.csv" if results is None else Path(results)
-    res = read_claims(res_path) if res_path.is_file() else None
+    res = read_results(res_path) if res_path.is_file() else None
     computed = {} if res is None else {r["id"]: r for _, r in res.iterrows()}
 
     toc_path = out_path.parent / "_toc.yml"
     toc = _toc_files(yaml.safe_load(toc_path.read_text())) if toc_path.is_file() else set()
 
-    verdicts = [computed[i]["verdict"] if i in computed else PENDING for i in reg["id"]]
-    counts = Counter(verdicts)
-    summary = ", ".join(f"{counts.get(v, 0)} {v}" for v in (*VERDICTS, PENDING))
-
+    counts = Counter(res["verdict"]) if res is not None else Counter()
+    counts[PENDING] = sum(1 for i in reg["id"] if i not in computed)
+    badges = " ".join(
+        f"{_badge(v)} {counts.get(v, 0)}" for v in (*VERDICTS, PENDING) if counts.get(v, 0)
+    )
+    _copy(reg_path, out_path.parent / REGISTER_COPY)
     lines = [
         "# Claims and verdicts",
         "",
-        "Every claim of the four papers that this study checks, with the figure the paper",
-        "publishes, the figure reproduced on synthetic data and the verdict. The table is",
-        "generated from `data/claims.csv` and `results/claims.csv` by `make reproduce`.",
+        "Every claim of the four papers that this study checks: the figure the paper publishes,",
+        "the figure reproduced on synthetic data and the verdict. Generated by `make reproduce`",
+        f"from the claims register {{download}}`data/claims.csv <{REGISTER_COPY}>` and the",
+        "results",
+        f"{{download}}`results/claims.csv <{RESULTS_COPY}>`." if res is not None else
+        "(none computed yet).",
         "",
-        f"**{len(reg)} claims: {summary}.**",
-        "",
-        "## How a verdict is computed",
-        "",
-        _RULE.rstrip(),
+        f'<p class="verdict-counts"><strong>{len(reg)} claims:</strong> {badges}</p>',
         "",
     ]
+    if res is not None and len(res):
+        _copy(res_path, out_path.parent / RESULTS_COPY)
+        figure, alt = claims_figure(res, out_path.parent / FIGURE_NAME)
+        lines += [
+            f"```{{figure}} {figure.name}",
+            f":alt: {alt}",
+            ":width: 100%",
+            "",
+            "Published (open diamond; a bar for a range) against reproduced (dot: median over the "
+            "trials, bar: 95 % confidence interval), coloured by verdict. Claims without a "
+            "published figure are compared with a reference method: a ratio of 1 is as good "
+            "as the reference.",
+            "```",
+            "",
+        ]
+    lines += ["## How a verdict is computed", "", _RULE.rstrip(), ""]
     papers = list(PAPERS) + sorted(set(reg["paper"]) - set(PAPERS))
     for paper in papers:
         group = reg[reg["paper"] == paper]
@@ -160,47 +417,22 @@ def render_claims_page(
             continue
         title, key = PAPERS.get(paper, (paper, ""))
         cite = f" {{cite:p}}`{key}`" if key else ""
-        lines += [
-            f"## {paper}",
-            "",
-            f"*{title}*{cite}.",
-            "",
-            "| claim (where) | statement | published | reproduced [95 % interval] | verdict "
-            "| notebook | note |",
-            "| --- | --- | --- | --- | --- | --- | --- |",
-        ]
-        for _, claim in group.iterrows():
-            row = computed.get(claim["id"])
-            unit = _cell(claim["unit"])
-            published = _cell(claim["published"])
-            published = f"{published} {unit}" if published and unit else published
-            if row is None:
-                reproduced, verdict, nb, note = "", f"*{PENDING}*", "", ""
-            else:
-                value = _reproduced(row)
-                rep_unit = _cell(row["unit"])
-                reproduced = f"{value} {rep_unit}" if value and rep_unit else value
-                verdict = f"**{_cell(row['verdict'])}**"
-                nb = _notebook(_cell(row["notebook"]), toc)
-                note = _cell(row["note"])
-            cells = [
-                f"`{claim['id']}` ({_cell(claim['where'])})",
-                _cell(claim["statement"]),
-                published,
-                _cell(reproduced),
-                verdict,
-                nb,
-                note,
-            ]
-            lines.append("| " + " | ".join(cells) + " |")
+        lines += [f"## {paper}", "", f"*{title}*{cite}.", ""]
+        lines += _table(group, computed, toc)
         lines.append("")
 
-    out_path.parent.mkdir(parents=True, exist_ok=True)
     text = "\n".join(lines).rstrip("\n") + "\n"
     tmp = out_path.with_name(f".{out_path.name}.tmp")
     tmp.write_text(text)
     tmp.replace(out_path)
     return out_path
+
+
+def _copy(src: Path, dest: Path) -> None:
+    if src.resolve() != dest.resolve():
+        tmp = dest.with_name(f".{dest.name}.tmp")
+        shutil.copyfile(src, tmp)
+        tmp.replace(dest)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -149,9 +149,12 @@ def notebook_writers(out_dir: str | Path):
     """The two writers every notebook uses, bound to its result folder ``out_dir``.
 
     Returns ``(save_table, show_figure)``: ``save_table(df, name)`` writes ``out_dir/name.csv``
-    (:func:`write_table`) and returns ``df``; ``show_figure(fig, name)`` writes
-    ``out_dir/name.png`` (:func:`write_figure`) and displays the saved file; it returns None,
-    so a notebook cell that ends with it shows the figure and no file path.
+    (:func:`write_table`) and returns ``df``; ``show_figure(fig, name, alt=...)`` writes
+    ``out_dir/name.png`` (:func:`write_figure`) and displays the saved file with ``alt`` (a
+    sentence describing the figure) as the image's alt text in the book
+    (:func:`calstudy.io.display.show_png`); it returns None, so a notebook cell that ends with
+    it shows the figure and no file path. Without ``alt`` the alt text names the figure, never
+    its path.
     """
     out = Path(out_dir)
 
@@ -159,11 +162,11 @@ def notebook_writers(out_dir: str | Path):
         write_table(df, out / f"{name}.csv")
         return df
 
-    def show_figure(fig, name: str) -> None:
-        from IPython.display import Image, display
+    def show_figure(fig, name: str, alt: str | None = None) -> None:
+        from calstudy.io.display import show_png
 
         path = write_figure(fig, out / f"{name}.png")
-        display(Image(filename=str(path)))
+        show_png(path, alt or f"figure {name.replace('_', ' ')}")
 
     return save_table, show_figure
 
