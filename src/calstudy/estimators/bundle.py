@@ -289,13 +289,12 @@ def bundle_adjust(
     (Eq. 10) divided by the 3-D noise of that triangulation: ``sigma_mm``, or with
     ``depth_ref_mm`` ``sigma_mm (Z / depth_ref_mm)^2`` at the marker's depth ``Z`` in the view,
     since a stereo depth error grows with the square of the depth. ``fixed_view``'s pose is
-    held (the gauge); the scale comes from the stereo baseline.
-    ``scipy.optimize.least_squares`` (trust region reflective, a Levenberg-Marquardt-type
-    method) minimises the sum of squares. Each observation touches only its view's 6 and its
-    marker's 3 parameters: the Jacobian is sparse, assembled analytically
-    as a ``scipy.sparse`` matrix (``jacobian="analytic"``, solved densely: the problem is small),
-    or estimated by finite differences grouped by that pattern (``jacobian="sparse-fd"``,
-    ``jac_sparsity`` with the LSMR trust-region solver; slower, the same minimum).
+    held; the scale comes from the stereo baseline. ``scipy.optimize.least_squares``
+    (trust region reflective, a Levenberg-Marquardt-type method) minimises the sum of squares.
+    Each observation touches only its view's 6 and its marker's 3 parameters: the Jacobian is
+    sparse, assembled analytically as a ``scipy.sparse`` matrix (``jacobian="analytic"``, solved
+    densely: the problem is small), or estimated by finite differences grouped by that pattern
+    (``jacobian="sparse-fd"``, ``jac_sparsity``, LSMR solver; slower, the same minimum).
 
     Parameters
     ----------
@@ -306,17 +305,14 @@ def bundle_adjust(
     points : array_like, shape (M, 3)
         Initial marker positions; rows of markers nobody saw may be NaN.
     fixed_view : int
+        The view whose pose is held (the gauge).
     sigma_px, sigma_mm : float
         Detection noise (px) and 3-D noise of a triangulated marker (mm), both > 0.
-    max_nfev : int
-        Evaluation budget.
-    max_rms_px : float
-        Largest RMS reprojection error of a converged adjustment.
+    max_nfev, max_rms_px : int, float
+        Evaluation budget; largest RMS reprojection error (px) of a converged adjustment.
     jacobian : {"analytic", "sparse-fd"}
-        How the sparse Jacobian is obtained (see above).
     depth_ref_mm : float or None
-        Depth (mm) at which a triangulated marker has the noise ``sigma_mm``; None: the same
-        noise at every depth.
+        Depth (mm) of the noise ``sigma_mm``; None: the same noise at every depth.
 
     Raises
     ------
