@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 from timing import best_ms, best_seconds
 
 from calstudy.estimators import sfm as mk
+from calstudy.estimators.bundle import bundle_adjust
 from calstudy.estimators.icp import weighted_icp
 from calstudy.papers.dualarm import experiments as ex
 from calstudy.papers.dualarm import simulate as sim
@@ -31,7 +32,7 @@ def icp_timings(scn) -> dict[str, tuple[float, float]]:
     test."""
     r = scn.sphere_radius["A"]
     rng = np.random.default_rng(2)
-    clouds = ex.scans_in_base(
+    clouds, _ = ex.scans_in_base(
         scn, 1, sim.sphere_place(scn, 1, r), r, scn.icp_views, rng, scn.cam2flange[0]
     )
     tree = cKDTree(clouds[0])
@@ -71,10 +72,10 @@ def bundle_timings(scn) -> dict[str, float]:
     )
     return {
         "bundle adjustment, analytic sparse Jacobian": best_seconds(
-            lambda: mk.bundle_adjust(scn.rig, used, poses, points, **kw), REPEATS
+            lambda: bundle_adjust(scn.rig, used, poses, points, **kw), REPEATS
         ),
         "bundle adjustment, finite differences on jac_sparsity": best_seconds(
-            lambda: mk.bundle_adjust(scn.rig, used, poses, points, jacobian="sparse-fd", **kw),
+            lambda: bundle_adjust(scn.rig, used, poses, points, jacobian="sparse-fd", **kw),
             REPEATS,
         ),
         "whole reconstruction (graph to bundle adjustment)": best_seconds(

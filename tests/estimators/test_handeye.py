@@ -72,20 +72,39 @@ def test_ml_refinement_noise_free_and_crb():
     )
 
 
+def _ml_residuals(poses, centres, cov, base_rot, x):
+    """The ML problem written out here, independently of the library: predicted minus measured
+    centre in the sensor frame, whitened by the inverse Cholesky factor of the (3, 3) centre
+    covariance ``cov``, with ``x = [T_F, delta, X_B]`` and ``R_F = base_rot exp(delta)``."""
+    s2f = geo.make_transform(base_rot @ geo.rotvec_to_matrix(x[3:6]), x[:3])
+    whiten = np.linalg.inv(np.linalg.cholesky(cov))
+    return ((_centres(poses, s2f, x[6:9]) - centres) @ whiten.T).ravel()
+
+
 def test_ml_analytic_jacobian_matches_finite_differences():
+    """The covariance of the ML fit is ``(J^T J)^-1`` of its analytic Jacobian at the solution;
+    it must equal the one from central differences of the residuals written out above. The start
+    is rotated far enough that the solution's correction ``delta`` is not small, so the chain
+    rule through ``exp(delta)`` is exercised too."""
     rng = np.random.default_rng(4)
     trans, rot = _poses(rng)
     poses = np.concatenate([trans, rot])
-    cov = np.array([[1e-4, 0.0, 0.0], [0.0, 4e-4, -5e-4], [0.0, -5e-4, 9e-4]])  # correlated y-z
-    problem = he._SphereProblem(poses, _centres(poses), he._whitening(cov, len(poses)), np.eye(3))
-    x = np.concatenate([[1.0, 2.0, 3.0], [0.1, -0.2, 0.3], X_B])
-    jac = problem.jacobian(x)
-    num = np.zeros_like(jac)
+    # correlated y-z noise, as the line-laser centre has
+    cov = np.array([[1e-4, 0.0, 0.0], [0.0, 4e-4, -5e-4], [0.0, -5e-4, 9e-4]])
+    centres = _centres(poses) + rng.multivariate_normal(np.zeros(3), cov, len(poses))
+    start_rot = SENSOR2FLANGE[:3, :3] @ geo.rotvec_to_matrix(np.array([0.1, -0.2, 0.3]))
+    start = geo.make_transform(start_rot, SENSOR2FLANGE[:3, 3] + [1.0, 2.0, 3.0])
+    est = he.sphere_handeye_ml(poses, centres, cov, start, misfit="off")
+    x = est.params
+    assert np.linalg.norm(x[3:6]) > 0.3
+    num = np.zeros((3 * len(poses), 9))
     for k in range(9):
         dx = np.zeros(9)
         dx[k] = 1e-6
-        num[:, k] = (problem.residuals(x + dx) - problem.residuals(x - dx)) / 2e-6
-    np.testing.assert_allclose(jac, num, rtol=1e-5, atol=1e-3)
+        plus = _ml_residuals(poses, centres, cov, start_rot, x + dx)
+        minus = _ml_residuals(poses, centres, cov, start_rot, x - dx)
+        num[:, k] = (plus - minus) / 2e-6
+    np.testing.assert_allclose(est.covariance, np.linalg.inv(num.T @ num), rtol=1e-4)
 
 
 def test_ml_crb_matches_monte_carlo_spread():

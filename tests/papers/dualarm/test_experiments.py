@@ -12,7 +12,9 @@ from calstudy import CalibrationError
 from calstudy.core import geometry as geo
 from calstudy.estimators import handeye as he
 from calstudy.estimators import sfm as mk
+from calstudy.estimators.bundle import bundle_adjust
 from calstudy.estimators.fitting import solve_pnp_ransac
+from calstudy.estimators.stereo_views import make_view, triangulate
 from calstudy.papers.dualarm import experiments as ex
 from calstudy.papers.dualarm import report
 from calstudy.papers.dualarm import simulate as sim
@@ -75,14 +77,14 @@ def test_triangulation_matches_opencv(scenario):
     ul, ur = scenario.rig.project(pts)
     ul += rng.normal(0, 0.3, ul.shape)
     ur += rng.normal(0, 0.3, ur.shape)
-    ours = mk.triangulate(scenario.rig, ul, ur)
+    ours = triangulate(scenario.rig, ul, ur)
     pl = scenario.rig.left.K @ np.eye(4)[:3]
     pr = scenario.rig.right.K @ scenario.rig.left2right[:3]
     h = cv2.triangulatePoints(pl, pr, ul.T, ur.T)
     ref = (h[:3] / h[3]).T
     # both are linear (DLT-type) solutions; they differ only at the noise level of the pixels
     assert np.abs(ours - ref).max() < 0.05
-    exact = mk.triangulate(scenario.rig, *scenario.rig.project(pts))
+    exact = triangulate(scenario.rig, *scenario.rig.project(pts))
     np.testing.assert_allclose(exact, pts, atol=1e-8)
 
 
@@ -101,7 +103,7 @@ def test_pnp_needs_four_markers(scenario):
 
 
 def test_arm_without_four_markers_raises(quiet):
-    view = mk.make_view([0, 1, 2], np.zeros((3, 2)), np.zeros((3, 2)))
+    view = make_view([0, 1, 2], np.zeros((3, 2)), np.zeros((3, 2)))
     data = [(np.eye(4)[None], [view]), (np.eye(4)[None], [view])]
     with pytest.raises(CalibrationError, match=r"at least 4 markers; arm 1's views show \[3\]"):
         ex.marker_base_to_base(quiet, quiet.cam2flange, quiet.markers, data)
@@ -125,8 +127,8 @@ def test_bundle_adjustment_jacobians_agree(scenario):
     (with the depth-dependent weights of Eq. 10)."""
     views, poses, points, ref = spliced(scenario, np.random.default_rng(11))
     kw = dict(fixed_view=ref, sigma_px=0.1, sigma_mm=0.1, depth_ref_mm=500.0)
-    a = mk.bundle_adjust(scenario.rig, views, poses, points, **kw)
-    b = mk.bundle_adjust(scenario.rig, views, poses, points, jacobian="sparse-fd", **kw)
+    a = bundle_adjust(scenario.rig, views, poses, points, **kw)
+    b = bundle_adjust(scenario.rig, views, poses, points, jacobian="sparse-fd", **kw)
     assert a.rms_px == pytest.approx(b.rms_px, rel=1e-5)
     np.testing.assert_allclose(a.points, b.points, atol=1e-4)
     assert a.rms_px < 0.2  # pixel noise 0.1 px per coordinate
@@ -154,7 +156,7 @@ def test_bundle_adjustment_rejects_bad_weights(scenario):
     views, poses, points, ref = spliced(scenario, np.random.default_rng(12))
     kw = dict(fixed_view=ref, sigma_px=0.1, sigma_mm=0.1, depth_ref_mm=0.0)
     with pytest.raises(CalibrationError, match=r"depth_ref_mm \(0.0\) must be > 0"):
-        mk.bundle_adjust(scenario.rig, views, poses, points, **kw)
+        bundle_adjust(scenario.rig, views, poses, points, **kw)
 
 
 def test_bundle_adjustment_divergence_raises(scenario):
@@ -162,7 +164,7 @@ def test_bundle_adjustment_divergence_raises(scenario):
     bad = points + np.random.default_rng(0).normal(0, 150.0, points.shape)
     kw = dict(fixed_view=ref, sigma_px=0.1, sigma_mm=0.1, max_nfev=3)
     with pytest.raises(CalibrationError, match="bundle adjustment diverged: RMS reprojection"):
-        mk.bundle_adjust(scenario.rig, views, poses, bad, **kw)
+        bundle_adjust(scenario.rig, views, poses, bad, **kw)
 
 
 def test_ransac_pnp_rejects_gross_errors(scenario):

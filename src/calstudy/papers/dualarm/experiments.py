@@ -27,9 +27,11 @@ from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment
 from calstudy.estimators import sfm as mk
+from calstudy.estimators.bundle import refine_camera_pose
 from calstudy.estimators.fitting import fit_rigid, fit_sphere, solve_pnp, solve_pnp_ransac
 from calstudy.estimators.handeye import MIN_PAIR_ROTATION, base_to_base, opencv_handeye
 from calstudy.estimators.icp import weighted_icp
+from calstudy.estimators.stereo_views import View
 from calstudy.papers.dualarm import simulate as sim
 from calstudy.papers.dualarm.scenario import ARMS, SPHERES, Scenario, load_scenario
 
@@ -56,7 +58,7 @@ def hand_eyes(scn: Scenario, rng: np.random.Generator) -> np.ndarray:
 # 2-3. markers and the base-to-base chain (Eq. 5-11)
 
 
-def survey_markers(scn: Scenario, views: list[mk.View], max_nfev: int = 200):
+def survey_markers(scn: Scenario, views: list[View], max_nfev: int = 200):
     """Global marker coordinates from the survey views (Eq. 5-10); the Eq. 10 weight is the
     marker noise at the working distance, scaled with the square of each marker's depth."""
     return mk.reconstruct_markers(
@@ -71,11 +73,11 @@ def survey_markers(scn: Scenario, views: list[mk.View], max_nfev: int = 200):
     )
 
 
-def locate_world(scn: Scenario, view: mk.View, points) -> np.ndarray:
+def locate_world(scn: Scenario, view: View, points) -> np.ndarray:
     """``world2cam`` of one view of known markers: PnP (>= 4 markers), then Eq. 9-10."""
     obj = np.asarray(points)[view.ids]
     init = mk.pnp_pose(obj, view.uv_left, scn.rig.left)
-    return mk.refine_camera_pose(
+    return refine_camera_pose(
         scn.rig,
         view,
         points,

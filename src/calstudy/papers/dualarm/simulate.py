@@ -15,7 +15,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators import sfm as mk
+from calstudy.estimators.stereo_views import View, make_view
 from calstudy.papers.dualarm.scenario import ARMS, Scenario
 
 # ----------------------------------------------------------------------------------------------
@@ -88,7 +88,7 @@ def mid_point(scn: Scenario) -> np.ndarray:
 # images of the markers and of the calibration plate
 
 
-def observe_markers(scn: Scenario, world2cam, rng: np.random.Generator) -> mk.View:
+def observe_markers(scn: Scenario, world2cam, rng: np.random.Generator) -> View:
     """Markers detected in one stereo pair: visible in both images and facing the camera, each
     lost with probability ``loss_rate``, centres with ``sigma_px`` noise."""
     w2c = np.asarray(world2cam)
@@ -106,7 +106,7 @@ def observe_markers(scn: Scenario, world2cam, rng: np.random.Generator) -> mk.Vi
     seen &= rng.random(len(pl)) >= scn.loss_rate
     noise = rng.normal(0.0, scn.sigma_px, (2, len(pl), 2))
     ids = np.flatnonzero(seen)
-    return mk.make_view(ids, ul[ids] + noise[0, ids], ur[ids] + noise[1, ids])
+    return make_view(ids, ul[ids] + noise[0, ids], ur[ids] + noise[1, ids])
 
 
 def plate_images(
@@ -175,7 +175,7 @@ def circular_plate_images(
     return out
 
 
-def survey_views(scn: Scenario, rng: np.random.Generator, bridges: bool = True) -> list[mk.View]:
+def survey_views(scn: Scenario, rng: np.random.Generator, bridges: bool = True) -> list[View]:
     """The scanner's unordered stereo images of the markers: ``survey_views_per_group`` of each
     group and ``survey_bridge_views`` of both (none with ``bridges=False``)."""
     poses = [
