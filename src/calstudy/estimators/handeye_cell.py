@@ -7,13 +7,18 @@ the predicted against the simulated accuracy at a tool point.
 
 from __future__ import annotations
 
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from calstudy.core import geometry as geo
+from calstudy.core.montecarlo import Experiment
 from calstudy.estimators import handeye_poses as hp
 from calstudy.estimators.handeye_sim import SimulatedCell, simulate_cell
-from calstudy.estimators.posefile import PoseList
+from calstudy.estimators.posefile import PoseList, read_pose_list, write_pose_list
 
 
 def example_cell(
@@ -180,41 +185,128 @@ def pose_residual_figure(table: pd.DataFrame, limit: float):
     return fig
 
 
-def tool_point_check(
-    result: hp.HandEyeResult,
-    point_camera,
-    n_trials: int,
-    rng: np.random.Generator,
-    **calibrate_kwargs,
-) -> pd.DataFrame:
-    """Predicted against simulated accuracy of a tool point mapped by ``X``.
+@dataclass(frozen=True)
+class ToolPointCell:
+    """What one re-calibration of the tool-point check needs (the engine's scenario).
 
-    The prediction is :meth:`HandEyeResult.point_covariance`. The check re-draws the camera
-    poses ``n_trials`` times on the same robot poses around the estimate, with the estimated
-    noise level, recalibrates each time and takes the spread of ``X p``; outliers (flagged poses)
-    are left out of the simulation. ``n_trials = 0`` gives only the prediction.
-
-    Returns
-    -------
-    pandas.DataFrame
-        Rows ``predicted`` and (if simulated) ``simulated``: std along x, y, z and the RMS
-        radius, mm.
+    ``a`` are the robot poses kept (flagged poses left out), ``b_true`` the camera poses the
+    estimate predicts for them, ``x`` the estimate, ``point`` the tool point in the camera frame
+    (mm), ``sigma_rot``/``sigma_trans`` the noise level, ``robust``/``setup`` as calibrated.
     """
-    p = np.asarray(point_camera, dtype=float)
-    cov = result.point_covariance(p)
+
+    a: np.ndarray
+    b_true: np.ndarray
+    x: np.ndarray
+    point: np.ndarray
+    sigma_rot: float
+    sigma_trans: float
+    given_sigmas: bool
+
+
+def tool_point_cell(result: hp.HandEyeResult, point_camera, given_sigmas: bool) -> ToolPointCell:
+    """The scenario of :func:`tool_point_trial` from a calibration ``result``."""
+    keep = ~np.isin(result.prepared.ids, result.flagged)
+    a = result.prepared.a[keep]
+    return ToolPointCell(
+        a=a,
+        b_true=geo.invert(result.x) @ geo.invert(a) @ result.z,
+        x=result.x,
+        point=np.asarray(point_camera, dtype=float),
+        sigma_rot=float(result.sigma_rot),
+        sigma_trans=float(result.sigma_trans),
+        given_sigmas=given_sigmas,
+    )
+
+
+def tool_point_trial(cell: ToolPointCell, rng: np.random.Generator) -> dict:
+    """One re-calibration: camera poses re-drawn around the estimate with its noise level, the
+    hand-eye fitted again, and the tool point's deviation from the estimate's (mm)."""
+    b = geo.perturb(cell.b_true, cell.sigma_rot, cell.sigma_trans, rng)
+    sigmas = {"sigma_rot": cell.sigma_rot, "sigma_trans": cell.sigma_trans}
+    fit = hp.calibrate_handeye(
+        cell.a, b, setup="eye_in_hand", check_convention="off",
+        **(sigmas if cell.given_sigmas else {}),
+    )
+    d = geo.apply(fit.x, cell.point) - geo.apply(cell.x, cell.point)
+    return {"dx_mm": float(d[0]), "dy_mm": float(d[1]), "dz_mm": float(d[2])}
+
+
+def tool_point_summary(result: hp.HandEyeResult, point_camera, trials: pd.DataFrame | None):
+    """Predicted (:meth:`HandEyeResult.point_covariance`) against simulated accuracy of a tool
+    point mapped by ``X``: std along x, y, z and the RMS radius, mm; the simulated row from the
+    rows of :func:`tool_point_trial` (none if ``trials`` is None or empty)."""
+    cov = result.point_covariance(np.asarray(point_camera, dtype=float))
     rows = [("predicted", *np.sqrt(np.diag(cov)), np.sqrt(np.trace(cov)))]
-    if n_trials > 0:
-        keep = ~np.isin(result.prepared.ids, result.flagged)
-        a = result.prepared.a[keep]
-        b_true = geo.invert(result.x) @ geo.invert(a) @ result.z
-        pts = []
-        for _ in range(n_trials):
-            b = geo.perturb(b_true, result.sigma_rot, result.sigma_trans, rng)
-            fit = hp.calibrate_handeye(
-                a, b, setup="eye_in_hand", check_convention="off", **calibrate_kwargs
-            )
-            pts.append(geo.apply(fit.x, p))
-        dev = np.array(pts) - geo.apply(result.x, p)
-        sim = dev.T @ dev / n_trials
+    if trials is not None and len(trials):
+        dev = trials[["dx_mm", "dy_mm", "dz_mm"]].to_numpy(float)
+        sim = dev.T @ dev / len(dev)
         rows.append(("simulated", *np.sqrt(np.diag(sim)), np.sqrt(np.trace(sim))))
     return pd.DataFrame(rows, columns=["kind", "std_x_mm", "std_y_mm", "std_z_mm", "rms_mm"])
+
+
+def cell_sigmas(sigma_rot_rad: float, sigma_trans_mm: float) -> dict:
+    """The noise keywords of the calibration: given when ``sigma_rot_rad > 0``, else estimated
+    from the residuals (an empty dict)."""
+    if sigma_rot_rad > 0:
+        return {"sigma_rot": sigma_rot_rad, "sigma_trans": sigma_trans_mm}
+    return {}
+
+
+def calibrate_cell(
+    seed: int,
+    poses_csv: str,
+    setup: str,
+    n_poses: int,
+    n_duplicates: int,
+    outlier: tuple[float, float],
+    sigmas: dict,
+    robust: str | None,
+) -> dict:
+    """The notebook's calibration, as one recipe: the pose list (the user's file, or the
+    synthetic cell written to a pose list and read back), the plain and robust ML hand-eye and
+    the robot-world-hand-eye fit. Returns a dict with ``poses``, ``source``, ``truth`` (the
+    synthetic cell's camera2flange, or None) and ``fits``."""
+    if poses_csv:
+        poses, source, truth = read_pose_list(poses_csv), f"user pose list {poses_csv}", None
+    else:
+        # through the file format, as a user's list would come: the writer's rounding included
+        cell = example_cell(seed, n_poses, n_duplicates, outlier)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = write_pose_list(
+                Path(tmp) / "poses.csv", cell.flange2base, cell.target2camera, rotation="matrix"
+            )
+            poses = read_pose_list(path)
+        source, truth = "synthetic cell", cell.camera2flange
+    plain = hp.calibrate_handeye(**poses.arguments(), setup=setup, **sigmas)
+    robust_fit = hp.calibrate_handeye(
+        **poses.arguments(), setup=setup, robust=robust, rng=np.random.default_rng(seed), **sigmas
+    )
+    rwhe = hp.calibrate_robot_world_handeye(
+        **poses.arguments(), setup=setup, robust=robust, rng=np.random.default_rng(seed), **sigmas
+    )
+    fits = {"ML": plain, f"ML, {robust}": robust_fit, f"AX = ZB ML, {robust}": rwhe}
+    return {"poses": poses, "source": source, "truth": truth, "fits": fits, "robust": robust_fit}
+
+
+def tool_point_experiment(
+    n_trials: int,
+    tool_point_mm: list,
+    seed: int,
+    poses_csv: str = "",
+    setup: str = "eye_in_hand",
+    n_poses: int = 20,
+    n_duplicates: int = 3,
+    outlier_mm: float = 68.0,
+    outlier_deg: float = 1.8,
+    sigma_rot_rad: float = 0.0,
+    sigma_trans_mm: float = 0.0,
+    robust: str | None = "cauchy",
+) -> Experiment:
+    """The Monte Carlo check of the predicted tool-point accuracy, as an engine experiment built
+    from the notebook's parameters alone (it repeats the calibration to get the estimate)."""
+    sigmas = cell_sigmas(sigma_rot_rad, sigma_trans_mm)
+    fit = calibrate_cell(
+        seed, poses_csv, setup, n_poses, n_duplicates, (outlier_mm, outlier_deg), sigmas, robust
+    )["robust"]
+    cell = tool_point_cell(fit, tool_point_mm, bool(sigmas))
+    return Experiment("tool_point", tool_point_trial, cell, n_trials)
