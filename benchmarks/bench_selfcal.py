@@ -1,4 +1,4 @@
-"""Time one selfcal identification: 24 sphere-centre measurements, 30 parameters (budget 50 ms).
+"""Time one selfcal identification: 24 sphere-centre measurements, 30 parameters (budget 10 ms).
 
 Prints the best of several repeats (wall clock) of ``calstudy.papers.selfcal.identify.identify``
 from the good initial estimate and from the very poor one, and of one model evaluation with its
@@ -16,7 +16,7 @@ from calstudy.papers.selfcal.model import N_PARAMS, GlobalModel
 from calstudy.papers.selfcal.scenario import load_scenario
 from calstudy.papers.selfcal.simulate import poor_start
 
-BUDGET_MS = 50.0
+BUDGET_MS = 10.0
 REPEATS = 20
 
 
@@ -24,6 +24,7 @@ def main() -> None:
     scenario = load_scenario()
     station, meas = example_station(scenario, 1)
     poor = poor_start(scenario, station, np.random.default_rng(0))
+    # the example cell of the calibration experiment (trial 0 of seed 1)
     good_fit = identify(meas, station.nominal_params)
     poor_fit = identify(meas, poor)
     model = GlobalModel()
@@ -40,7 +41,8 @@ def main() -> None:
     }
     print(f"selfcal: {len(meas)} measurements, {N_PARAMS} parameters, best of {REPEATS}")
     for label, ms in timings.items():
-        print(f"  {label:<55s} {ms:8.2f} ms   (budget {BUDGET_MS:g} ms per identification)")
+        budget = "" if label.startswith("points") else f"   (budget {BUDGET_MS:g} ms)"
+        print(f"  {label:<55s} {ms:8.2f} ms{budget}")
 
 
 if __name__ == "__main__":

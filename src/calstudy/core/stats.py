@@ -13,18 +13,25 @@ import numpy as np
 from calstudy.core.errors import CalibrationError
 
 
-def _finite_samples(name: str, samples, min_count: int = 1) -> np.ndarray:
-    """Return ``samples`` as a float array with at least one axis, after checking it."""
-    a = np.asarray(samples, dtype=float)
+def finite_samples(name: str, samples, min_count: int = 1) -> np.ndarray:
+    """Return ``samples`` as a float array with at least one axis (one row per trial), after
+    checking that it is numeric, holds ``min_count`` rows and no NaN or inf (the message names
+    the first bad trial)."""
+    try:
+        a = np.asarray(samples, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(f"{name} is not numeric ({exc}); expected floats") from exc
     if a.ndim == 0:
         a = a[None]
     if a.shape[0] < min_count:
         raise CalibrationError(f"{name} holds {a.shape[0]} samples; at least {min_count} needed")
     bad = ~np.isfinite(a)
     if bad.any():
+        first = np.argwhere(bad)[0]
+        where = int(first[0]) if a.ndim == 1 else tuple(int(i) for i in first)
         raise CalibrationError(
-            f"{name} holds {int(bad.sum())} non-finite value(s) (first at index "
-            f"{tuple(int(i) for i in np.argwhere(bad)[0])}); drop or explain failed trials first"
+            f"{name} holds {int(bad.sum())} non-finite value(s) of {a.size} (first at trial "
+            f"{where}); drop or explain failed trials first"
         )
     return a
 
@@ -58,7 +65,7 @@ def rmse(x, axis: int | None = None) -> float | np.ndarray:
     a = np.asarray(x, dtype=float)
     if a.size == 0:
         raise CalibrationError("rmse of an empty array (0 values)")
-    _finite_samples("rmse input", a)
+    finite_samples("rmse input", a)
     out = np.sqrt(np.mean(np.square(a), axis=axis))
     return float(out) if np.ndim(out) == 0 else out
 
@@ -85,7 +92,7 @@ def percentile_interval(samples, level: float = 0.95) -> tuple[float, float]:
         If there are fewer than 2 samples, a sample is not finite, or ``level`` is not in (0, 1).
     """
     level = _check_level(level)
-    a = _finite_samples("samples", samples, min_count=2)
+    a = finite_samples("samples", samples, min_count=2)
     if a.ndim != 1:
         raise CalibrationError(f"samples has shape {a.shape}; expected (N,)")
     lo, hi = np.quantile(a, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
@@ -136,7 +143,7 @@ def bootstrap_interval(
         raise CalibrationError(f"rng is a {type(rng).__name__}; expected numpy.random.Generator")
     if int(n_boot) < 1:
         raise CalibrationError(f"n_boot is {n_boot}; at least 1 resample needed")
-    a = _finite_samples("samples", samples, min_count=2)
+    a = finite_samples("samples", samples, min_count=2)
     n = a.shape[0]
     estimate = np.asarray(statistic(a[None, ...]), dtype=float).reshape(-1)
     idx = rng.integers(0, n, size=(int(n_boot), n))
@@ -162,7 +169,7 @@ def median_and_spread(samples, level: float = 0.95) -> tuple[float, float, float
 
     One sample gives ``(x, x, x)``. Raises :class:`CalibrationError` on no or non-finite values.
     """
-    a = _finite_samples("samples", samples, min_count=1).reshape(-1)
+    a = finite_samples("samples", samples, min_count=1).reshape(-1)
     lo, hi = percentile_interval(a, level) if a.size >= 2 else (float(a[0]), float(a[0]))
     return float(np.median(a)), lo, hi
 
@@ -196,7 +203,7 @@ def lilliefors_test(samples) -> tuple[float, float]:
     n = 0 if x.ndim == 0 else x.shape[0]
     if n < 4:
         raise CalibrationError(f"a Lilliefors test needs at least 4 samples; samples holds {n}")
-    _finite_samples("samples", x)
+    finite_samples("samples", x)
     if x.ndim != 1:
         raise CalibrationError(f"samples has shape {x.shape}; expected (n,)")
     if np.ptp(x) <= 1e-12 * max(1.0, float(np.abs(x).max())):

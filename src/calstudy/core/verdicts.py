@@ -27,6 +27,7 @@ import numpy as np
 from scipy.stats import binom
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core.stats import finite_samples
 
 #: The four verdicts of the claims register.
 VERDICTS = ("reproduced", "direction only", "not reproduced", "not testable")
@@ -117,19 +118,10 @@ def _finite(name: str, value: object) -> float:
 
 def _trials(name: str, values: object) -> np.ndarray:
     """``values`` as a finite float array of shape (N,), N >= 1."""
-    try:
-        a = np.asarray(values, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise CalibrationError(f"{name} is not numeric ({exc}); expected (N,) floats") from exc
-    if a.ndim != 1 or a.size == 0:
-        raise CalibrationError(f"{name} has shape {a.shape}; expected (N,), one value per trial")
-    bad = ~np.isfinite(a)
-    if bad.any():
-        raise CalibrationError(
-            f"{name} holds {int(bad.sum())} non-finite value(s) of {a.size} (first at trial "
-            f"{int(np.flatnonzero(bad)[0])}); drop or explain failed trials first"
-        )
-    return a
+    shape = np.shape(values) if not isinstance(values, str) else ()
+    if len(shape) != 1 or shape[0] == 0:
+        raise CalibrationError(f"{name} has shape {shape}; expected (N,), one value per trial")
+    return finite_samples(name, values)
 
 
 def _check_level(level: float) -> float:

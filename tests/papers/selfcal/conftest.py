@@ -16,8 +16,11 @@ def scenario():
 
 @pytest.fixture(scope="module")
 def quiet(scenario):
-    """The scenario without any noise: scanner, repeatability and tracker exact."""
-    return scenario.with_(sigma_point_mm=0.0, repeatability_mm=0.0, tracker=(0.0, 0.0, 2.0))
+    """The scenario without any noise (scanner, repeatability and tracker exact) and without the
+    unmodelled joint compliance: the true system lies in the model class."""
+    return scenario.with_(
+        sigma_point_mm=0.0, repeatability_mm=0.0, tracker=(0.0, 0.0, 2.0), compliance_scale=0.0
+    )
 
 
 @pytest.fixture(scope="module")

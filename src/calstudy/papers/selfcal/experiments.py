@@ -1,42 +1,58 @@
-"""Trials, Monte Carlo loops and sweeps of the ``selfcal`` notebook.
+"""Trials and Monte Carlo experiments of the ``selfcal`` notebook (run by the shared engine).
 
-:func:`run_trial` is one simulated calibration (draw a cell, measure it, identify it every way,
-validate); :func:`monte_carlo` repeats it, :func:`noise_sweep` repeats that at scaled noise, and
-:func:`identifiability_designs` compares the scanner with a one-point sensor on the same poses.
-Trial ``t`` of seed ``s`` draws from ``numpy.random.default_rng([s, t])``.
+Each experiment is built by a module-level factory (``*_experiment``) from JSON-able keyword
+arguments (the scenario path, ``""`` for the paper's, and the trial count), so that the tests can
+rebuild it from ``experiments.json`` and recompute stored trials:
+
+- :func:`calibration_experiment`: the experiment that decides the claims; :func:`calibration_trial`
+  draws a cell, measures it, identifies it by the one-step model (paper's LM, maximum likelihood,
+  very poor start) and by every multi-step route, and validates each on 10 new placements,
+  beside the two controls (nothing identified; the true parameters).
+- :func:`compliance_sweep_experiment`: the same trial at several sizes of the unmodelled joint
+  compliance.
+- :func:`noise_sweep_experiment`: the same trial with all noise scaled.
+- :func:`basin_experiment`: :func:`basin_trial`, convergence from starts farther and farther away.
+
+The engine hands every trial its own generator (seed, experiment, sweep point, trial index).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from calstudy.core.config import scenario_file
 from calstudy.core.errors import CalibrationError
-from calstudy.core.stats import median_and_spread
+from calstudy.core.montecarlo import Experiment, trial_rng
 from calstudy.papers.selfcal.identify import (
     RANK_RTOL,
     Identification,
     Measurements,
+    crb_covariance,
     identifiability,
     identify,
     scaled_jacobian,
     three_step,
+    three_step_alternated,
+    three_step_reordered,
+    two_step,
 )
 from calstudy.papers.selfcal.model import (
-    BASE,
     IS_LENGTH,
     N_PARAMS,
     PARAM_NAMES,
     ROBOT,
-    SENSOR,
     angle_wrap,
     default_model,
     scaled_error,
 )
-from calstudy.papers.selfcal.scenario import Scenario
+from calstudy.papers.selfcal.scenario import Scenario, load_scenario
 from calstudy.papers.selfcal.simulate import (
     Station,
     draw_placements,
@@ -45,192 +61,264 @@ from calstudy.papers.selfcal.simulate import (
     simulate,
 )
 
-METHODS = ("one-step (paper)", "one-step ML", "three-step", "nominal robot")
+ONE_STEP = "one-step (paper)"
+ONE_STEP_ML = "one-step ML"
+NULL = "nothing identified"
+ORACLE = "ideal identification"
+TRUTH = "true parameters"
+#: the multi-step routes (issue 15): as the paper describes it, reordered, alternated, two-step
+ROUTES = (
+    "three-step",
+    "three-step reordered",
+    "three-step alternated",
+    "two-step (sensor+robot, then exterior)",
+)
+METHODS = (ONE_STEP, ONE_STEP_ML, *ROUTES, NULL, ORACLE, TRUTH)
+#: rounds of the alternated route (hand-eye then robot); its limit is the two-step joint fit
+ALTERNATION_ROUNDS = 5
+#: iterations of Fig. 5 stored per trial (the last value repeats after the solver stopped)
+HISTORY_LENGTH = 12
+#: evaluation budget of one identification; a failed run counts as this many iterations
+MAX_EVALUATIONS = 100
+#: a start reached "the same solution" when its scaled parameter distance to the good start's
+#: solution is below this (mm, angles as mm at 1 m)
+SAME_SOLUTION_MM = 1e-3
+
+
+#: bump when a trial function changes what it returns: it keys the engine's trial cache
+TRIAL_VERSION = "selfcal-trials-2"
+
+
+def _scenario(scenario_toml: str) -> Scenario:
+    return load_scenario(scenario_toml or None)
+
+
+def scenario_key(scenario_toml: str = "") -> str:
+    """Cache key of a scenario: the scenario file, the robot table it names, the trial version.
+
+    The scenario holds a Pinocchio robot, which has no stable text form for the engine's default
+    fingerprint.
+    """
+    path = scenario_file("selfcal", "scenario.toml", scenario_toml or None)
+    sc = load_scenario(path)
+    robot = sc.robot
+    record = {
+        "version": TRIAL_VERSION,
+        "scenario": Path(path).read_text(),
+        "robot": [
+            robot.name,
+            robot.parameters().tolist(),
+            robot.base.tolist(),
+            robot.tool.tolist(),
+        ],
+    }
+    return hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()
+
+
+def _experiment(name, trial, scenario_toml, n_trials, points=({},)) -> Experiment:
+    return Experiment(
+        name, trial, _scenario(scenario_toml), n_trials, points, scenario_key(scenario_toml)
+    )
 
 
 # ----------------------------------------------------------------------------------------------
-# one trial
+# one calibration trial
 
 
-def _identify_all(scenario: Scenario, st: Station, meas: Measurements, rng: np.random.Generator):
-    """The fits from the good and very poor starts and by ML, and the parameters per method."""
-    fits: dict[str, Identification | None] = {}
-    fits["good"] = identify(meas, st.nominal_params)
-    try:
-        fits["poor"] = identify(meas, poor_start(scenario, st, rng))
-    except CalibrationError:
-        fits["poor"] = None
-    fits["ml"] = identify(meas, st.nominal_params, weighted=True)
-    ext = np.zeros(N_PARAMS, bool)
-    ext[BASE] = ext[SENSOR] = True
-    params = {
-        METHODS[0]: fits["good"].params,
-        METHODS[1]: fits["ml"].params,
-        METHODS[2]: three_step(meas, scenario.robot, st.nominal_params),
-        METHODS[3]: identify(meas, st.nominal_params, free=ext).params,
-    }
-    return fits, params
+def _cell(scenario: Scenario, rng: np.random.Generator, compliance_scale: float):
+    """Draw a true cell, its 24 calibration measurements and 10 validation measurements."""
+    st = draw_station(scenario, rng)
+    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, rng, compliance_scale)
+    val_sites = draw_placements(scenario, scenario.n_validation, rng)
+    val = simulate(scenario, st, val_sites, 1, rng, compliance_scale)
+    return st, meas, val
 
 
-def _validation_rows(trial: int, params: dict, val: Measurements, truth: np.ndarray):
-    """Per method the validation errors (``methods`` rows) and, in trial 0, per placement."""
-    model = default_model()
-    reference = model.points(truth, val.Q, val.C_true)
-    methods, validation = [], []
-    for name, p in params.items():
-        err = model.points(p, val.Q, val.C) - val.P_ref
-        norm = np.linalg.norm(err, axis=1)
-        model_err = np.linalg.norm(model.points(p, val.Q, val.C_true) - reference, axis=1)
-        methods.append(
-            {
-                "trial": trial,
-                "method": name,
-                "val_mean_mm": norm.mean(),
-                "val_max_mm": norm.max(),
-                "val_rms_mm": float(np.sqrt(np.mean(norm**2))),
-                "model_rms_mm": float(np.sqrt(np.mean(model_err**2))),
-                "robot_param_error": scaled_error(p, truth, ROBOT),
-            }
-        )
-        if trial == 0:
-            validation += [
-                {
-                    "method": name,
-                    "placement": j + 1,
-                    "dx_mm": e[0],
-                    "dy_mm": e[1],
-                    "dz_mm": e[2],
-                    "norm_mm": n,
-                }
-                for j, (e, n) in enumerate(zip(err, norm, strict=True))
-            ]
-    return methods, validation
-
-
-def _convergence_row(trial: int, fits: dict, st: Station, meas: Measurements) -> dict:
-    """Iterations of the fits, whether the poor start found the same solution, Jacobian rank."""
-    truth = st.true_params
-    convergence = {
-        "trial": trial,
-        "good_iterations": fits["good"].iterations_to(),
-        "good_solver_iterations": fits["good"].iterations,
-        "poor_converged": fits["poor"] is not None,
-        "poor_iterations": fits["poor"].iterations_to() if fits["poor"] else np.nan,
-        "poor_solver_iterations": fits["poor"].iterations if fits["poor"] else np.nan,
-        "poor_same_solution": bool(
-            fits["poor"] is not None
-            and scaled_error(fits["poor"].params, fits["good"].params) < 1e-3
-        ),
-        "nominal_robot_param_error": scaled_error(st.nominal_params, truth, ROBOT),
-    }
-    _, jac = default_model().points_and_jacobian(truth, meas.Q, meas.C_true)
-    sv = np.linalg.svd(scaled_jacobian(jac), compute_uv=False)
-    convergence["jacobian_rank"] = int(np.sum(sv > sv[0] * RANK_RTOL))
-    convergence["jacobian_condition"] = float(sv[0] / sv[-1])
-    return convergence
-
-
-def _robot_rows(trial: int, fits: dict, st: Station) -> list[dict]:
-    """Per robot parameter: true, identified (paper and ML) minus nominal, and the std."""
-    truth = st.true_params
-    std = fits["good"].estimate.std
-    return [
-        {
-            "trial": trial,
-            "name": PARAM_NAMES[i],
-            "unit": "mm" if IS_LENGTH[i] else "deg",
-            "true_minus_nominal": _conv(truth[i] - st.nominal_params[i], i),
-            "identified_minus_nominal": _conv(
-                angle_wrap(fits["good"].params - st.nominal_params)[i], i
-            ),
-            "ml_identified_minus_nominal": _conv(
-                angle_wrap(fits["ml"].params - st.nominal_params)[i], i
-            ),
-            "std": _conv(std[i], i),
-        }
-        for i in range(ROBOT.start, ROBOT.stop)
-    ]
+def _history(fit: Identification | None, prefix: str) -> dict:
+    if fit is None:
+        return {f"{prefix}_err_{i}": math.nan for i in range(HISTORY_LENGTH)}
+    e = fit.mean_error_mm
+    return {f"{prefix}_err_{i}": float(e[min(i, len(e) - 1)]) for i in range(HISTORY_LENGTH)}
 
 
 def _conv(value: float, i: int) -> float:
     return float(value if IS_LENGTH[i] else math.degrees(value))
 
 
-def run_trial(scenario: Scenario, seed: int, trial: int) -> dict:
-    """One simulated calibration: draw a station, measure, identify every way, validate.
+def _one_step_extras(scenario, st, meas, val, good, poor, ml) -> dict:
+    """Trial-level columns of the one-step row: convergence, rank, CRB, robot parameters."""
+    model = default_model()
+    truth = st.true_params
+    _, jac = model.points_and_jacobian(truth, meas.Q, meas.C_true)
+    sv = np.linalg.svd(scaled_jacobian(jac), compute_uv=False)
+    crb = crb_covariance(meas, truth, model)
+    _, jv = model.points_and_jacobian(truth, val.Q, val.C_true)
+    crb_rms = math.sqrt(float(np.trace(jv @ crb @ jv.T)) / len(val))
+    same = poor is not None and scaled_error(poor.params, good.params) < SAME_SOLUTION_MM
+    row = {
+        "crb_model_rms_mm": crb_rms,
+        "jacobian_rank": int(np.sum(sv > sv[0] * RANK_RTOL)),
+        "jacobian_condition": float(sv[0] / sv[-1]),
+        "good_iterations": good.iterations_to(),
+        "good_solver_iterations": good.iterations,
+        "poor_converged": poor is not None,
+        "poor_same_solution": bool(same),
+        "poor_iterations": poor.iterations_to() if poor is not None else MAX_EVALUATIONS,
+        "poor_solver_iterations": poor.iterations if poor is not None else MAX_EVALUATIONS,
+        **_history(good, "good"),
+        **_history(poor, "poor"),
+    }
+    std = good.estimate.std
+    for i in range(ROBOT.start, ROBOT.stop):
+        name = PARAM_NAMES[i]
+        row[f"true_{name}"] = _conv(truth[i] - st.nominal_params[i], i)
+        row[f"id_{name}"] = _conv(angle_wrap(good.params - st.nominal_params)[i], i)
+        row[f"ml_{name}"] = _conv(angle_wrap(ml.params - st.nominal_params)[i], i)
+        row[f"std_{name}"] = _conv(std[i], i)
+    return row
 
-    Returns a dict of tables (lists of row dicts): ``methods``, ``history``, ``convergence``
-    (with the rank of the Jacobian at the truth), ``robot`` and ``validation``.
+
+def _validate(params: np.ndarray, val: Measurements, truth: np.ndarray) -> dict:
+    """Validation errors (Eq. 13-14) of one parameter vector on the validation placements.
+
+    ``val_*``: identified model at the commanded joints and fitted centres against the tracker
+    (what the paper reports). ``model_rms_mm``: identified model at the commanded joints and the
+    noise-free centres against where the sensor really saw them (true model at the joint angles
+    as the robot stood): the error of the identified geometry, unmodelled deflection included.
     """
-    rng = np.random.default_rng([seed, trial])
-    st = draw_station(scenario, rng)
-    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, rng)
-    val_sites = draw_placements(scenario, scenario.n_validation, rng)
-    val = simulate(scenario, st, val_sites, 1, rng)
-    fits, params = _identify_all(scenario, st, meas, rng)
-    methods, validation = _validation_rows(trial, params, val, st.true_params)
-    history = [
-        {"trial": trial, "start": start, "iteration": i, "mean_error_mm": e}
-        for start in ("good", "poor")
-        if fits[start] is not None
-        for i, e in enumerate(fits[start].mean_error_mm)
-    ]
+    model = default_model()
+    err = np.linalg.norm(model.points(params, val.Q, val.C) - val.P_ref, axis=1)
+    q_true = val.Q if val.Q_true is None else val.Q_true
+    reference = model.points(truth, q_true, val.C_true)
+    model_err = np.linalg.norm(model.points(params, val.Q, val.C_true) - reference, axis=1)
     return {
-        "methods": methods,
-        "history": history,
-        "convergence": [_convergence_row(trial, fits, st, meas)],
-        "robot": _robot_rows(trial, fits, st),
-        "validation": validation,
+        "val_mean_mm": float(err.mean()),
+        "val_max_mm": float(err.max()),
+        "val_rms_mm": float(np.sqrt(np.mean(err**2))),
+        "model_rms_mm": float(np.sqrt(np.mean(model_err**2))),
+        "robot_param_error": scaled_error(params, truth, ROBOT),
     }
 
 
-# ----------------------------------------------------------------------------------------------
-# Monte Carlo and sweeps
+def _ideal_identification(meas: Measurements, st: Station) -> np.ndarray:
+    """The one-step fit to noise-free data at the same poses (commanded joints, exact centres
+    and tracker readings, the robot where it really stood): the oracle of the controls."""
+    model = default_model()
+    q_true = meas.Q if meas.Q_true is None else meas.Q_true
+    exact = replace(meas, C=meas.C_true, P_ref=model.points(st.true_params, q_true, meas.C_true))
+    return identify(exact, st.nominal_params, max_evaluations=MAX_EVALUATIONS).params
 
 
-def monte_carlo(scenario: Scenario, seed: int, n_trials: int, progress: bool = False) -> dict:
-    """:func:`run_trial` over ``n_trials`` seeds; one DataFrame per table of its result."""
-    if n_trials < 2:
-        raise CalibrationError(f"Monte Carlo needs at least 2 trials (got {n_trials})")
-    tables: dict[str, list] = {}
-    for t in range(n_trials):
-        if progress and (t % 20 == 0 or t == n_trials - 1):
-            print(f"trial {t + 1}/{n_trials}", flush=True)
-        for key, rows in run_trial(scenario, seed, t).items():
-            tables.setdefault(key, []).extend(rows)
-    return {k: pd.DataFrame(v) for k, v in tables.items()}
+def calibration_trial(
+    scenario: Scenario,
+    rng: np.random.Generator,
+    compliance_scale: float | None = None,
+    noise_scale: float = 1.0,
+) -> list[dict]:
+    """One simulated calibration, identified every way and validated; one row per method.
 
-
-def noise_sweep(
-    scenario: Scenario, seed: int, scales, n_trials: int, progress: bool = False
-) -> pd.DataFrame:
-    """Validation errors when repeatability, scanner and tracker noise are scaled together.
-
-    The residual verdict rests on these three assumed noise levels; each ``scale`` multiplies
-    all three. Returns per scale the median and 95 % interval of the largest validation error
-    of the one-step identification and of the three-step route.
+    Methods (:data:`METHODS`): the paper's one-step LM from the good start, one-step maximum
+    likelihood, the four multi-step routes (:data:`ROUTES`) on the same 24 measurements, the
+    null control (the good initial estimate, nothing identified), the oracle control (the ideal
+    identification: the same model fitted to the same poses without any measurement noise,
+    i.e. the geometric error that identification corrects removed as far as the 30-parameter
+    model can; with compliance 0 it is the truth) and the true parameters themselves. The
+    one-step row also carries the trial's convergence
+    (good and very poor start), Jacobian rank, the Cramer-Rao prediction of the model error and
+    the 18 robot parameters; the alternated row the rounds it ran.
     """
-    rows = []
-    for k, f in enumerate(scales):
-        u0, u1, cov = scenario.tracker
-        sc = scenario.with_(
-            repeatability_mm=scenario.repeatability_mm * f,
-            sigma_point_mm=scenario.sigma_point_mm * f,
-            tracker=(u0 * f, u1 * f, cov),
+    if noise_scale != 1.0:
+        u0, u1, k = scenario.tracker
+        scenario = scenario.with_(
+            repeatability_mm=scenario.repeatability_mm * noise_scale,
+            sigma_point_mm=scenario.sigma_point_mm * noise_scale,
+            tracker=(u0 * noise_scale, u1 * noise_scale, k),
         )
-        mc = monte_carlo(sc, seed + 1000 * (k + 1), n_trials, progress)["methods"]
-        for name in (METHODS[0], METHODS[2]):
-            med, lo, hi = median_and_spread(mc.loc[mc["method"] == name, "val_max_mm"])
-            rows.append(
-                {
-                    "noise_scale": f,
-                    "method": name,
-                    "val_max_mm_median": med,
-                    "val_max_mm_lo": lo,
-                    "val_max_mm_hi": hi,
-                }
-            )
-    return pd.DataFrame(rows)
+    scale = scenario.compliance_scale if compliance_scale is None else compliance_scale
+    st, meas, val = _cell(scenario, rng, scale)
+    good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
+    start = poor_start(scenario, st, rng)
+    try:
+        poor = identify(meas, start, max_evaluations=MAX_EVALUATIONS)
+    except CalibrationError:
+        poor = None
+    ml = identify(meas, st.nominal_params, weighted=True, max_evaluations=MAX_EVALUATIONS)
+    alternated, rounds = three_step_alternated(
+        meas, scenario.robot, st.nominal_params, max_rounds=ALTERNATION_ROUNDS
+    )
+    params = {
+        ONE_STEP: good.params,
+        ONE_STEP_ML: ml.params,
+        ROUTES[0]: three_step(meas, scenario.robot, st.nominal_params),
+        ROUTES[1]: three_step_reordered(meas, scenario.robot, st.nominal_params),
+        ROUTES[2]: alternated,
+        ROUTES[3]: two_step(meas, scenario.robot, st.nominal_params),
+        NULL: st.nominal_params,
+        ORACLE: _ideal_identification(meas, st),
+        TRUTH: st.true_params,
+    }
+    rows = [{"method": name, **_validate(p, val, st.true_params)} for name, p in params.items()]
+    rows[0].update(_one_step_extras(scenario, st, meas, val, good, poor, ml))
+    rows[METHODS.index(ROUTES[2])]["rounds"] = rounds
+    return rows
+
+
+def calibration_experiment(scenario_toml: str = "", n_trials: int = 200) -> Experiment:
+    """The experiment that decides the five claims, at the scenario's compliance."""
+    return _experiment("calibration", calibration_trial, scenario_toml, n_trials)
+
+
+def compliance_sweep_experiment(scenario_toml: str = "", n_trials: int = 30) -> Experiment:
+    """:func:`calibration_trial` at each compliance scale of the scenario's ``sweep_scales``
+    other than the scenario's own (that point is :func:`calibration_experiment`)."""
+    sc = _scenario(scenario_toml)
+    scales = [s for s in sc.compliance_sweep if s != sc.compliance_scale]
+    points = [{"compliance_scale": float(s)} for s in scales]
+    return _experiment("compliance_sweep", calibration_trial, scenario_toml, n_trials, points)
+
+
+def noise_sweep_experiment(
+    scenario_toml: str = "", n_trials: int = 30, scales: list[float] | None = None
+) -> Experiment:
+    """:func:`calibration_trial` with repeatability, scanner and tracker noise scaled together
+    (``scales`` without 1, which is :func:`calibration_experiment`)."""
+    scales = [0.5, 2.0, 4.0] if scales is None else scales
+    points = [{"noise_scale": float(s)} for s in scales if s != 1.0]
+    return _experiment("noise_sweep", calibration_trial, scenario_toml, n_trials, points)
+
+
+# ----------------------------------------------------------------------------------------------
+# basin of convergence
+
+
+def basin_trial(scenario: Scenario, rng: np.random.Generator, start_scale: float) -> dict:
+    """Identification from the good start and from a very poor start ``start_scale`` times as far.
+
+    Returns whether the far start converged, to the same solution as the good start, and its
+    iterations (a failure counts as :data:`MAX_EVALUATIONS`).
+    """
+    st = draw_station(scenario, rng)
+    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, rng)
+    good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
+    try:
+        start = poor_start(scenario, st, rng, start_scale)
+        far = identify(meas, start, max_evaluations=MAX_EVALUATIONS)
+    except CalibrationError:
+        far = None
+    same = far is not None and scaled_error(far.params, good.params) < SAME_SOLUTION_MM
+    return {
+        "converged": far is not None,
+        "same_solution": bool(same),
+        "iterations": far.iterations_to() if far is not None else MAX_EVALUATIONS,
+        "solver_iterations": far.iterations if far is not None else MAX_EVALUATIONS,
+    }
+
+
+def basin_experiment(scenario_toml: str = "", n_trials: int = 30) -> Experiment:
+    """:func:`basin_trial` at the start scales of the scenario (``poor_start.basin_scales``)."""
+    sc = _scenario(scenario_toml)
+    points = [{"start_scale": float(s)} for s in sc.basin_scales]
+    return _experiment("basin", basin_trial, scenario_toml, n_trials, points)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -238,10 +326,11 @@ def noise_sweep(
 
 
 def example_station(scenario: Scenario, seed: int) -> tuple[Station, Measurements]:
-    """The station and its measurements in trial 0 (the same draws as :func:`run_trial`)."""
-    rng = np.random.default_rng([seed, 0])
+    """The station and measurements of trial 0 of :func:`calibration_experiment`."""
+    rng = trial_rng(seed, "calibration", {}, 0)
     st = draw_station(scenario, rng)
-    return st, simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, rng)
+    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, rng)
+    return st, meas
 
 
 def _null_space_parameters(meas: Measurements, params, rank: int) -> list[str]:

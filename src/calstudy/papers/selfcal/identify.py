@@ -69,6 +69,8 @@ class Measurements:
         tracker (the weights of the maximum-likelihood identification).
     tracker_cov : (m, 3, 3) the tracker's part of ``cov``: one reading per sphere placement, so
         this error is common to all measurements of the same sphere (see :func:`covariance`).
+    Q_true : (m, 6) joint angles as the robot actually stood (commanded plus any unmodelled
+        deflection), for scoring only; None means ``Q``. The identification never reads it.
     """
 
     Q: np.ndarray
@@ -78,6 +80,7 @@ class Measurements:
     C_true: np.ndarray
     cov: np.ndarray
     tracker_cov: np.ndarray
+    Q_true: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.Q)
@@ -221,6 +224,7 @@ class _Problem:
     mask: np.ndarray
     white: np.ndarray | None
     iterates: list[np.ndarray] = field(default_factory=list)
+    mean_errors: dict[bytes, float] = field(default_factory=dict)
 
     def full(self, x) -> np.ndarray:
         p = self.start.copy()
@@ -229,8 +233,19 @@ class _Problem:
 
     def fun(self, x) -> np.ndarray:
         meas = self.meas
-        r = self.model.points(self.full(x), meas.Q, meas.C).ravel() - meas.P_ref.ravel()
+        d = self.model.points(self.full(x), meas.Q, meas.C) - meas.P_ref
+        self.mean_errors[np.asarray(x, float).tobytes()] = float(
+            np.sqrt(np.einsum("ij,ij->i", d, d)).mean()
+        )
+        r = d.ravel()
         return r if self.white is None else self.white @ r
+
+    def mean_error(self, p: np.ndarray) -> float:
+        """Mean ``|P_i - P_i^n|`` at the full parameter vector ``p`` (cached from :meth:`fun`)."""
+        key = p[self.mask].tobytes()
+        if key not in self.mean_errors:
+            self.fun(p[self.mask])
+        return self.mean_errors[key]
 
     def jac(self, x) -> np.ndarray:
         self.iterates.append(self.full(x))
@@ -335,9 +350,7 @@ def identify(
     est.params = problem.full(est.params)
     est.value = est.params
     arr = _iteration_path(problem.start, problem.iterates, est.params)
-    errors = np.array(
-        [np.linalg.norm(model.points(p, meas.Q, meas.C) - meas.P_ref, axis=1).mean() for p in arr]
-    )
+    errors = np.array([problem.mean_error(p) for p in arr])
     return Identification(est, arr, errors)
 
 
@@ -345,14 +358,20 @@ def identify(
 # the three-step route
 
 
-def _fixed_sphere_fit(meas: Measurements, start, free, model: GlobalModel):
-    """Fit free parameters and the sphere centres (in the frame of ``start``'s base) jointly."""
+def _fixed_sphere_fit(meas: Measurements, start, free, model: GlobalModel, centres=None):
+    """Fit free parameters and the sphere centres (in the frame of ``start``'s base) jointly.
+
+    ``centres`` (k, 3) starts the sphere centres (a warm start when steps alternate); by default
+    the mean of the points that ``start`` predicts for each sphere.
+    """
     k = int(meas.sphere.max()) + 1
     mask = np.asarray(free, bool)
     nf = int(mask.sum())
     start = np.asarray(start, float)
-    guess = model.points(start, meas.Q, meas.C)
-    x0 = np.concatenate([start[mask]] + [guess[meas.sphere == s].mean(axis=0) for s in range(k)])
+    if centres is None:
+        guess = model.points(start, meas.Q, meas.C)
+        centres = np.array([guess[meas.sphere == s].mean(axis=0) for s in range(k)])
+    x0 = np.concatenate([start[mask], np.asarray(centres, float).ravel()])
     select = np.zeros((3 * len(meas), 3 * k))
     for i, s in enumerate(meas.sphere):
         select[3 * i : 3 * i + 3, 3 * s : 3 * s + 3] = np.eye(3)
@@ -376,8 +395,34 @@ def _fixed_sphere_fit(meas: Measurements, start, free, model: GlobalModel):
     return p, centres.reshape(k, 3)
 
 
+def _own_frame_start(robot: Robot, start) -> np.ndarray:
+    """The nominal robot in its own base frame (as "part" frame), sensor from ``start``."""
+    # the robot's own base frame as "part" frame: the base pose folds only d1 and theta1
+    own = parameters_from_robot(robot, np.eye(4), np.eye(4))
+    own[SENSOR] = np.asarray(start, float)[SENSOR]
+    return own
+
+
+def _mask(*groups: slice) -> np.ndarray:
+    free = np.zeros(N_PARAMS, bool)
+    for g in groups:
+        free[g] = True
+    return free
+
+
+def _exterior(meas: Measurements, params: np.ndarray, centres_base: np.ndarray) -> np.ndarray:
+    """Exterior step: the base pose from sphere centres in the robot frame and their tracker
+    readings (Kabsch, :func:`calstudy.estimators.fitting.fit_rigid`)."""
+    k = len(centres_base)
+    readings = np.array([meas.P_ref[meas.sphere == s][0] for s in range(k)])
+    base2part = fit_rigid(centres_base, readings)
+    out = params.copy()
+    out[BASE] = pose_to_params(base2part @ params_to_pose(params[BASE]))
+    return out
+
+
 def three_step(meas: Measurements, robot: Robot, start, model: GlobalModel | None = None):
-    """The route the paper argues against, on the same measurements.
+    """The route the paper argues against, on the same measurements, in its natural order.
 
     1. Hand-eye: the sensor pose (6) and the sphere centres in the robot base frame, with the
        nominal ``robot``, from the constraint that each sphere stays put; the sensor pose
@@ -393,21 +438,60 @@ def three_step(meas: Measurements, robot: Robot, start, model: GlobalModel | Non
         The assembled parameters.
     """
     model = default_model() if model is None else model
-    # the robot's own base frame as "part" frame: the base pose folds only d1 and theta1
-    own = parameters_from_robot(robot, np.eye(4), np.eye(4))
-    own[SENSOR] = np.asarray(start, float)[SENSOR]
-    free = np.zeros(N_PARAMS, bool)
-    free[SENSOR] = True
-    after_he, _ = _fixed_sphere_fit(meas, own, free, model)
-    free = np.zeros(N_PARAMS, bool)
-    free[ROBOT] = True
-    after_robot, centres_base = _fixed_sphere_fit(meas, after_he, free, model)
-    k = len(centres_base)
-    readings = np.array([meas.P_ref[meas.sphere == s][0] for s in range(k)])
-    base2part = fit_rigid(centres_base, readings)
-    out = after_robot.copy()
-    out[BASE] = pose_to_params(base2part @ params_to_pose(after_robot[BASE]))
-    return out
+    after_he, _ = _fixed_sphere_fit(meas, _own_frame_start(robot, start), _mask(SENSOR), model)
+    after_robot, centres_base = _fixed_sphere_fit(meas, after_he, _mask(ROBOT), model)
+    return _exterior(meas, after_robot, centres_base)
+
+
+def three_step_reordered(
+    meas: Measurements, robot: Robot, start, model: GlobalModel | None = None
+) -> np.ndarray:
+    """Hand-eye, then exterior, then robot: the robot step fits the 18 robot parameters to the
+    tracker readings with the sensor (step 1) and base (step 2) held."""
+    model = default_model() if model is None else model
+    own = _own_frame_start(robot, start)
+    after_he, centres = _fixed_sphere_fit(meas, own, _mask(SENSOR), model)
+    placed = _exterior(meas, after_he, centres)
+    fit = identify(meas, placed, free=_mask(ROBOT), model=model, max_evaluations=200)
+    return fit.params
+
+
+def three_step_alternated(
+    meas: Measurements,
+    robot: Robot,
+    start,
+    model: GlobalModel | None = None,
+    max_rounds: int = 10,
+    tol_mm: float = 1e-4,
+) -> tuple[np.ndarray, int]:
+    """Hand-eye and robot steps alternated until the parameters stop moving, then exterior.
+
+    Each round refits the sensor with the robot held, then the robot with the sensor held
+    (warm-started). Stops when a round moves no parameter by more than ``tol_mm`` (angles as
+    mm at ``ANGLE_SCALE_MM``) or after ``max_rounds`` rounds. Returns the parameters and the
+    rounds used.
+    """
+    model = default_model() if model is None else model
+    p, centres = _own_frame_start(robot, start), None
+    done = 0
+    while done < max_rounds:
+        before = p
+        p, centres = _fixed_sphere_fit(meas, p, _mask(SENSOR), model, centres)
+        p, centres = _fixed_sphere_fit(meas, p, _mask(ROBOT), model, centres)
+        done += 1
+        step = np.where(IS_LENGTH, 1.0, ANGLE_SCALE_MM) * (p - before)
+        if np.max(np.abs(step)) < tol_mm:
+            break
+    return _exterior(meas, p, centres), done
+
+
+def two_step(meas: Measurements, robot: Robot, start, model: GlobalModel | None = None):
+    """Sensor and robot fitted jointly (fixed-sphere constraint), then exterior (Kabsch)."""
+    model = default_model() if model is None else model
+    p, centres = _fixed_sphere_fit(
+        meas, _own_frame_start(robot, start), _mask(SENSOR, ROBOT), model
+    )
+    return _exterior(meas, p, centres)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -446,6 +530,18 @@ def _separation(js: np.ndarray) -> np.ndarray:
         coef, *_ = np.linalg.lstsq(others, js[:, i], rcond=None)
         separation[i] = np.linalg.norm(js[:, i] - others @ coef) / np.linalg.norm(js[:, i])
     return separation
+
+
+def crb_covariance(meas: Measurements, params, model: GlobalModel | None = None) -> np.ndarray:
+    """Cramer-Rao bound (30, 30) of the parameters: ``(J^T S^-1 J)^-1`` at ``params``.
+
+    ``J`` is the identification Jacobian at the sensor-frame centres ``meas.C_true`` and ``S``
+    the full measurement covariance (:func:`covariance`). Raises if ``S`` is singular (no noise).
+    """
+    model = default_model() if model is None else model
+    _, jac = model.points_and_jacobian(params, meas.Q, meas.C_true)
+    wj = _whitening(meas) @ jac
+    return np.linalg.pinv(wj.T @ wj, rcond=1e-12, hermitian=True)
 
 
 def _ml_std(meas: Measurements, jac: np.ndarray) -> np.ndarray:

@@ -1,13 +1,16 @@
 """Tables, figures and claim rows of the ``selfcal`` notebook, from the experiments' tables.
 
-Summaries over trials (:func:`summarise_methods`, :func:`summarise_history`,
-:func:`summarise_robot`), the tables of the example cell, the figures (Figs. 5-7 of the paper and
-the identifiability and noise studies; each drawn from one results table) and the five claim rows
-(:func:`selfcal_claims`).
+Everything here is computed from the trial rows of the experiments (and the scenario): the
+route table, convergence and robot summaries, the basin and sweep tables, the figures (Figs. 5-7
+of the paper, the routes, basin and sweeps) and the verdicts of the five claims by the v2 rule
+with their null and oracle controls (:func:`selfcal_verdicts`). The tables of the example cell
+(:func:`parameter_table`, :func:`measurement_table`) are the only ones drawn from one simulated
+cell.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import matplotlib
@@ -17,19 +20,27 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from calstudy.claims import (  # noqa: E402
-    ClaimRow,
-    verdict_direction,
-    verdict_vs_ml,
-    verdict_vs_published,
+from calstudy.claims import ClaimRow, claim_row, control_rows  # noqa: E402
+from calstudy.core.verdicts import (  # noqa: E402
+    Verdict,
+    judge,
+    judge_controls,
+    median_interval,
+    oracle_gate,
 )
-from calstudy.core.stats import median_and_spread  # noqa: E402
-from calstudy.papers.selfcal.experiments import METHODS  # noqa: E402
+from calstudy.papers.selfcal.experiments import (  # noqa: E402
+    HISTORY_LENGTH,
+    MAX_EVALUATIONS,
+    METHODS,
+    NULL,
+    ONE_STEP,
+    ORACLE,
+    ROUTES,
+)
 from calstudy.papers.selfcal.identify import Measurements  # noqa: E402
 from calstudy.papers.selfcal.model import (  # noqa: E402
     GROUPS,
     IS_LENGTH,
-    N_PARAMS,
     PARAM_NAMES,
     ROBOT_NAMES,
     angle_wrap,
@@ -37,33 +48,64 @@ from calstudy.papers.selfcal.model import (  # noqa: E402
 from calstudy.papers.selfcal.scenario import Scenario  # noqa: E402
 from calstudy.papers.selfcal.simulate import Station  # noqa: E402
 
+METRICS = ("val_mean_mm", "val_max_mm", "model_rms_mm", "robot_param_error")
+
 # ----------------------------------------------------------------------------------------------
-# tables
+# tables from the trial rows
 
 
-def summarise_methods(methods: pd.DataFrame) -> pd.DataFrame:
-    """Median and 95 % interval over trials of each method's errors (mm)."""
+def method_column(calib: pd.DataFrame, method: str, column: str) -> np.ndarray:
+    """``column`` of ``method`` over the trials, in trial order (one value per trial)."""
+    sub = calib[calib["method"] == method].sort_values("trial")
+    return sub[column].to_numpy(float)
+
+
+def best_route(calib: pd.DataFrame) -> str:
+    """The multi-step route with the lowest median mean validation error over the trials."""
+    medians = {r: float(np.median(method_column(calib, r, "val_mean_mm"))) for r in ROUTES}
+    return min(medians, key=medians.get)
+
+
+def route_table(calib: pd.DataFrame) -> pd.DataFrame:
+    """Per method: median and 95 % CI of the median of each error, and the paired ratio of the
+    one-step mean validation error to the method's (median, CI, share of trials below 1)."""
+    one = method_column(calib, ONE_STEP, "val_mean_mm")
+    best = best_route(calib)
     rows = []
     for name in METHODS:
-        sub = methods[methods["method"] == name]
-        row = {"method": name, "trials": len(sub)}
-        for col in ("val_mean_mm", "val_max_mm", "model_rms_mm", "robot_param_error"):
-            med, lo, hi = median_and_spread(sub[col])
-            row.update({f"{col}_median": med, f"{col}_lo": lo, f"{col}_hi": hi})
+        row = {"method": name, "best_multi_step": name == best}
+        n = 0
+        for col in METRICS:
+            values = method_column(calib, name, col)
+            n = len(values)
+            med, lo, hi = median_interval(values)
+            row.update({f"{col}_median": med, f"{col}_ci_low": lo, f"{col}_ci_high": hi})
+        ratio = one / method_column(calib, name, "val_mean_mm")
+        med, lo, hi = median_interval(ratio)
+        row.update(
+            {
+                "trials": n,
+                "one_step_ratio_median": med,
+                "one_step_ratio_ci_low": lo,
+                "one_step_ratio_ci_high": hi,
+                "one_step_better_share": float(np.mean(ratio < 1.0)),
+            }
+        )
         rows.append(row)
     return pd.DataFrame(rows)
 
 
-def summarise_history(history: pd.DataFrame) -> pd.DataFrame:
+def summarise_history(calib: pd.DataFrame) -> pd.DataFrame:
     """Per start and iteration: median and 5-95 % over trials of the mean position error (mm).
 
-    A trial whose solver stopped earlier keeps its final value, so every iteration has all trials.
+    A trial whose solver stopped earlier keeps its final value; failed runs are left out.
     """
+    one = calib[calib["method"] == ONE_STEP].sort_values("trial")
     rows = []
-    for start, sub in history.groupby("start", sort=True):
-        wide = sub.pivot(index="trial", columns="iteration", values="mean_error_mm")
-        wide = wide.ffill(axis=1).to_numpy()
-        for it in range(wide.shape[1]):
+    for start in ("good", "poor"):
+        cols = [f"{start}_err_{i}" for i in range(HISTORY_LENGTH)]
+        wide = one[cols].dropna().to_numpy(float)
+        for it in range(HISTORY_LENGTH):
             lo, med, hi = np.percentile(wide[:, it], [5, 50, 95])
             rows.append(
                 {"start": start, "iteration": it, "median_mm": med, "p5_mm": lo, "p95_mm": hi}
@@ -71,24 +113,143 @@ def summarise_history(history: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def summarise_robot(robot: pd.DataFrame) -> pd.DataFrame:
+def convergence_summary(calib: pd.DataFrame) -> pd.DataFrame:
+    """Counts over the trials: iterations from both starts, same solution, Jacobian rank."""
+    one = calib[calib["method"] == ONE_STEP]
+    rows = []
+    for col in (
+        "good_iterations",
+        "poor_iterations",
+        "poor_solver_iterations",
+        "jacobian_rank",
+        "jacobian_condition",
+    ):
+        x = one[col].to_numpy(float)
+        rows.append(
+            {
+                "quantity": col,
+                "min": x.min(),
+                "median": np.median(x),
+                "p95": np.percentile(x, 95),
+                "max": x.max(),
+            }
+        )
+    for col in ("poor_converged", "poor_same_solution"):
+        x = one[col].astype(bool).to_numpy()
+        rows.append(
+            {
+                "quantity": f"{col} (share)",
+                "min": np.nan,
+                "median": x.mean(),
+                "p95": np.nan,
+                "max": np.nan,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def robot_example(calib: pd.DataFrame, trial: int = 0) -> pd.DataFrame:
+    """One trial's 18 robot parameters: true, identified (paper, ML) minus nominal, std."""
+    row = calib[(calib["method"] == ONE_STEP) & (calib["trial"] == trial)].iloc[0]
+    return pd.DataFrame(
+        [
+            {
+                "name": name,
+                "unit": "mm" if IS_LENGTH[PARAM_NAMES.index(name)] else "deg",
+                "true_minus_nominal": row[f"true_{name}"],
+                "identified_minus_nominal": row[f"id_{name}"],
+                "ml_identified_minus_nominal": row[f"ml_{name}"],
+                "std": row[f"std_{name}"],
+            }
+            for name in ROBOT_NAMES
+        ]
+    )
+
+
+def summarise_robot(calib: pd.DataFrame) -> pd.DataFrame:
     """Per robot parameter over trials: RMS manufacturing error, RMS identification errors, std."""
+    one = calib[calib["method"] == ONE_STEP]
     rows = []
     for name in ROBOT_NAMES:
-        sub = robot[robot["name"] == name]
-        err = sub["identified_minus_nominal"] - sub["true_minus_nominal"]
-        err_ml = sub["ml_identified_minus_nominal"] - sub["true_minus_nominal"]
+        true = one[f"true_{name}"].to_numpy(float)
+        ident = one[f"id_{name}"].to_numpy(float)
+        ml = one[f"ml_{name}"].to_numpy(float)
         rows.append(
             {
                 "name": name,
-                "unit": sub["unit"].iloc[0],
-                "rms_true_minus_nominal": float(np.sqrt(np.mean(sub["true_minus_nominal"] ** 2))),
-                "rms_identified_minus_nominal": float(
-                    np.sqrt(np.mean(sub["identified_minus_nominal"] ** 2))
+                "unit": "mm" if IS_LENGTH[PARAM_NAMES.index(name)] else "deg",
+                "rms_true_minus_nominal": float(np.sqrt(np.mean(true**2))),
+                "rms_identified_minus_nominal": float(np.sqrt(np.mean(ident**2))),
+                "rms_error_paper": float(np.sqrt(np.mean((ident - true) ** 2))),
+                "rms_error_ml": float(np.sqrt(np.mean((ml - true) ** 2))),
+                "mean_std": float(one[f"std_{name}"].mean()),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def _convergence_figure_values(one: pd.DataFrame) -> np.ndarray:
+    """Per trial: iterations from the very poor start, :data:`MAX_EVALUATIONS` unless it
+    reached the same solution as the good start."""
+    same = one["poor_same_solution"].astype(bool).to_numpy()
+    return np.where(same, one["poor_iterations"].to_numpy(float), float(MAX_EVALUATIONS))
+
+
+def basin_table(basin: pd.DataFrame) -> pd.DataFrame:
+    """Per start scale: trials, share converged, share reaching the good start's solution and
+    the iterations (median, 95th percentile) of those that did."""
+    rows = []
+    for scale, sub in basin.groupby("start_scale", sort=True):
+        same = sub["same_solution"].astype(bool).to_numpy()
+        it = sub["iterations"].to_numpy(float)[same]
+        rows.append(
+            {
+                "start_scale": scale,
+                "trials": len(sub),
+                "converged_share": float(sub["converged"].astype(bool).mean()),
+                "same_solution_share": float(same.mean()),
+                "iterations_median": float(np.median(it)) if it.size else np.nan,
+                "iterations_p95": float(np.percentile(it, 95)) if it.size else np.nan,
+                "within_published_share": float(
+                    np.mean(same & (sub["iterations"].to_numpy(float) <= 4))
                 ),
-                "rms_error_paper": float(np.sqrt(np.mean(err**2))),
-                "rms_error_ml": float(np.sqrt(np.mean(err_ml**2))),
-                "mean_std": float(sub["std"].mean()),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def sweep_table(calib: pd.DataFrame, sweep: pd.DataFrame, key: str, own: float) -> pd.DataFrame:
+    """Per value of the sweep ``key`` (the calibration experiment is the point ``own``): median
+    and 95th percentile of the largest validation error of the one-step route, its median ratio
+    to the best multi-step route, and the model error ratio to the Cramer-Rao prediction."""
+    frames = [calib.assign(**{key: own}), sweep]
+    both = pd.concat(frames, ignore_index=True)
+    rows = []
+    for value, sub in both.groupby(key, sort=True):
+        best = best_route(sub)
+        one_max = method_column(sub, ONE_STEP, "val_max_mm")
+        ratio = method_column(sub, ONE_STEP, "val_mean_mm") / method_column(
+            sub, best, "val_mean_mm"
+        )
+        crb = method_column(sub, ONE_STEP, "model_rms_mm") / method_column(
+            sub, ONE_STEP, "crb_model_rms_mm"
+        )
+        rows.append(
+            {
+                key: value,
+                "trials": len(one_max),
+                "one_step_val_max_median_mm": float(np.median(one_max)),
+                "one_step_val_max_p95_mm": float(np.percentile(one_max, 95)),
+                "oracle_val_max_p95_mm": float(
+                    np.percentile(method_column(sub, ORACLE, "val_max_mm"), 95)
+                ),
+                "best_route": best,
+                "best_route_val_mean_median_mm": float(
+                    np.median(method_column(sub, best, "val_mean_mm"))
+                ),
+                "one_step_over_best_route_median": float(np.median(ratio)),
+                "model_error_over_crb_median": float(np.median(crb)),
+                "model_error_over_crb_p95": float(np.percentile(crb, 95)),
             }
         )
     return pd.DataFrame(rows)
@@ -127,52 +288,112 @@ def measurement_table(meas: Measurements) -> pd.DataFrame:
 
 
 # ----------------------------------------------------------------------------------------------
-# claims
+# claims (v2 rule)
+
+UNITS = {
+    "selfcal.identification": "model error / CRB",
+    "selfcal.convergence": "iterations",
+    "selfcal.robot_params": "ratio",
+    "selfcal.residual": "mm",
+    "selfcal.one_step": "ratio",
+}
 
 
-def selfcal_claims(
-    mc: dict, scenario: Scenario, seed: int, notebook: str, budget: int = 100
-) -> list[ClaimRow]:
-    """The five claim rows of the paper from the Monte Carlo tables of
-    :func:`calstudy.papers.selfcal.experiments.monte_carlo`.
+def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict:
+    """Verdicts by the v2 rule from the calibration trials: claim id -> (claim, null, oracle),
+    the controls None where the claim has none (convergence)."""
+    col = lambda m, c: method_column(calib, m, c)  # noqa: E731
+    one = calib[calib["method"] == ONE_STEP].sort_values("trial")
+    crb = one["crb_model_rms_mm"].to_numpy(float)
+    out: dict[str, tuple[Verdict, Verdict | None, Verdict | None]] = {}
 
-    ``budget`` is the evaluation budget of :func:`calstudy.papers.selfcal.identify.identify` (a
-    failed run counts as it).
-    """
-    m = mc["methods"]
-    by = {name: m[m["method"] == name].sort_values("trial") for name in METHODS}
-    paper, ml = by[METHODS[0]], by[METHODS[1]]
-    rng = np.random.default_rng([seed, 999])
-    rows = []
-    rank = int(mc["convergence"]["jacobian_rank"].min())
-    works = rank == N_PARAMS and bool(np.all(np.isfinite(paper["model_rms_mm"])))
-    v = verdict_vs_ml(paper["model_rms_mm"], ml["model_rms_mm"], works, rng=rng)
-    rows.append(v.row("selfcal.identification", "", "ratio", notebook))
-    conv = mc["convergence"].sort_values("trial")
-    # a failed run counts as the evaluation budget of identify(), which is also "no effect"
-    iters = np.where(conv["poor_converged"], conv["poor_iterations"], budget)
-    published = scenario.published_iterations
-    v = verdict_vs_published(published, iters, float(budget), kind="value", direction="lower")
-    rows.append(v.row("selfcal.convergence", f"{published:g}", "iterations", notebook))
-    improves = float(
-        np.median(
-            paper["robot_param_error"].to_numpy() / conv["nominal_robot_param_error"].to_numpy()
+    bound = {"kind": "bound", "direction": "lower"}
+    c, n, o = judge_controls(
+        col(ONE_STEP, "model_rms_mm") / crb,
+        col(NULL, "model_rms_mm") / crb,
+        col(ORACLE, "model_rms_mm") / crb,
+        bound=scenario.crb_multiple,
+        **bound,
+    )
+    out["selfcal.identification"] = (
+        oracle_gate(c, o, "the geometric errors of robot, sensor mounting and base"),
+        n,
+        o,
+    )
+
+    iters = _convergence_figure_values(one)
+    out["selfcal.convergence"] = (
+        judge(iters, bound=float(scenario.published_iterations), **bound),
+        None,
+        None,
+    )
+
+    base = col(NULL, "robot_param_error")
+    ratio = {"kind": "ratio", "direction": "lower", "baseline": base}
+    c, n, o = judge_controls(
+        col(ONE_STEP, "robot_param_error"), base, col(ORACLE, "robot_param_error"), **ratio
+    )
+    out["selfcal.robot_params"] = (oracle_gate(c, o, "manufacturing errors of the robot"), n, o)
+
+    c, n, o = judge_controls(
+        col(ONE_STEP, "val_max_mm"),
+        col(NULL, "val_max_mm"),
+        col(ORACLE, "val_max_mm"),
+        bound=scenario.requirement_mm,
+        **bound,
+    )
+    out["selfcal.residual"] = (
+        oracle_gate(c, o, "geometric errors that identification can correct"),
+        n,
+        o,
+    )
+
+    best = col(best_route(calib), "val_mean_mm")
+    ratio = {"kind": "ratio", "direction": "lower", "baseline": best}
+    c, n, o = judge_controls(
+        col(ONE_STEP, "val_mean_mm"), col(NULL, "val_mean_mm"), col(ORACLE, "val_mean_mm"), **ratio
+    )
+    out["selfcal.one_step"] = (
+        oracle_gate(c, o, "error propagation between calibration steps"),
+        n,
+        o,
+    )
+    return out
+
+
+def claim_rows(verdicts: dict, scenario: Scenario, notebook: str) -> list[ClaimRow]:
+    """The five rows of ``claims.csv``."""
+    published = {
+        "selfcal.convergence": f"{scenario.published_iterations:g}",
+        "selfcal.residual": f"{scenario.requirement_mm:g}",
+        "selfcal.identification": f"{scenario.crb_multiple:g}",
+    }
+    return [
+        claim_row(
+            cid,
+            v,
+            published=published.get(cid, ""),
+            unit=UNITS[cid],
+            notebook=notebook,
+            null=n,
+            oracle=o,
         )
-    )
-    v = verdict_vs_ml(paper["robot_param_error"], ml["robot_param_error"], improves < 1.0, rng=rng)
-    rows.append(v.row("selfcal.robot_params", "", "ratio", notebook))
-    # "meets the requirement" (0.42 mm): no effect is a largest error at the requirement itself
-    v = verdict_vs_published(
-        scenario.requirement_mm,
-        paper["val_max_mm"].to_numpy(),
-        scenario.requirement_mm,
-        kind="value",
-        direction="lower",
-    )
-    rows.append(v.row("selfcal.residual", f"{scenario.requirement_mm:g}", "mm", notebook))
-    v = verdict_direction(paper["val_mean_mm"].to_numpy(), by[METHODS[2]]["val_mean_mm"].to_numpy())
-    rows.append(v.row("selfcal.one_step", "", "ratio", notebook))
+        for cid, (v, n, o) in verdicts.items()
+    ]
+
+
+def controls_rows(verdicts: dict) -> list[dict]:
+    """The rows of ``controls.csv`` (claims with controls only)."""
+    rows = []
+    for cid, (_, n, o) in verdicts.items():
+        if n is not None:
+            rows += control_rows(cid, n, o)
     return rows
+
+
+def claims_frame(rows: list[ClaimRow]) -> pd.DataFrame:
+    """The claim rows as a table, for display."""
+    return pd.DataFrame([dataclasses.asdict(r) for r in rows])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -241,40 +462,64 @@ def robot_parameters_figure(trial: pd.DataFrame, title: str):
     return fig
 
 
-def residuals_figure(validation: pd.DataFrame, requirement_mm: float, title: str):
-    """Validation position errors per placement, x / y / z and norm, per method (Fig. 7)."""
-    methods = list(dict.fromkeys(validation["method"]))
-    fig, axes = plt.subplots(
-        1, len(methods), figsize=(3.2 * len(methods), 3.8), sharey=True, constrained_layout=True
-    )
-    for ax, name in zip(np.atleast_1d(axes), methods, strict=True):
-        sub = validation[validation["method"] == name]
-        x = sub["placement"].to_numpy()
-        for k, col in enumerate(("dx_mm", "dy_mm", "dz_mm")):
-            ax.bar(x + (k - 1) * 0.25, sub[col], 0.25, label=col[1])
-        ax.plot(x, sub["norm_mm"], "ko", ms=4, label="|error|")
-        for sign in (1, -1):
-            ax.axhline(sign * requirement_mm, color="r", ls="--", lw=1)
-        ax.set_title(name, fontsize=9)
-        ax.set_xlabel("validation placement")
-        ax.grid(axis="y", alpha=0.3)
-    np.atleast_1d(axes)[0].set_ylabel("position error (mm)")
-    np.atleast_1d(axes)[0].legend(fontsize=7)
+def residuals_figure(calib: pd.DataFrame, requirement_mm: float, title: str):
+    """Largest validation error per calibration (Fig. 7 over all trials): one-step, the best
+    multi-step route and the ideal identification, against the requirement."""
+    fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
+    names = (ONE_STEP, best_route(calib), ORACLE)
+    values = [method_column(calib, name, "val_max_mm") for name in names]
+    bins = np.geomspace(min(v.min() for v in values), max(v.max() for v in values), 40)
+    for name, v in zip(names, values, strict=True):
+        ax.hist(v, bins=bins, histtype="step", lw=1.5, label=name)
+    ax.axvline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
+    ax.set_xscale("log")
+    return _finish(fig, ax, title, "largest validation error of a calibration (mm)", "trials")
+
+
+def routes_figure(table: pd.DataFrame, requirement_mm: float, title: str):
+    """Median and its 95 % CI of the mean validation error per method (log scale);
+    ``table`` from :func:`route_table`."""
+    sub = table[table["method"] != NULL]
+    fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
+    y = np.arange(len(sub))
+    med = sub["val_mean_mm_median"].to_numpy()
+    err = np.vstack([med - sub["val_mean_mm_ci_low"], sub["val_mean_mm_ci_high"] - med])
+    ax.errorbar(med, y, xerr=err, fmt="o", capsize=4, label="median, 95 % CI")
+    ax.axvline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
+    ax.set_yticks(y, sub["method"])
+    ax.set_xscale("log")
+    return _finish(fig, ax, title, "mean validation error of a calibration (mm)")
+
+
+def basin_figure(table: pd.DataFrame, title: str):
+    """Share of trials reaching the good start's solution (and within 4 iterations) against
+    the start distance; ``table`` from :func:`basin_table`."""
+    fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
+    x = table["start_scale"]
+    ax.plot(x, table["same_solution_share"], "o-", label="reaches the same solution")
+    ax.plot(x, table["within_published_share"], "s--", label="... within 4 iterations")
+    ax.set_ylim(-0.05, 1.05)
+    xlabel = "start distance (multiples of the very poor start: 200 mm / 20 deg base, 1 deg joints)"
+    return _finish(fig, ax, title, xlabel, "share of trials")
+
+
+def sweep_figure(table: pd.DataFrame, key: str, requirement_mm: float, title: str, xlabel: str):
+    """One-step largest validation error (median, 95th percentile) and its ratio to the best
+    multi-step route against a swept input; ``table`` from :func:`sweep_table`."""
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    x = table[key]
+    ax.plot(x, table["one_step_val_max_median_mm"], "o-", label="one-step, median")
+    ax.plot(x, table["one_step_val_max_p95_mm"], "s--", label="one-step, 95th percentile")
+    ax.plot(x, table["oracle_val_max_p95_mm"], "^:", label="ideal identification, 95th pct.")
+    ax.axhline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
+    ax.set_yscale("log")
+    _finish(fig, ax, "largest validation error", xlabel, "mm")
+    ax2.plot(x, table["one_step_over_best_route_median"], "o-", label="one-step / best route")
+    ax2.plot(x, table["model_error_over_crb_median"], "s--", label="model error / CRB")
+    ax2.axhline(1.0, color="0.5", lw=0.8)
+    _finish(fig, ax2, "ratios (medians)", xlabel)
     fig.suptitle(title)
     return fig
-
-
-def routes_figure(summary: pd.DataFrame, requirement_mm: float, title: str):
-    """Median and 95 % interval of the largest validation error per method (log scale)."""
-    fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
-    y = np.arange(len(summary))
-    med = summary["val_max_mm_median"].to_numpy()
-    err = np.vstack([med - summary["val_max_mm_lo"], summary["val_max_mm_hi"] - med])
-    ax.errorbar(med, y, xerr=err, fmt="o", capsize=4)
-    ax.axvline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
-    ax.set_yticks(y, summary["method"])
-    ax.set_xscale("log")
-    return _finish(fig, ax, title, "largest validation error of a calibration (mm)")
 
 
 def singular_values_figure(table: pd.DataFrame, title: str):
@@ -283,16 +528,3 @@ def singular_values_figure(table: pd.DataFrame, title: str):
     for design, sub in table.groupby("design", sort=False):
         ax.semilogy(sub["index"], sub["singular_value"], "o-", ms=4, label=design)
     return _finish(fig, ax, title, "index", "singular value (mm per unit)")
-
-
-def noise_sweep_figure(table: pd.DataFrame, requirement_mm: float, title: str):
-    """Largest validation error against the common noise scale, per method."""
-    fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
-    for name, sub in table.groupby("method", sort=False):
-        ax.plot(sub["noise_scale"], sub["val_max_mm_median"], "o-", label=name)
-        ax.fill_between(sub["noise_scale"], sub["val_max_mm_lo"], sub["val_max_mm_hi"], alpha=0.2)
-    ax.axhline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    xlabel = "noise scale (repeatability, scanner and tracker noise x)"
-    return _finish(fig, ax, title, xlabel, "largest validation error (mm)")

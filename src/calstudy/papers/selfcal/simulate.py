@@ -268,6 +268,27 @@ def _seed_configuration(robot: Robot, flange_xyz) -> np.ndarray:
     return np.array([q1, 0.3, 0.0, 0.0, -0.8, 0.0])
 
 
+GRAVITY_MPS2 = 9.81
+
+
+def joint_deflection(scenario: Scenario, robot: Robot, Q, scale: float | None = None):
+    """Joint deflections (m, 6) rad of a compliant robot under the sensor's payload.
+
+    Static joint compliance: ``K dq = J(q)^T F`` with ``F`` the payload's weight (-z of the robot
+    base frame, ``payload_kg``) at the flange, ``J`` the flange Jacobian (mm/rad, so the torque
+    is divided by 1000 for N m) and ``K`` the joint stiffnesses of the scenario (N m/rad),
+    multiplied by ``1/scale``. ``scale`` (default ``scenario.compliance_scale``) 0 removes the
+    error: the true robot then lies in the model class.
+    """
+    scale = scenario.compliance_scale if scale is None else float(scale)
+    Q = np.asarray(Q, float)
+    if scale == 0.0:
+        return np.zeros_like(Q)
+    force = np.array([0.0, 0.0, -scenario.payload_kg * GRAVITY_MPS2])
+    torque = np.array([robot.jacobian(q)[:3].T @ force for q in Q]) / 1000.0
+    return scale * torque / np.asarray(scenario.joint_stiffness, float)
+
+
 def _measure_view(scenario: Scenario, pose: np.ndarray, centre_part, rng: np.random.Generator):
     """One view of one sphere: the fitted centre ``C``, the noise-free one, their covariance.
 
@@ -306,11 +327,14 @@ def simulate(
     placements_base,
     views_per_sphere: int,
     rng: np.random.Generator,
+    compliance_scale: float | None = None,
 ) -> Measurements:
     """Measure each sphere placement (k, 3) from ``views_per_sphere`` robot positions.
 
-    The true system moves (true robot, true base and sensor, repeatability); the scanner returns
-    a noisy cap whose LLS fit gives ``C``; the tracker reads each placement once with its noise.
+    The true system moves (true robot, true base and sensor, joint deflection under the payload
+    by :func:`joint_deflection`, repeatability); the scanner returns a noisy cap whose LLS fit
+    gives ``C``; the tracker reads each placement once with its noise. The measurements record
+    the commanded joint angles ``Q`` (what the controller reports) and, for scoring, ``Q_true``.
     """
     model = default_model()
     placements = np.asarray(placements_base, float)
@@ -320,15 +344,17 @@ def simulate(
         truth_part
         + rng.normal(size=truth_part.shape) * tracker_sigma(scenario, truth_part)[:, None]
     )
-    Q, C, C_true, idx, cov, shared = [], [], [], [], [], []
+    Q, Q_true, C, C_true, idx, cov, shared = [], [], [], [], [], [], []
     for k, centre in enumerate(placements):
         views = plan_views(scenario, centre, views_per_sphere, rng)
-        poses = model.sensor2part(station.true_params, views)
-        for q, pose in zip(views, poses, strict=True):
+        stood = views + joint_deflection(scenario, station.true_robot, views, compliance_scale)
+        poses = model.sensor2part(station.true_params, stood)
+        for q, q_true, pose in zip(views, stood, poses, strict=True):
             centre_fit, c_true, cov_view, tracker = _measure_view(
                 scenario, pose, truth_part[k], rng
             )
             Q.append(q)
+            Q_true.append(q_true)
             C.append(centre_fit)
             C_true.append(c_true)
             idx.append(k)
@@ -342,6 +368,7 @@ def simulate(
         np.array(C_true),
         np.array(cov),
         np.array(shared),
+        np.array(Q_true),
     )
 
 
@@ -349,10 +376,16 @@ def simulate(
 # initial estimates
 
 
-def poor_start(scenario: Scenario, station: Station, rng: np.random.Generator) -> np.ndarray:
-    """The "very poor" initial estimate of ``scenario.poor`` around the true system."""
+def poor_start(
+    scenario: Scenario, station: Station, rng: np.random.Generator, scale: float = 1.0
+) -> np.ndarray:
+    """The "very poor" initial estimate of ``scenario.poor`` around the true system.
+
+    ``scale`` multiplies every offset of ``scenario.poor`` (the start distance of the basin
+    sweep); the directions and signs drawn are the same for every scale.
+    """
     p = np.empty(N_PARAMS)
-    cfg = scenario.poor
+    cfg = {k: scale * v for k, v in scenario.poor.items()}
 
     def offset(true6, mm, deg):
         t = rng.normal(size=3)
