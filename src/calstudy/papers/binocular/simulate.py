@@ -158,20 +158,16 @@ def expose_and_fuse(
     )
 
 
-def image_dots(scenario, camera: PinholeCamera, centres_cam, normals_cam, rng, imaging: Imaging):
-    """Fused ROIs of ``m`` dots in one camera: render, defocus (Eq. 4, 7), two exposures, fuse
-    (Eq. 3), batched over the dots (one ROI shape for all, large enough for each).
+def render_rois(scenario, camera: PinholeCamera, centres_cam, normals_cam):
+    """Sharp ROIs of ``m`` dots in one camera, one ROI shape for all, large enough for each dot
+    with the margin its circle of confusion (Eq. 4) needs.
 
-    Returns ``(fused, origins, deltas)``: the ``(m, rows, cols)`` ROIs, their top-left pixels
+    Returns ``(sharp, origins, deltas)``: the ``(m, rows, cols)`` ROIs, their top-left pixels
     ``(m, 2)`` and the true CoC radii ``(m,)``.
     """
     centres = np.asarray(centres_cam, dtype=float)
     depth = centres[:, 2]
-    deltas = (
-        np.asarray(scenario.coc_radius_px(depth), dtype=float).reshape(-1)
-        if imaging.defocus
-        else np.zeros(len(centres))
-    )
+    deltas = np.asarray(scenario.coc_radius_px(depth), dtype=float).reshape(-1)
     uv = camera.project(centres)
     r_px = float(np.max(scenario.dot_radius_mm * camera.fx / depth))
     margin = float(np.max(4.0 * deltas)) + 10.0
@@ -186,14 +182,32 @@ def image_dots(scenario, camera: PinholeCamera, centres_cam, normals_cam, rng, i
         origins,
         rois[0][1],
     )
+    return sharp, origins, deltas
+
+
+def image_dots(
+    scenario, camera: PinholeCamera, centres_cam, normals_cam, rng, imaging: Imaging, rendered=None
+):
+    """Fused ROIs of ``m`` dots in one camera: render (:func:`render_rois`, or the given
+    ``rendered`` triple of it), defocus (Eq. 4, 7), two exposures, fuse (Eq. 3), batched over
+    the dots.
+
+    Returns ``(fused, origins, deltas, rendered)``: the ``(m, rows, cols)`` ROIs, their top-left
+    pixels ``(m, 2)``, the CoC radii ``(m,)`` applied (zeros without defocus) and the
+    :func:`render_rois` triple.
+    """
+    if rendered is None:
+        rendered = render_rois(scenario, camera, centres_cam, normals_cam)
+    sharp, origins, true_deltas = rendered
+    deltas = true_deltas if imaging.defocus else np.zeros(len(true_deltas))
     blurred = np.stack([optics.defocus(img, d) for img, d in zip(sharp, deltas, strict=True)])
     if not imaging.noise:
-        return blurred, origins, deltas
+        return blurred, origins, deltas, rendered
     noise = scenario.config["sensor"]["noise"]
     fused = expose_and_fuse(
         scenario, blurred, rng, noise["read_noise_dn"], noise["electrons_per_dn"]
     )
-    return fused, origins, deltas
+    return fused, origins, deltas, rendered
 
 
 def rectified_centre(scenario: Scenario, image, origin, delta_px: float) -> np.ndarray:
@@ -210,6 +224,7 @@ class Observation:
 
     uv_raw: np.ndarray
     uv_rect: np.ndarray
+    rendered: tuple = ()  # per camera, the sharp ROIs of :func:`render_rois` (oracle re-imaging)
 
     def points(self, sensor: StereoRig, tol_mm: float) -> tuple[np.ndarray, np.ndarray]:
         """Sensor-frame points ``(m, 3)`` triangulated with the calibrated ``sensor`` (Eq. 1):
@@ -221,40 +236,46 @@ class Observation:
 
 
 def observe(
-    scenario, model: StereoRig, sensor2base, dots_base, normal_base, rng, imaging
+    scenario, model: StereoRig, sensor2base, dots_base, normal_base, rng, imaging, rendered=None
 ) -> Observation:
     """Image the dots ``(m, 3)`` (base frame, one plate normal) from a true sensor pose.
 
     The physical cameras are those of Table 1 (``scenario.sensor``); the calibrated ``model``
     differs from them by the calibration errors of the trial. The rectification uses the CoC
     radius (Eq. 4) at the depth of the unrectified triangulation with ``model``, as a real
-    system would.
+    system would. ``rendered`` (the ``Observation.rendered`` of an earlier call at the same
+    true pose) skips the rendering: the same sharp images exposed again.
     """
-    base2sensor = geo.invert(sensor2base)
-    dots_s = geo.apply(base2sensor, dots_base)
-    normal_s = base2sensor[:3, :3] @ normal_base
     rois = []
-    for camera, s2c in scenario.sensor.cameras():
-        n = np.tile(s2c[:3, :3] @ normal_s, (len(dots_s), 1))
-        rois.append(image_dots(scenario, camera, geo.apply(s2c, dots_s), n, rng, imaging))
+    if rendered:
+        for c, (camera, _) in enumerate(scenario.sensor.cameras()):
+            rois.append(image_dots(scenario, camera, None, None, rng, imaging, rendered[c]))
+    else:
+        base2sensor = geo.invert(sensor2base)
+        dots_s = geo.apply(base2sensor, dots_base)
+        normal_s = base2sensor[:3, :3] @ normal_base
+        for camera, s2c in scenario.sensor.cameras():
+            n = np.tile(s2c[:3, :3] @ normal_s, (len(dots_s), 1))
+            rois.append(image_dots(scenario, camera, geo.apply(s2c, dots_s), n, rng, imaging))
+    kept = tuple(r[3] for r in rois)
     kwargs = scenario.detection
     uv_raw = np.array(
         [
             [detect_centre(img, o, **kwargs) for img, o in zip(f, org, strict=True)]
-            for f, org, _ in rois
+            for f, org, _, _ in rois
         ]
     )
     if not imaging.defocus:
-        return Observation(uv_raw, uv_raw)
+        return Observation(uv_raw, uv_raw, kept)
     tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
     raw = bino.triangulate(model, uv_raw[0], uv_raw[1], tol)
     uv_rect = np.empty_like(uv_raw)
     for c, (_, s2c) in enumerate(model.cameras()):
         est = np.atleast_1d(scenario.coc_radius_px(geo.apply(s2c, raw)[:, 2]))
-        fused, origins, _ = rois[c]
+        fused, origins, _, _ = rois[c]
         for i in range(len(raw)):
             uv_rect[c, i] = rectified_centre(scenario, fused[i], origins[i], est[i])
-    return Observation(uv_raw, uv_rect)
+    return Observation(uv_raw, uv_rect, kept)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -379,13 +400,13 @@ def view_calibrator(scenario, world, n, rng, imaging, model) -> Views:
     )
 
 
-def reimage(scenario, world, views: Views, target2base, dots, rng, imaging, model) -> Views:
-    """The same true poses imaged again under other ``imaging`` switches (oracle controls)."""
-    normal = target2base[:3, 2]
-    obs = []
-    for t in views.true_flange2base:
-        t = geo.perturb(t, 0.0, world.repeatability_mm, rng) if world.repeatability_mm else t
-        obs.append(observe(scenario, model, t @ scenario.sensor2flange, dots, normal, rng, imaging))
+def reimage(scenario, views: Views, rng, imaging, model) -> Views:
+    """The same true poses (repeatability draw included) and the same sharp images exposed again
+    under other ``imaging`` switches, with fresh image noise (oracle controls)."""
+    obs = [
+        observe(scenario, model, None, None, None, rng, imaging, rendered=o.rendered)
+        for o in views.observations
+    ]
     return Views(views.q, views.flange2base, views.true_flange2base, obs)
 
 
