@@ -2,7 +2,7 @@
 the Cramer-Rao bound, and time per call.
 
 Standard scenario: :func:`calstudy.estimators.handeye_sim.simulate_cell` with 15 poses,
-camera-pose noise 1e-3 rad and 0.2 mm, 200 trials (each its own cell). Goals of the issue: ML RMS
+camera-pose noise 1e-3 rad and 0.2 mm, 200 trials (each its own cell). Goals: ML RMS
 error within 10 % of the bound, ML median error at least 2x below the best closed form, one
 refinement on 100 poses within 50 ms.
 """

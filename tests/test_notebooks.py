@@ -27,7 +27,7 @@ from support import REPRODUCIBLE_ENV, ci_parameters, run
 
 from calstudy.claims import VERDICTS, claim_ids
 from calstudy.core.paths import REPO_ROOT, RESULTS_DIR
-from calstudy.io.results import read_claims
+from calstudy.io.results import EXECUTION_PARAMETERS, read_claims
 
 NOTEBOOK_DIR = REPO_ROOT / "notebooks"
 CI_PARAMS = NOTEBOOK_DIR / "ci-params.yml"
@@ -164,10 +164,11 @@ def test_runs_with_ci_parameters(path, tmp_path):
     assert snapshot(RESULTS_DIR / path.stem) == committed, "the run wrote to results/ itself"
     assert (out / "run.json").is_file()
     assert (out / "claims.csv").is_file() == decides_claims(path.stem), "claims.csv presence"
-    # run.json records what produced the results: every parameter but where they went and
-    # whether progress was shown
+    # run.json records what produced the results: every parameter but those saying how the
+    # run was executed (workers, scheduler, cache, progress, where results went)
     recorded = set(json.loads((out / "run.json").read_text())["parameters"])
-    wanted = parameter_names(parameter_cells(read(path))[0]) - {"results_dir", "progress"}
+    wanted = parameter_names(parameter_cells(read(path))[0]) - set(EXECUTION_PARAMETERS)
+    assert not recorded & set(EXECUTION_PARAMETERS), "run.json must not depend on n_jobs etc."
     assert wanted <= recorded, f"run.json lacks the parameters {sorted(wanted - recorded)}"
     if not decides_claims(path.stem):
         return

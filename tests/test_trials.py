@@ -20,9 +20,10 @@ from calstudy.core.montecarlo import trial_rows
 from calstudy.core.paths import RESULTS_DIR
 from calstudy.io.runs import rebuild
 
-#: the rows are stored with 10 significant digits; another machine's floating point may move
-#: the last few of them
-RTOL, ATOL = 1e-6, 1e-9
+#: the rows are stored with 10 significant digits; another machine's floating point (or BLAS)
+#: moves the last ones, and ill-conditioned solves (a hand-eye from few poses) amplify that to
+#: about 1e-6: the tolerance of the tables, one unit in the sixth digit
+RTOL, ATOL = 2e-5, 1e-9
 PICKS = 2
 
 

@@ -76,7 +76,8 @@ def test_ml_analytic_jacobian_matches_finite_differences():
     rng = np.random.default_rng(4)
     trans, rot = _poses(rng)
     poses = np.concatenate([trans, rot])
-    problem = he._SphereProblem(poses, _centres(poses), np.array([0.01, 0.02, 0.03]), np.eye(3))
+    cov = np.array([[1e-4, 0.0, 0.0], [0.0, 4e-4, -5e-4], [0.0, -5e-4, 9e-4]])  # correlated y-z
+    problem = he._SphereProblem(poses, _centres(poses), he._whitening(cov, len(poses)), np.eye(3))
     x = np.concatenate([[1.0, 2.0, 3.0], [0.1, -0.2, 0.3], X_B])
     jac = problem.jacobian(x)
     num = np.zeros_like(jac)

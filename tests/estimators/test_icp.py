@@ -9,7 +9,7 @@ from scipy.optimize import least_squares
 from calstudy import CalibrationError
 from calstudy.core import geometry as geo
 from calstudy.estimators import icp
-from calstudy.estimators.fitting import fit_rigid
+from calstudy.estimators.fitting import fit_rigid, fit_sphere
 
 
 def sphere_cloud(rng, n=800, radius=25.0, centre=(10.0, -20.0, 300.0)):
@@ -70,3 +70,58 @@ def test_icp_rejects_clouds_that_do_not_overlap():
         CalibrationError, match=r"do not overlap: 0 of 800 points.*closest 1\d\d mm"
     ):
         icp.weighted_icp(cloud + [150.0, 0, 0], cloud + [0, 0, 0.0])
+
+
+def test_normal_equations_from_moments_match_the_dense_jacobian():
+    """The 6 x 6 normal equations built from the 3 x 3 moments give the step of the explicit
+    (N, 3, 6) Jacobian of Eq. 4."""
+    rng = np.random.default_rng(17)
+    p = rng.normal(size=(300, 3)) * [20.0, 30.0, 10.0] + [5.0, -3.0, 400.0]
+    q = geo.apply(geo.perturb(np.eye(4), 0.01, 0.5, rng), p) + rng.normal(0, 0.05, p.shape)
+    w = np.array([1.0, 1.0, 20.0])
+    x = p - p.mean(axis=0)
+    jac = np.zeros((len(p), 3, 6))
+    jac[:, 0, 1], jac[:, 0, 2] = x[:, 2], -x[:, 1]
+    jac[:, 1, 0], jac[:, 1, 2] = -x[:, 2], x[:, 0]
+    jac[:, 2, 0], jac[:, 2, 1] = x[:, 1], -x[:, 0]
+    jac[:, :, 3:] = np.eye(3)
+    jac *= np.sqrt(w)[None, :, None]
+    flat = jac.reshape(-1, 6)
+    delta = -np.linalg.solve(flat.T @ flat, flat.T @ ((p - q) * np.sqrt(w)).ravel())
+    rot = geo.rotvec_to_matrix(delta[:3])
+    c = p.mean(axis=0)
+    dense = geo.make_transform(rot, c - rot @ c + delta[3:])
+    step, size = icp._weighted_rigid_step(p, q, w)
+    np.testing.assert_allclose(step, dense, atol=1e-12)
+    assert size > 1.0  # a 0.5 mm offset is far above 0.05 mm noise over 300 pairs
+
+
+def test_stop_below_noise_ends_the_slide_but_not_a_real_correction():
+    """Two differently sampled noisy caps of one sphere, 0.4 mm apart: stopping once the update
+    is below its standard error takes fewer correspondence updates than the tolerance, and the
+    sphere centre of the result is as good (the slide it cuts short is about the centre)."""
+    rng = np.random.default_rng(18)
+    centre = np.array([10.0, -20.0, 300.0])
+    ref = sphere_cloud(rng, n=1000, centre=centre) + rng.normal(0, 0.03, (1000, 3))
+    drift = geo.perturb(np.eye(4), np.deg2rad(0.02), 0.4, rng)
+    moving = geo.apply(drift, sphere_cloud(rng, n=1000, centre=centre))
+    moving += rng.normal(0, 0.03, moving.shape)
+    full = icp.weighted_icp(moving, ref)
+    fast = icp.weighted_icp(moving, ref, stop_below_noise=True)
+    assert fast.converged and fast.iterations < full.iterations
+    before = np.linalg.norm(fit_sphere(moving)[0] - centre)
+    errs = [
+        np.linalg.norm(fit_sphere(geo.apply(r.transform, moving))[0] - centre) for r in (full, fast)
+    ]
+    assert before > 0.2
+    assert max(errs) < 0.25 * before
+    # noise-free true pairs: the noise test never ends a real correction early
+    exact = sphere_cloud(rng)
+    res = icp.weighted_icp(geo.apply(geo.invert(drift), exact), exact, stop_below_noise=True)
+    assert geo.translation_error(res.transform, drift) < 1e-9
+
+
+def test_icp_refuses_bad_settings():
+    cloud = sphere_cloud(np.random.default_rng(19))
+    with pytest.raises(CalibrationError, match=r"z_weight -1.*must be > 0"):
+        icp.weighted_icp(cloud, cloud, z_weight=-1.0)

@@ -346,7 +346,7 @@ def test_robot_file_with_missing_key(tmp_path, monkeypatch):
         '[[link]]\nconvention = "dh"\na_mm = 1.0\nalpha_deg = 0.0\nd_mm = 0.0\n'
     )
     monkeypatch.setattr(paths, "DATA_DIR", tmp_path)
-    with pytest.raises(CalibrationError, match=r"bad.toml link 1 lacks the key 'theta_deg'"):
+    with pytest.raises(CalibrationError, match=r"bad.toml: link #1.theta_deg: missing"):
         load_robot("bad")
 
 

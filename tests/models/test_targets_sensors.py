@@ -219,3 +219,17 @@ def test_camera_with_distortion_projects_like_opencv_and_undistorts_back():
     np.testing.assert_allclose(CAMERA.normalise(CAMERA.project(p)), p[:, :2] / p[:, 2:], atol=1e-12)
     with pytest.raises(CalibrationError, match="distortion"):
         PinholeCamera(fx=1.0, fy=1.0, cx=0.0, cy=0.0, width=10, height=10, dist=(0.1, 0.2))
+
+
+def test_line_laser_centre_covariance_matches_repeated_shots(rng):
+    """The linearised covariance (strong y-z correlation) against 20,000 simulated shots."""
+    sensor = LineLaserSensor()
+    c = np.array([4.0, stripe_offset_recommended(R), 180.0])
+    shots = sensor.measure_sphere_centre(np.tile(c, (20000, 1)), R, rng)
+    empirical, model = np.cov(shots.T), sensor.centre_covariance(c, R)
+    np.testing.assert_allclose(np.diag(model), np.diag(empirical), rtol=0.05)
+    corr = model[1, 2] / np.sqrt(model[1, 1] * model[2, 2])
+    corr_emp = empirical[1, 2] / np.sqrt(empirical[1, 1] * empirical[2, 2])
+    assert corr < -0.9 and abs(corr - corr_emp) < 0.02
+    batch = sensor.centre_covariance(np.tile(c, (2, 1)), R)
+    np.testing.assert_allclose(batch[1], model)

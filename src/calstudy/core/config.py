@@ -8,13 +8,12 @@ file, a malformed file and a missing key are reported the same way in all four p
 
 from __future__ import annotations
 
-import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from calstudy.core import schema
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
 
@@ -34,14 +33,7 @@ def read_toml(path: str | Path, what: str) -> dict:
     CalibrationError
         If the file is not valid TOML (the message gives the parser's line and column).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file (the {what})")
-    try:
-        with path.open("rb") as handle:
-            return tomllib.load(handle)
-    except tomllib.TOMLDecodeError as exc:
-        raise CalibrationError(f"{path}: not valid TOML ({exc})") from exc
+    return schema.read_toml(path, what)
 
 
 def require(table: dict, dotted_key: str, source: str | Path) -> Any:
@@ -58,16 +50,9 @@ def require(table: dict, dotted_key: str, source: str | Path) -> Any:
 
 def parse_number(path: str | Path, line: int, column: str, text: str) -> float:
     """``float(text)`` of the cell in row ``line`` (1-based, the header is row 1) and ``column``
-    of the CSV file ``path``; CalibrationError naming all three if it is not a finite number."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise CalibrationError(
-            f"{path}: row {line}, column {column!r}: {text!r} is not a number"
-        ) from None
-    if not math.isfinite(value):
-        raise CalibrationError(f"{path}: row {line}, column {column!r}: {text!r} is not finite")
-    return value
+    of the CSV file ``path``; CalibrationError naming all three if it is not a finite number
+    (a decimal comma such as ``12,5`` is named as such)."""
+    return schema.parse_number(path, line, column, text)
 
 
 def check_ids(path: str | Path, ids: np.ndarray) -> np.ndarray:

@@ -8,3 +8,8 @@ class CalibrationError(ValueError):
     ``"rotation axes of the 6 moves are parallel (condition number 3e+12); add a move about
     another axis"``.
     """
+
+
+class CalibrationWarning(UserWarning):
+    """A result that is returned but should not be trusted without a look: a goodness-of-fit
+    test failed (the message says which measurements disagree). Notebooks show it in red."""

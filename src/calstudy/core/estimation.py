@@ -8,14 +8,61 @@ number of the Jacobian. The covariance is what the book reports as the uncertain
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import chi2 as _chi2
 
-from calstudy.core.errors import CalibrationError
+from calstudy.core.errors import CalibrationError, CalibrationWarning
+
+#: false-alarm probability of the goodness-of-fit test (two-sided) of :func:`goodness_of_fit`
+FIT_ALPHA = 1e-4
+#: how a failed goodness-of-fit test is handled: raise, or flag the result and warn, or ignore
+MISFIT_POLICIES = ("raise", "flag", "off")
+
+
+@dataclass
+class FitCheck:
+    """Goodness of fit of a least-squares estimate with whitened residuals.
+
+    Attributes
+    ----------
+    chi2 : float
+        Sum of squared whitened residuals.
+    dof : int
+        Degrees of freedom (residuals minus parameters); 0 when nothing is redundant.
+    low, high : float
+        Expected range of ``chi2 / dof`` (two-sided, false-alarm probability :data:`FIT_ALPHA`).
+    message : str
+        Empty when the fit is within its range; else what is wrong and which measurements
+        disagree most.
+    """
+
+    chi2: float
+    dof: int
+    low: float
+    high: float
+    message: str = ""
+
+    @property
+    def chi2_dof(self) -> float:
+        """``chi2 / dof`` (NaN without redundancy)."""
+        return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+    @property
+    def ok(self) -> bool:
+        """True when ``chi2 / dof`` lies in its expected range (or cannot be tested)."""
+        return not self.message
+
+    @property
+    def too_large(self) -> bool:
+        """True when ``chi2 / dof`` exceeds its range: the measurements contradict the model or
+        the stated noise; the estimate and its covariance are then not to be trusted."""
+        return self.dof > 0 and self.chi2 / self.dof > self.high
 
 
 @dataclass
@@ -53,6 +100,8 @@ class Estimate:
     method: str = ""
     names: list[str] = field(default_factory=list)
     history: list[float] = field(default_factory=list)
+    fit: FitCheck | None = None
+    flags: list[str] = field(default_factory=list)
 
     @property
     def std(self) -> np.ndarray:
@@ -65,6 +114,103 @@ class Estimate:
     def cost(self) -> float:
         """Half the sum of squared residuals."""
         return 0.5 * float(self.residuals @ self.residuals)
+
+
+def goodness_of_fit(
+    whitened,
+    n_params: int,
+    *,
+    label: str,
+    block: int = 1,
+    block_names: Sequence[str] | None = None,
+    alpha: float = FIT_ALPHA,
+) -> FitCheck:
+    """Compare ``chi2 / dof`` of whitened residuals with its expected range.
+
+    Parameters
+    ----------
+    whitened : (m,) array
+        Residuals divided by their standard deviations (unit variance if the model and the
+        stated noise are right).
+    n_params : int
+        Number of estimated parameters.
+    label : str
+        Name of the estimator, for the message.
+    block : int
+        Residuals per measurement (3 for a point); the message names the measurements whose
+        blocks disagree most.
+    block_names : sequence of str, optional
+        Names of the measurements (``m / block`` of them), e.g. ``"id 7"``.
+    alpha : float
+        Two-sided false-alarm probability of the test.
+
+    Returns
+    -------
+    FitCheck
+    """
+    r = np.asarray(whitened, dtype=float).ravel()
+    dof = int(r.size - n_params)
+    chi2 = float(r @ r)
+    if dof <= 0:
+        return FitCheck(chi2, max(dof, 0), float("nan"), float("nan"))
+    low = float(_chi2.ppf(alpha / 2, dof) / dof)
+    high = float(_chi2.isf(alpha / 2, dof) / dof)
+    ratio = chi2 / dof
+    if low <= ratio <= high:
+        return FitCheck(chi2, dof, low, high)
+    head = (
+        f"{label}: whitened residual chi2/dof = {ratio:.3g} with {dof} degrees of freedom, "
+        f"outside its expected range [{low:.3g}, {high:.3g}] (whitened RMS "
+        f"{np.sqrt(chi2 / r.size):.3g})"
+    )
+    if ratio < low:
+        return FitCheck(
+            chi2, dof, low, high, head + ": the residuals are smaller than the stated noise "
+            "(is sigma overstated?)"
+        )
+    per = (r[: r.size - r.size % block].reshape(-1, block) ** 2).mean(axis=1)
+    names = (
+        list(block_names) if block_names is not None and len(block_names) == per.size
+        else [f"measurement {i}" for i in range(per.size)]
+    )
+    worst = np.argsort(per)[::-1][:3]
+    which = ", ".join(f"{names[i]} (RMS {np.sqrt(per[i]):.3g})" for i in worst)
+    return FitCheck(
+        chi2, dof, low, high, head + f": the measurements contradict the model or the stated "
+        f"noise is too small; those that disagree most: {which}"
+    )
+
+
+def apply_fit_check(est: Estimate, check: FitCheck, policy: str) -> Estimate:
+    """Store ``check`` in ``est`` and act on residuals too large for the stated noise by
+    ``policy``: ``"raise"`` a :class:`CalibrationError`, ``"flag"`` (append the message to
+    ``est.flags`` and warn with :class:`CalibrationWarning`) or ``"off"``. Residuals smaller
+    than expected (noise-free data, an overstated sigma) only add a note to ``est.flags``: the
+    estimate is right, its covariance conservative."""
+    if policy not in MISFIT_POLICIES:
+        raise CalibrationError(f"misfit policy {policy!r} is not one of {MISFIT_POLICIES}")
+    est.fit = check
+    if check.ok or policy == "off":
+        return est
+    if not check.too_large:
+        est.flags.append(check.message)
+        return est
+    if policy == "raise":
+        raise CalibrationError(check.message)
+    est.flags.append(check.message)
+    warnings.warn(check.message, CalibrationWarning, stacklevel=3)
+    return est
+
+
+def check_condition(cond: float, limit: float, what: str, advice: str) -> float:
+    """``cond`` if finite and at most ``limit``; else a CalibrationError saying ``what`` is
+    unobservable, with the number and the ``advice``."""
+    if not np.isfinite(cond) or cond > limit:
+        raise CalibrationError(
+            f"{what} is not determined by these data: condition number {cond:.3g} "
+            f"(limit {limit:.3g}); {advice}"
+        )
+    return float(cond)
 
 
 def condition_number(matrix) -> float:
@@ -121,6 +267,8 @@ def levenberg_marquardt(
     method: str = "lm",
     to_value: Callable[[np.ndarray], Any] | None = None,
     label: str = "Levenberg-Marquardt",
+    max_condition: float | None = None,
+    advice: str = "add measurements that vary the undetermined parameters",
 ) -> Estimate:
     """Minimise ``sum fun(x)^2`` with scipy's Levenberg-Marquardt and return an :class:`Estimate`.
 
@@ -143,14 +291,21 @@ def levenberg_marquardt(
         Maps the solution vector to the result's ``value`` (default: the vector itself).
     label
         Name used in error messages and stored as ``method``.
+    max_condition
+        Largest condition number of the Jacobian at the solution that is accepted (None: not
+        checked); beyond it the parameters are unobservable and :class:`CalibrationError` says so
+        with ``advice``.
 
     Raises
     ------
     CalibrationError
-        If ``m < n``, if the residuals are not finite at the start, or if the solver stops without
-        converging (the message gives the evaluation count and the cost).
+        If ``m < n``, if the start or the residuals there are not finite, if the solver stops
+        without converging (the message gives the evaluation count and the cost), or if the
+        condition number exceeds ``max_condition``.
     """
     x0 = np.asarray(x0, dtype=float)
+    if not np.all(np.isfinite(x0)):
+        raise CalibrationError(f"{label}: the starting point is not finite ({x0})")
     r0 = np.asarray(fun(x0), dtype=float)
     if not np.all(np.isfinite(r0)):
         raise CalibrationError(f"{label}: residuals are not finite at the starting point")
@@ -173,7 +328,11 @@ def levenberg_marquardt(
             f"{label} did not converge after {res.nfev} evaluations (cost {res.cost:.6g}): "
             f"{res.message}"
         )
+    if not (np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.fun))):
+        raise CalibrationError(f"{label}: the solution is not finite after {res.nfev} evaluations")
     cov, cond = covariance_from_jacobian(res.jac, res.fun, sigma)
+    if max_condition is not None:
+        check_condition(cond, max_condition, f"{label}: the estimate", advice)
     value = to_value(res.x) if to_value is not None else res.x
     return Estimate(
         value=value,

@@ -21,9 +21,17 @@ ORTHONORMAL_TOL = 1e-6
 # checks
 
 
+def _as_float(name: str, array) -> np.ndarray:
+    """``array`` as a float array; CalibrationError if it is ragged or holds non-numbers."""
+    try:
+        return np.asarray(array, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(f"{name} is not an array of numbers ({exc})") from None
+
+
 def check_finite(name: str, array) -> np.ndarray:
     """Return ``array`` as float array; raise if it holds NaN or infinity (naming the first)."""
-    a = np.asarray(array, dtype=float)
+    a = _as_float(name, array)
     bad = ~np.isfinite(a)
     if bad.any():
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
@@ -41,7 +49,7 @@ def check_shape(name: str, array, shape: tuple) -> np.ndarray:
     CalibrationError
         If the number of axes or a fixed length differs, or a value is not finite.
     """
-    a = np.asarray(array, dtype=float)
+    a = _as_float(name, array)
     ok = a.ndim == len(shape) and all(
         s is None or s == n for s, n in zip(shape, a.shape, strict=True)
     )

@@ -33,6 +33,12 @@ from calstudy.core.geometry import (
 #: Condition number of the (centred, scaled) sphere-fit matrix above which the points are
 #: treated as coplanar.
 SPHERE_COND_MAX = 1e9
+#: Ratio of the 8th to the 1st singular value of the normalised DLT matrix below which the
+#: correspondences do not determine a homography (e.g. 3 of 4 points on a line).
+HOMOGRAPHY_RANK_TOL = 1e-8
+#: Ratio of the smallest to the largest singular value of ``K^-1 H`` below which ``H`` is taken
+#: as singular (a plane seen edge-on, or not a homography of a plane at all).
+HOMOGRAPHY_SINGULAR_TOL = 1e-8
 
 
 # ----------------------------------------------------------------------------------------------
@@ -205,6 +211,37 @@ def _homography_jacobian(h8, xy, uv):
     return jac.reshape(-1, 8)
 
 
+def _normalise_2d(p: np.ndarray) -> np.ndarray:
+    """Hartley normalisation: centroid at 0, RMS distance sqrt(2)."""
+    q = p - p.mean(axis=0)
+    scale = np.sqrt((q**2).sum(axis=1).mean())
+    return q * (np.sqrt(2.0) / scale) if scale > 0 else q
+
+
+def check_homography_data(xy: np.ndarray, uv: np.ndarray) -> float:
+    """Ratio of the 8th to the largest singular value of the normalised DLT matrix of the
+    correspondences; CalibrationError if below :data:`HOMOGRAPHY_RANK_TOL` (the points do not
+    determine a homography: with 4 points, 3 of them on a line)."""
+    a, b = _normalise_2d(xy), _normalise_2d(uv)
+    one, zero = np.ones((len(a), 1)), np.zeros((len(a), 3))
+    ah = np.column_stack([a, one])
+    rows = np.concatenate(
+        [
+            np.hstack([ah, zero, -b[:, :1] * ah]),
+            np.hstack([zero, ah, -b[:, 1:] * ah]),
+        ]
+    )
+    s = singular_values(rows)
+    ratio = float(s[7] / s[0]) if s.size > 7 and s[0] > 0 else 0.0
+    if ratio < HOMOGRAPHY_RANK_TOL:
+        raise CalibrationError(
+            f"the {len(xy)} correspondences do not determine a homography (8th singular value "
+            f"of the normalised DLT matrix {ratio:.3g} of the largest, limit "
+            f"{HOMOGRAPHY_RANK_TOL:g}): with 4 points, no 3 may lie on a line; add points"
+        )
+    return ratio
+
+
 def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
     """Homography ``H`` from target-plane points to image points, ``s [u v 1] = H [x y 1]``.
 
@@ -243,7 +280,13 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
         raise CalibrationError(f"homography needs at least 4 points; got {xy.shape[0]}")
     check_not_collinear("points", xy)
     check_not_collinear("image points", uv)
-    h, _ = cv2.findHomography(xy, uv, method=0)
+    check_homography_data(xy, uv)
+    try:
+        h, _ = cv2.findHomography(xy, uv, method=0)
+    except cv2.error as exc:
+        raise CalibrationError(
+            f"cv2.findHomography failed on {xy.shape[0]} points: {exc.err}"
+        ) from None
     if h is None or h.shape != (3, 3) or not np.isfinite(h).all() or abs(h[2, 2]) < 1e-12:
         raise CalibrationError(
             f"cv2.findHomography found no homography for the {xy.shape[0]} points (degenerate "
@@ -262,6 +305,8 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
             gtol=1e-15,
         )
         h = np.append(res.x, 1.0).reshape(3, 3)
+    if not np.all(np.isfinite(h)):
+        raise CalibrationError(f"the homography of the {xy.shape[0]} points is not finite")
     return h
 
 
@@ -297,6 +342,13 @@ def homography_to_pose(h, k) -> np.ndarray:
     hm = check_shape("H", h, (3, 3))
     km = _check_camera_matrix(k)
     m = np.linalg.solve(km, hm)
+    sv = singular_values(m)
+    if sv[0] == 0.0 or sv[2] / sv[0] < HOMOGRAPHY_SINGULAR_TOL:
+        raise CalibrationError(
+            f"H is singular (rank {int(np.sum(sv > sv[0] * HOMOGRAPHY_SINGULAR_TOL))}, singular "
+            f"values of K^-1 H {format_values(sv)}): it is not the homography of a plane in "
+            "front of the camera"
+        )
     norm1 = np.linalg.norm(m[:, 0])
     if norm1 == 0.0 or np.linalg.norm(m[:, 1]) == 0.0:
         raise CalibrationError(
@@ -308,6 +360,13 @@ def homography_to_pose(h, k) -> np.ndarray:
     if gamma * m[2, 2] < 0:
         gamma = -gamma
     r1, r2, t = gamma * m[:, 0], gamma * m[:, 1], gamma * m[:, 2]
+    ratio = np.linalg.norm(r2)
+    if not 0.5 < ratio < 2.0 or abs(r1 @ r2) > 0.5 * ratio:
+        raise CalibrationError(
+            f"H is far from a plane's homography under this K: its first two columns give "
+            f"|r2|/|r1| = {ratio:.3g} and r1.r2 = {r1 @ r2:.3g} (a rotation gives 1 and 0); "
+            "check K and the homography's direction (plane to image)"
+        )
     rot = project_to_so3(np.column_stack([r1, r2, np.cross(r1, r2)]))
     return make_transform(rot, t)
 
@@ -365,12 +424,19 @@ def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.
     try:
         ok, rvec, tvec = cv2.solvePnP(obj, uv, km, d, flags=cv2.SOLVEPNP_ITERATIVE)
     except cv2.error as exc:
-        raise CalibrationError(f"cv2.solvePnP failed on {n} points: {exc}") from exc
+        raise CalibrationError(f"cv2.solvePnP failed on {n} points: {exc.err}") from None
     if not ok:
         raise CalibrationError(f"cv2.solvePnP found no pose for the {n} points")
     if refine:
         criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-16)
-        rvec, tvec = cv2.solvePnPRefineLM(obj, uv, km, d, rvec, tvec, criteria=criteria)
+        try:
+            rvec, tvec = cv2.solvePnPRefineLM(obj, uv, km, d, rvec, tvec, criteria=criteria)
+        except cv2.error as exc:
+            raise CalibrationError(
+                f"cv2.solvePnPRefineLM failed on {n} points: {exc.err}"
+            ) from None
+    if not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
+        raise CalibrationError(f"cv2.solvePnP returned a non-finite pose for the {n} points")
     rot, _ = cv2.Rodrigues(rvec)
     return make_transform(rot, tvec.ravel())
 
@@ -407,8 +473,19 @@ def solve_pnp_ransac(object_points, image_uv, k, threshold_px: float) -> np.ndar
     """
     obj = check_shape("object_points", object_points, (None, 3))
     uv = check_shape("image_uv", image_uv, (obj.shape[0], 2))
+    k = _check_camera_matrix(k)
+    if not (np.isfinite(threshold_px) and threshold_px > 0):
+        raise CalibrationError(f"threshold_px must be positive and finite; got {threshold_px}")
     if obj.shape[0] < 4:
         raise CalibrationError(f"RANSAC-PnP needs at least 4 points; got {obj.shape[0]}")
+    check_not_collinear("object points", obj)
+    try:
+        return _pnp_ransac(obj, uv, k, threshold_px)
+    except cv2.error as exc:
+        raise CalibrationError(f"RANSAC-PnP failed on {obj.shape[0]} points: {exc.err}") from None
+
+
+def _pnp_ransac(obj, uv, k, threshold_px):
     cv2.setRNGSeed(0)
     ok, rvec, tvec, inliers = cv2.solvePnPRansac(
         obj,

@@ -21,21 +21,33 @@ from one robot pose and two images of a two-sided target.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import cv2
 import numpy as np
 import pinocchio as pin
 
 from calstudy.core import geometry as geo
-from calstudy.core.config import check_ids, parse_number
+from calstudy.core import schema
+from calstudy.core.config import check_ids
 from calstudy.core.errors import CalibrationError
-from calstudy.core.estimation import Estimate, condition_number, levenberg_marquardt
+from calstudy.core.estimation import (
+    Estimate,
+    apply_fit_check,
+    check_condition,
+    condition_number,
+    goodness_of_fit,
+    levenberg_marquardt,
+)
 from calstudy.estimators.fitting import fit_rotation
 
 #: largest orientation spread (rad) accepted among moves that should be pure translations
 PURE_TRANSLATION_TOL = np.deg2rad(0.01)
 #: condition number of Eq. 13's matrix above which T_F is declared undetermined
 MAX_CONDITION = 1e6
+#: condition number of the whitened ML Jacobian above which R_F, T_F, X_B are unobservable (a
+#: well-posed station gives about 1e5; translation-only poses give 1e17)
+MAX_ML_CONDITION = 1e10
 #: smallest rotation (rad) between consecutive poses that Tsai-Lenz is given by the dualarm chain
 MIN_PAIR_ROTATION = np.deg2rad(0.5)
 
@@ -203,11 +215,31 @@ def sphere_centre_in_base(flange2base, centres, sensor2flange) -> np.ndarray:
     return (np.einsum("nij,nj->ni", chain[:, :3, :3], x_f) + chain[:, :3, 3]).mean(axis=0)
 
 
+def _whitening(sensor_sigma, n: int) -> np.ndarray:
+    """(n, 3, 3) whitening matrices ``W`` (``W^T W = cov^-1``) of a sigma or a covariance."""
+    if np.ndim(sensor_sigma) <= 1:
+        sigma = _check_sigma(sensor_sigma)
+        return np.broadcast_to(np.diag(1.0 / sigma), (n, 3, 3)).copy()
+    a = np.asarray(sensor_sigma, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise CalibrationError(f"sensor covariance must be finite; got {a}")
+    if a.shape not in ((3, 3), (n, 3, 3)):
+        raise CalibrationError(
+            f"sensor covariance has shape {a.shape}; expected (3, 3) or ({n}, 3, 3)"
+        )
+    cov = np.broadcast_to(a, (n, 3, 3))
+    try:
+        chol = np.linalg.cholesky(0.5 * (cov + np.swapaxes(cov, 1, 2)))
+    except np.linalg.LinAlgError as exc:
+        raise CalibrationError(f"a sensor covariance is not positive definite ({exc})") from exc
+    return np.linalg.inv(chol)
+
+
 @dataclass
 class _SphereProblem:
     poses: np.ndarray
     x_f: np.ndarray
-    sigma: np.ndarray
+    whiten: np.ndarray  # (N, 3, 3): W_i with W_i^T W_i the inverse covariance of centre i
     base: np.ndarray  # rotation around which the correction is parametrised
 
     def unpack(self, x):
@@ -220,7 +252,7 @@ class _SphereProblem:
         chain = self.poses @ s2f
         rt = np.swapaxes(chain[:, :3, :3], 1, 2)
         pred = np.einsum("nij,nj->ni", rt, x_b - chain[:, :3, 3])
-        return ((pred - self.x_f) / self.sigma).ravel()
+        return np.einsum("nij,nj->ni", self.whiten, pred - self.x_f).ravel()
 
     def jacobian(self, x):
         s2f, x_b = self.unpack(x)
@@ -236,10 +268,30 @@ class _SphereProblem:
         pred = q @ r_f
         jac[:, :, 3:6] = geo.skew(pred) @ pin.Jexp3(np.asarray(x[3:6], dtype=float))
         jac[:, :, 6:9] = np.einsum("ji,njk->nik", r_f, r0.transpose(0, 2, 1))
-        return (jac / self.sigma[None, :, None]).reshape(n * 3, 9)
+        return (self.whiten @ jac).reshape(n * 3, 9)
 
 
-def sphere_handeye_ml(flange2base, centres, sensor_sigma, initial: np.ndarray) -> Estimate:
+def _check_sigma(sensor_sigma) -> np.ndarray:
+    try:
+        sigma = np.broadcast_to(np.asarray(sensor_sigma, dtype=float), (3,)).copy()
+    except (TypeError, ValueError):
+        raise CalibrationError(
+            f"sensor sigma must be one value or one per sensor axis (3); got {sensor_sigma!r}"
+        ) from None
+    if not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
+        raise CalibrationError(f"sensor sigma must be positive and finite (mm); got {sigma}")
+    return sigma
+
+
+def sphere_handeye_ml(
+    flange2base,
+    centres,
+    sensor_sigma,
+    initial: np.ndarray,
+    *,
+    ids=None,
+    misfit: str = "flag",
+) -> Estimate:
     """Maximum-likelihood fixed-sphere hand-eye: ``R_F, T_F, X_B`` from all measurements jointly.
 
     Minimises the whitened differences between the measured and the predicted sphere centres in
@@ -253,31 +305,51 @@ def sphere_handeye_ml(flange2base, centres, sensor_sigma, initial: np.ndarray) -
         All flange poses (translations and pose changes), mm.
     centres : (N, 3) array
         Measured sphere centres in the sensor frame, mm.
-    sensor_sigma : float or (3,) array
-        Standard deviation of a measured centre along the sensor axes, mm.
+    sensor_sigma : float, (3,), (3, 3) or (N, 3, 3) array
+        The sensor noise of a measured centre: a standard deviation (mm) for all axes, one per
+        sensor axis (independent axes), or the full covariance (mm^2) shared by all
+        measurements or one per measurement. Only the full covariance makes this the maximum
+        likelihood when the axes are correlated (the line laser's y and z are, strongly).
     initial : (4, 4) array
         Starting ``sensor2flange`` (for example :func:`sphere_handeye`).
+    ids : (N,) array, optional
+        Measurement ids (e.g. the CSV's ``id`` column), used to name the measurements that
+        disagree most when the fit fails.
+    misfit : {"flag", "raise", "off"}
+        What a failed goodness-of-fit test does (whitened ``chi2/dof`` outside its expected
+        range, :func:`calstudy.core.estimation.goodness_of_fit`): ``"flag"`` returns the
+        estimate with the message in ``flags`` and a :class:`calstudy.CalibrationWarning` (a
+        simulated station whose robot errors the sensor noise does not cover fails it, and its
+        estimate is still wanted); ``"raise"`` raises :class:`CalibrationError`. Use ``"raise"``
+        for measured data.
 
     Returns
     -------
     Estimate
         ``value`` is ``sensor2flange``; ``params`` ``[T_F (3), delta (3), X_B (3)]`` with ``delta``
         the rotation correction of ``R_F`` about ``initial`` in the sensor frame; ``covariance``
-        ``(J^T J)^-1`` of these parameters (whitened residuals, sigma = 1).
+        ``(J^T J)^-1`` of these parameters (whitened residuals, sigma = 1); ``fit`` the
+        goodness-of-fit test.
 
     Raises
     ------
     CalibrationError
-        On bad shapes, fewer than 3 poses, or if LM does not converge.
+        On bad shapes, fewer than 3 poses, non-positive sigma, if LM does not converge, if the
+        poses leave the parameters unobservable (condition number above
+        :data:`MAX_ML_CONDITION`, e.g. translations only), or with ``misfit="raise"`` if the
+        residuals are far larger than the stated noise (a sphere that moved, mixed units).
     """
     poses, x_f = _check_measurements("ML", flange2base, centres)
     init = geo.check_transform("initial sensor2flange", initial)
-    sigma = np.broadcast_to(np.asarray(sensor_sigma, dtype=float), (3,)).copy()
-    if np.any(sigma <= 0) or not np.all(np.isfinite(sigma)):
-        raise CalibrationError(f"sensor sigma must be positive and finite; got {sigma}")
+    names = None
+    if ids is not None:
+        id_arr = np.asarray(ids).ravel()
+        if id_arr.size != poses.shape[0]:
+            raise CalibrationError(f"{id_arr.size} ids for {poses.shape[0]} measurements")
+        names = [f"id {i}" for i in id_arr]
     if poses.shape[0] < 3:
         raise CalibrationError(f"ML hand-eye needs at least 3 poses; got {poses.shape[0]}")
-    problem = _SphereProblem(poses, x_f, sigma, init[:3, :3])
+    problem = _SphereProblem(poses, x_f, _whitening(sensor_sigma, poses.shape[0]), init[:3, :3])
     x_b0 = sphere_centre_in_base(poses, x_f, init)
     x0 = np.concatenate([init[:3, 3], np.zeros(3), x_b0])
     est = levenberg_marquardt(
@@ -288,8 +360,14 @@ def sphere_handeye_ml(flange2base, centres, sensor_sigma, initial: np.ndarray) -
         names=["tx", "ty", "tz", "dx", "dy", "dz", "Xb", "Yb", "Zb"],
         label="ML sphere hand-eye",
         to_value=lambda x: problem.unpack(x)[0],
+        max_condition=MAX_ML_CONDITION,
+        advice="the poses must include orientation changes about at least two axes (translations "
+        "alone leave T_F and the sphere centre confounded)",
     )
-    return est
+    check = goodness_of_fit(
+        est.residuals, 9, label="ML sphere hand-eye", block=3, block_names=names
+    )
+    return apply_fit_check(est, check, misfit)
 
 
 def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x_b) -> np.ndarray:
@@ -299,13 +377,24 @@ def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x
     sphere centre ``x_b`` in base. Returns the ``(9, 9)`` covariance ``(J^T J)^-1`` of the
     whitened problem; ``sqrt(trace)`` of its blocks is the smallest RMS error any unbiased
     estimator can reach from these poses and this noise.
+
+    Raises
+    ------
+    CalibrationError
+        On bad shapes, a sigma that is not positive and finite, or poses that leave the
+        parameters unobservable (condition number above :data:`MAX_ML_CONDITION`).
     """
     poses, x_f = _check_measurements("CRB", flange2base, centres_true)
     t = geo.check_transform("sensor2flange", sensor2flange)
-    sigma = np.broadcast_to(np.asarray(sensor_sigma, dtype=float), (3,)).copy()
-    problem = _SphereProblem(poses, x_f, sigma, t[:3, :3])
-    x = np.concatenate([t[:3, 3], np.zeros(3), np.asarray(x_b, dtype=float)])
+    problem = _SphereProblem(poses, x_f, _whitening(sensor_sigma, poses.shape[0]), t[:3, :3])
+    x = np.concatenate([t[:3, 3], np.zeros(3), geo.check_shape("x_b", x_b, (3,))])
     jac = problem.jacobian(x)
+    check_condition(
+        condition_number(jac),
+        MAX_ML_CONDITION,
+        "the Cramer-Rao bound of the sphere hand-eye",
+        "the poses must include orientation changes about at least two axes",
+    )
     return np.linalg.pinv(jac.T @ jac)
 
 
@@ -374,13 +463,20 @@ def opencv_handeye(
         raise CalibrationError(f"AX = XB needs at least 3 poses; got {g2b.shape[0]}")
     if min_pair_rotation > 0.0:
         check_pair_rotations(g2b, min_pair_rotation)
-    rot, trans = cv2.calibrateHandEye(
-        list(g2b[:, :3, :3]),
-        list(g2b[:, :3, 3:]),
-        list(t2c[:, :3, :3]),
-        list(t2c[:, :3, 3:]),
-        method=OPENCV_METHODS[method],
-    )
+    try:
+        rot, trans = cv2.calibrateHandEye(
+            list(g2b[:, :3, :3]),
+            list(g2b[:, :3, 3:]),
+            list(t2c[:, :3, :3]),
+            list(t2c[:, :3, 3:]),
+            method=OPENCV_METHODS[method],
+        )
+    except cv2.error as exc:
+        raise CalibrationError(
+            f"OpenCV {method} hand-eye failed on {g2b.shape[0]} poses: {exc.err or exc}"
+        ) from None
+    if rot is None or trans is None:
+        raise CalibrationError(f"OpenCV {method} hand-eye returned no result")
     out = geo.make_transform(rot, trans.ravel())
     if not np.all(np.isfinite(out)):
         raise CalibrationError(f"OpenCV {method} hand-eye returned a non-finite result")
@@ -519,6 +615,95 @@ class SphereMeasurements:
         )
 
 
+#: the unit suffixes a column name may declare, and the factor to mm or degrees
+_LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
+_ANGLE_UNITS = {"deg": 1.0, "rad": 180.0 / np.pi}
+#: positions whose largest magnitude is below this (mm) are suspected to be metres when the
+#: other group of lengths reaches :data:`_MM_TYPICAL`
+_METRE_SUSPECT = 10.0
+_MM_TYPICAL = 100.0
+
+
+class _SphereRow(schema.Schema):
+    id: float
+    group: Literal["translation", "rotation"]
+    x: schema.Finite
+    y: schema.Finite
+    z: schema.Finite
+    a: schema.Finite
+    b: schema.Finite
+    c: schema.Finite
+    sx: schema.Finite
+    sy: schema.Finite
+    sz: schema.Finite
+
+
+def _sphere_columns(path, header: list[str]) -> tuple[dict[str, str], dict[str, float]]:
+    """Map each schema column to the file's column (bare, or with a declared unit suffix) and
+    give each group's factor to mm / deg; ``nan`` factor means the unit is not declared."""
+    mapping, factors = {}, {}
+    groups = {"xyz": ("x", "y", "z"), "abc": ("a", "b", "c"), "sxyz": ("sx", "sy", "sz")}
+    for group, cols in groups.items():
+        units = _ANGLE_UNITS if group == "abc" else _LENGTH_UNITS
+        found = set()
+        for col in cols:
+            names = [col] + [f"{col}_{u}" for u in units]
+            present = [n for n in names if n in header]
+            if len(present) > 1:
+                raise CalibrationError(
+                    f"{path}: column {col!r} is given twice ({', '.join(present)})"
+                )
+            if not present:
+                raise CalibrationError(
+                    f"{path}: missing column {col!r} (or {col}_<unit> with unit "
+                    f"{' or '.join(units)}); the header has {', '.join(header)}"
+                )
+            mapping[col] = present[0]
+            found.add(present[0][len(col) + 1 :] or None)
+        if len(found) > 1:
+            bare = [c for c in cols if mapping[c] == c]
+            raise CalibrationError(
+                f"{path}: missing column(s) {', '.join(c + '_<unit>' for c in bare)}: columns "
+                f"{', '.join(mapping[c] for c in cols)} mix declared and undeclared units; give "
+                "all three the same suffix"
+            )
+        unit = found.pop()
+        factors[group] = float("nan") if unit is None else units[unit]
+    for col in ("id", "group"):
+        if col not in header:
+            raise CalibrationError(
+                f"{path}: missing column {col!r}; the header has {', '.join(header)}"
+            )
+        mapping[col] = col
+    return mapping, factors
+
+
+def _check_units(path, values: np.ndarray, factors: dict[str, float]) -> None:
+    """Refuse undeclared units that look like radians or metres (the suspicion stated)."""
+    abc, xyz, sxyz = values[:, 4:7], values[:, 1:4], values[:, 7:10]
+    if np.isnan(factors["abc"]):
+        largest = float(np.abs(abc).max())
+        if 0.0 < largest <= np.pi:
+            raise CalibrationError(
+                f"{path}: every value of columns a, b, c lies within +-pi (largest |value| "
+                f"{largest:.4g}): they look like radians, but the schema expects degrees; "
+                "convert them, or declare the unit by naming the columns a_rad, b_rad, c_rad"
+            )
+    big = {"xyz": float(np.abs(xyz).max()), "sxyz": float(np.abs(sxyz).max())}
+    what = {"xyz": "flange positions x, y, z", "sxyz": "sphere centres sx, sy, sz"}
+    declare = {"xyz": "x_m, y_m, z_m", "sxyz": "sx_m, sy_m, sz_m"}
+    for group, other in (("xyz", "sxyz"), ("sxyz", "xyz")):
+        if not np.isnan(factors[group]) or big[group] >= _METRE_SUSPECT:
+            continue
+        if big[other] >= _MM_TYPICAL or big[other] < _METRE_SUSPECT:
+            raise CalibrationError(
+                f"{path}: the {what[group]} are all below {_METRE_SUSPECT:g} (largest |value| "
+                f"{big[group]:.4g}) while the {what[other]} reach {big[other]:.4g}: they look "
+                "like metres, but the schema expects mm; convert them, or declare the unit by "
+                f"naming the columns {declare[group]}"
+            )
+
+
 def read_sphere_measurements(path) -> SphereMeasurements:
     """Read a user's fixed-sphere measurements from CSV (schema in the README).
 
@@ -526,44 +711,41 @@ def read_sphere_measurements(path) -> SphereMeasurements:
     ``translation`` (flange orientation unchanged) or ``rotation``; ``x, y, z`` (mm) and
     ``a, b, c`` (deg, ``R = Rz(a) Ry(b) Rx(c)``, the KUKA convention) are the flange pose read
     from the robot controller; ``sx, sy, sz`` (mm) the sphere centre measured in the sensor frame.
+    A column may declare its unit by a suffix (``x_mm`` or ``x_m``, ``a_deg`` or ``a_rad``, the
+    same for the three columns of a group); declared units are converted. Spreadsheet files are
+    accepted: a UTF-8 byte-order mark, ``;`` as the separator, ``#`` comment lines.
+
+    Checks, each naming the file and the row and column where it applies: every column present;
+    every cell a finite number (a decimal comma ``12,5`` is named as such), ``group`` one of
+    ``translation, rotation``, ids distinct integers; and, where units are not declared, their
+    plausibility: angles that all lie within +-pi look like radians, positions all below 10 while
+    the other lengths reach 100 or more look like metres (both refused with the suspicion stated).
 
     Raises
     ------
+    FileNotFoundError
+        If ``path`` is not a file.
     CalibrationError
-        For a missing column, an empty file, or a cell that is empty, not a number or not finite,
-        naming the row (1-based, counting the header as row 1) and the column; for an unknown
-        group or a duplicated id.
+        On any of the checks above.
     """
-    import csv
-
-    with open(path, newline="") as handle:
-        reader = csv.DictReader(handle)
-        header = [h.strip() for h in (reader.fieldnames or [])]
-        missing = [c for c in SPHERE_CSV_COLUMNS if c not in header]
-        if missing:
-            raise CalibrationError(f"{path}: missing column(s) {', '.join(missing)}")
-        rows = list(reader)
+    header, rows = schema.read_csv_table(path, "fixed-sphere measurement file")
     if not rows:
         raise CalibrationError(f"{path}: no measurement rows")
+    mapping, factors = _sphere_columns(path, header)
+    renamed = [next((k for k, v in mapping.items() if v == h), "") for h in header]
+    records = schema.validate_rows(_SphereRow, renamed, rows, path)
     numeric = [c for c in SPHERE_CSV_COLUMNS if c != "group"]
-    values = np.zeros((len(rows), len(numeric)))
-    groups = []
-    for i, row in enumerate(rows):
-        line = i + 2
-        row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
-        for j, col in enumerate(numeric):
-            values[i, j] = parse_number(path, line, col, row.get(col, ""))
-        if row["group"] not in SPHERE_CSV_GROUPS:
-            raise CalibrationError(
-                f"{path}: row {line}, column 'group': {row['group']!r} is not one of "
-                f"{', '.join(SPHERE_CSV_GROUPS)}"
-            )
-        groups.append(row["group"])
+    values = np.array([[getattr(r, c) for c in numeric] for r in records], dtype=float)
+    groups = np.array([r.group for r in records])
+    _check_units(path, values, factors)
+    values[:, 1:4] *= np.nan_to_num(factors["xyz"], nan=1.0)
+    values[:, 4:7] *= np.nan_to_num(factors["abc"], nan=1.0)
+    values[:, 7:10] *= np.nan_to_num(factors["sxyz"], nan=1.0)
     ids = check_ids(path, values[:, 0])
     rot = geo.euler_zyx_to_matrix(values[:, 4], values[:, 5], values[:, 6])
     return SphereMeasurements(
         ids=ids.astype(int),
-        group=np.array(groups),
+        group=groups,
         flange2base=geo.make_transform(rot, values[:, 1:4]),
         centres=values[:, 7:10],
     )

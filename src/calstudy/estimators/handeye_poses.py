@@ -50,7 +50,13 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.estimation import Estimate, covariance_from_jacobian
+from calstudy.core.estimation import (
+    MISFIT_POLICIES,
+    Estimate,
+    apply_fit_check,
+    covariance_from_jacobian,
+    goodness_of_fit,
+)
 from calstudy.estimators.handeye import OPENCV_METHODS
 from calstudy.estimators.handeye_inputs import (
     ORTHO_TOL,
@@ -197,6 +203,7 @@ class _Options:
     pixels: object
     camera_matrix: object
     pixel_sigma: float | None
+    misfit: str = "flag"
 
 
 @dataclass
@@ -227,6 +234,8 @@ def _check_options(opt: _Options) -> None:
         raise CalibrationError("give both sigma_rot and sigma_trans, or neither")
     if not 0 < opt.outlier_alpha < 1:
         raise CalibrationError(f"outlier_alpha must be in (0, 1); got {opt.outlier_alpha:g}")
+    if opt.misfit not in MISFIT_POLICIES:
+        raise CalibrationError(f"misfit must be one of {MISFIT_POLICIES}; got {opt.misfit!r}")
 
 
 def _check_convention(a, b, check: str, notes: list) -> ConventionCheck:
@@ -262,8 +271,11 @@ def _start(a, b, start: ClosedForm, opt: _Options, notes: list) -> _Fit:
     fit = _Fit(x, z, w_user, w, given=opt.sigma_rot is not None, label=start.method)
     if fit.given:
         fit.s_rot, fit.s_trans = float(opt.sigma_rot), float(opt.sigma_trans)
-        if not (fit.s_rot > 0 and fit.s_trans > 0):
-            raise CalibrationError(f"sigmas must be positive; got {fit.s_rot:g}, {fit.s_trans:g}")
+        if not (0 < fit.s_rot < np.inf and 0 < fit.s_trans < np.inf):
+            raise CalibrationError(
+                f"sigma_rot and sigma_trans must be positive and finite; got {fit.s_rot:g}, "
+                f"{fit.s_trans:g}"
+            )
     else:
         fit.s_rot, fit.s_trans = robust_sigmas(pose_residuals(a, b, x, z)[w > 0])
     return fit
@@ -355,6 +367,22 @@ def _covariance(fit: _Fit, opt: _Options) -> tuple[np.ndarray, str]:
     return cov, basis
 
 
+def _check_fit(ids, fit: _Fit, opt: _Options, notes: list) -> None:
+    """Goodness of fit of the pose refinement with a given noise level (with an estimated one
+    chi2/dof is 1 by construction; robust weights change its distribution): far outside its
+    range, raise or flag by ``opt.misfit``."""
+    if not (fit.given and opt.refine and opt.robust is None and opt.target_points is None):
+        return
+    keep = fit.w > 0
+    r = fit.est.residuals.reshape(-1, 6)[keep]
+    check = goodness_of_fit(
+        r, 12, label="hand-eye ML", block=6, block_names=[f"pose {i}" for i in ids[keep]]
+    )
+    n_flags = len(fit.est.flags)
+    apply_fit_check(fit.est, check, opt.misfit)
+    notes.extend(fit.est.flags[n_flags:])
+
+
 def _flag(ids, score, outlier_alpha: float, x, z, notes: list) -> list[int]:
     """Ids of the poses flagged as outliers; notes on them and on a possible X, Z swap."""
     limit = outlier_limit(outlier_alpha)
@@ -389,6 +417,7 @@ def _calibrate(
     res = pose_residuals(a, b, x, z)
     score = outlier_scores(res, fit.s_rot, fit.s_trans)
     cov, basis = _covariance(fit, opt)
+    _check_fit(prep.ids, fit, opt, notes)
     flagged = _flag(prep.ids, score, opt.outlier_alpha, x, z, notes)
     eye_in_hand = prep.setup == "eye_in_hand"
     return HandEyeResult(
@@ -451,6 +480,11 @@ _COMMON_DOC = """
     target_points, pixels, camera_matrix, pixel_sigma : optional
         Target points (M, 3) mm, their pixels (N, M, 2), K (3, 3) and the pixel noise (px): refine
         on the reprojection error instead of the target poses.
+    misfit : {"flag", "raise", "off"}
+        With ``sigma_rot`` and ``sigma_trans`` given (no robust loss), the whitened residual
+        ``chi2/dof`` is tested against its expected range; above it, ``"flag"`` adds the message
+        (naming the poses that disagree most) to ``notes`` with a
+        :class:`calstudy.CalibrationWarning`, ``"raise"`` raises :class:`CalibrationError`.
 
     Returns
     -------
@@ -493,6 +527,7 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
         pixels=None,
         camera_matrix=None,
         pixel_sigma: float | None = None,
+        misfit: str = "flag",
     ) -> HandEyeResult:
         prep = prepare_poses(
             flange2base,
@@ -524,6 +559,7 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             pixels=pixels,
             camera_matrix=camera_matrix,
             pixel_sigma=pixel_sigma,
+            misfit=misfit,
         )
         return _calibrate(prep, forms, method, options)
 

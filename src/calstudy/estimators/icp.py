@@ -28,6 +28,16 @@ from calstudy.core.errors import CalibrationError
 
 #: fewest pairs an update may rest on
 MIN_PAIRS = 6
+#: an update with ``delta^T H delta / s^2`` below this is smaller than its own standard error
+NOISE_STEP = 1.0
+#: [e_j]_x, the cross-product matrices of the unit vectors
+_SKEW = np.array(
+    [
+        [[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
+        [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]],
+        [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
+    ]
+)
 
 
 @dataclass
@@ -45,7 +55,8 @@ class IcpResult:
     rms_mm : float
         Unweighted RMS distance of the final pairs, mm.
     converged : bool
-        The last update moved the cloud by less than the tolerance.
+        The last update moved the cloud by less than the tolerance (or, with
+        ``stop_below_noise``, was below the noise).
     """
 
     transform: np.ndarray
@@ -55,28 +66,54 @@ class IcpResult:
     converged: bool
 
 
-def _weighted_rigid_step(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> np.ndarray:
+def _rodrigues(omega: np.ndarray) -> np.ndarray:
+    """Rotation matrix ``(3, 3)`` of the rotation vector ``omega`` (rad), without a scipy object."""
+    angle = float(np.sqrt(omega @ omega))
+    k = np.array(
+        [[0.0, -omega[2], omega[1]], [omega[2], 0.0, -omega[0]], [-omega[1], omega[0], 0.0]]
+    )
+    if angle < 1e-12:
+        return np.eye(3) + k
+    return np.eye(3) + np.sin(angle) / angle * k + (1.0 - np.cos(angle)) / angle**2 * (k @ k)
+
+
+def _weighted_rigid_step(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, float]:
     """One Gauss-Newton step ``(4, 4)`` towards the rigid motion minimising
     ``sum (R p + t - q)^T diag(w) (R p + t - q)`` over fixed pairs ``p -> q`` ``(N, 3)``.
 
     The pairs are centred on ``p``'s centroid first, which keeps the normal equations well
-    conditioned far from the origin. Repeated on fixed pairs, the steps converge quadratically.
+    conditioned far from the origin. The 6 x 6 normal equations are accumulated directly from
+    the 3 x 3 moments of the pairs, never from an ``(N, 3, 6)`` Jacobian. Repeated on fixed
+    pairs, the steps converge quadratically. Also returns ``delta^T H delta / s^2``, the size
+    of the step in units of its own standard error, with ``s^2`` the weighted residual variance
+    of the pairs (``3 N - 6`` degrees of freedom): below 1, the step is smaller than its
+    standard error.
     """
     c = p.mean(axis=0)
     x = p - c
-    r = (p - q) * np.sqrt(w)
-    # d(R x + t)/d(omega) = -[x]_x, d/dt = I, each row weighted by sqrt(w)
-    jac = np.zeros((p.shape[0], 3, 6))
-    jac[:, 0, 1], jac[:, 0, 2] = x[:, 2], -x[:, 1]
-    jac[:, 1, 0], jac[:, 1, 2] = -x[:, 2], x[:, 0]
-    jac[:, 2, 0], jac[:, 2, 1] = x[:, 1], -x[:, 0]
-    jac[:, :, 3:] = np.eye(3)
-    jac *= np.sqrt(w)[None, :, None]
-    flat = jac.reshape(-1, 6)
-    delta = -np.linalg.solve(flat.T @ flat, flat.T @ r.ravel())
-    rot = geo.rotvec_to_matrix(delta[:3])
+    r = p - q
+    n = p.shape[0]
+    # the Jacobian of axis j is a_j = [x_k x e_j, e_j] per pair; with sum_k x_k = 0 the normal
+    # equations need only the moments M = x^T x and C = x^T r:
+    #   H_rot = sum_j w_j [e_j]_x M [e_j]_x^T,  H_rot,t = 0,  H_t = n diag(w),
+    #   g_rot = -sum_j w_j [e_j]_x C[:, j],      g_t = w * sum_k r_k
+    m = x.T @ x
+    cm = x.T @ r
+    h = np.zeros((6, 6))
+    g = np.zeros(6)
+    for j in range(3):
+        e = _SKEW[j]
+        h[:3, :3] += w[j] * (e @ m @ e.T)
+        g[:3] -= w[j] * (e @ cm[:, j])
+    h[3:, 3:] = n * np.diag(w)
+    g[3:] = w * r.sum(axis=0)
+    delta = -np.linalg.solve(h, g)
+    s2 = float(np.sum(r**2 @ w)) / max(3 * n - 6, 1)
+    rot = _rodrigues(delta[:3])
     # rotation about the centroid, then the translation
-    return geo.make_transform(rot, c - rot @ c + delta[3:])
+    return geo.make_transform(rot, c - rot @ c + delta[3:]), float(delta @ h @ delta) / max(
+        s2, 1e-300
+    )
 
 
 def _check_cloud(name: str, cloud) -> np.ndarray:
@@ -97,7 +134,9 @@ def weighted_icp(
     max_iterations: int = 200,
     max_pair_mm: float = 2.0,
     tol: float = 1e-6,
+    stop_below_noise: bool = False,
     tree: cKDTree | None = None,
+    workers: int = 1,
 ) -> IcpResult:
     """Align ``moving`` ``(N, 3)`` onto ``reference`` ``(M, 3)`` (both mm, same frame), Eq. 4.
 
@@ -118,8 +157,19 @@ def weighted_icp(
         Convergence: an update that moves no point by more than ``tol`` mm ends a stage.
         (Point-to-point ICP lets overlapping caps of a sphere slide about its centre with little
         change of cost; the cap on iterations stops such a slide.)
+    stop_below_noise : bool, default False
+        Also end a stage once an update is below the noise: smaller than its own standard
+        error, ``delta^T H delta < s^2`` (``H`` the normal matrix, ``s^2`` the weighted residual
+        variance of the pairs; the covariance of the update is ``s^2 H^-1``).
+        The pairs of two differently sampled clouds are not corresponding points, and the
+        residual they leave (for 1,000-point sphere caps: tangential offsets of about half the
+        point spacing) makes later updates a random walk of that size, not a convergence: such
+        updates cannot be told from noise, and iterating them to ``max_iterations`` adds nothing.
     tree : scipy.spatial.cKDTree, optional
         A prebuilt tree of ``reference``.
+    workers : int, default 1
+        Threads of the nearest-neighbour query (``cKDTree.query(workers=...)``; -1: all cores).
+        Keep 1 when trials already run in parallel processes.
 
     Raises
     ------
@@ -140,7 +190,7 @@ def weighted_icp(
     it, stage, converged, n_pairs, rms = 0, 0, False, 0, float("nan")
     while it < max_iterations:
         cur = geo.apply(total, p0)
-        dist, idx = kd.query(cur, distance_upper_bound=max_pair_mm)
+        dist, idx = kd.query(cur, distance_upper_bound=max_pair_mm, workers=workers)
         keep = np.isfinite(dist)
         if stage == 1:
             dz = np.zeros_like(dist)
@@ -159,12 +209,12 @@ def weighted_icp(
                 f"ICP lost its pairs: {n_pairs} pairs left at iteration {it} (need {MIN_PAIRS})"
             )
         it += 1
-        step = _weighted_rigid_step(cur[keep], q[idx[keep]], w)
+        step, size = _weighted_rigid_step(cur[keep], q[idx[keep]], w)
         total = step @ total
         moved = geo.apply(step, cur[keep]) - q[idx[keep]]
         rms = float(np.sqrt(np.mean(np.sum(moved**2, axis=1))))
         shift = float(np.abs(geo.apply(step, cur) - cur).max())
-        if shift < tol:
+        if shift < tol or (stop_below_noise and size < NOISE_STEP):
             if stage == 0 and np.isfinite(z_threshold_mm):
                 stage = 1
                 continue

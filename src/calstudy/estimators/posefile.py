@@ -7,7 +7,6 @@
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from calstudy.core import geometry as geo
+from calstudy.core import schema
 from calstudy.core.config import check_ids, parse_number
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.handeye_inputs import (
@@ -131,18 +131,28 @@ def _rotations(form: str, v: np.ndarray) -> np.ndarray:
     return v.reshape(-1, 3, 3)
 
 
-def _values(path, header, rows, cols, index) -> np.ndarray:
+#: largest deviation of a stored quaternion's norm from 1 accepted (rounded files)
+QUATERNION_NORM_TOL = 1e-3
+
+
+def _values(path, rows, cols, index) -> np.ndarray:
     """The numbers ``(rows, cols)`` of a pose list; CalibrationError naming row and column."""
     values = np.zeros((len(rows), len(cols)))
-    for i, row in enumerate(rows):
-        line = i + 2
-        if len(row) != len(header):
-            raise CalibrationError(
-                f"{path}: row {line} has {len(row)} cells; the header has {len(header)}"
-            )
+    for i, (line, row) in enumerate(rows):
         for j, (col, k) in enumerate(zip(cols, index, strict=True)):
-            values[i, j] = parse_number(path, line, col, row[k].strip())
+            values[i, j] = parse_number(path, line, col, row[k])
     return values
+
+
+def _check_quaternions(path, rows, prefix: str, q: np.ndarray) -> None:
+    norm = np.linalg.norm(q, axis=1)
+    k = int(np.argmax(np.abs(norm - 1.0)))
+    if abs(norm[k] - 1.0) > QUATERNION_NORM_TOL:
+        raise CalibrationError(
+            f"{path}: row {rows[k][0]}, columns {prefix}_qw..{prefix}_qz: the quaternion has norm "
+            f"{norm[k]:.6g}, not 1 (tolerance {QUATERNION_NORM_TOL:g}); is it scalar first, "
+            "and complete?"
+        )
 
 
 def read_pose_list(path) -> PoseList:
@@ -155,7 +165,9 @@ def read_pose_list(path) -> PoseList:
     ``mm, cm, m`` or ``in``. Rotation forms (:data:`ROTATION_FORMS`): ``_qw, _qx, _qy, _qz``
     (unit quaternion, scalar first), ``_rx_rad, _ry_rad, _rz_rad`` (rotation vector),
     ``_a_deg, _b_deg, _c_deg`` (``R = Rz(a) Ry(b) Rx(c)``, KUKA) or ``_r11 ... _r33`` (matrix,
-    row by row). Lines starting with ``#`` are comments.
+    row by row). Lines starting with ``#`` are comments; a UTF-8 byte-order mark and ``;`` as
+    the separator (spreadsheet exports) are accepted. Quaternions must have norm 1 within
+    :data:`QUATERNION_NORM_TOL`; other rotations are checked by the calibration (naming the pose).
 
     Returns
     -------
@@ -171,13 +183,7 @@ def read_pose_list(path) -> PoseList:
         with the header as row 1, and the column), a non-integer or repeated id.
     """
     path = Path(path)
-    with open(path, newline="") as handle:
-        lines = [ln for ln in handle if not ln.lstrip().startswith("#")]
-    reader = csv.reader(lines)
-    try:
-        header = [h.strip() for h in next(reader)]
-    except StopIteration:
-        raise CalibrationError(f"{path}: the file is empty") from None
+    header, rows = schema.read_csv_table(path, "pose list")
     if "id" not in header:
         raise CalibrationError(f"{path}: missing column 'id'")
     rprefix = _find_prefix(path, header, list(ROBOT_CONVENTIONS), "robot")
@@ -186,12 +192,15 @@ def read_pose_list(path) -> PoseList:
     cunit, cform, ctrans, crot = _pose_columns(path, header, cprefix)
     cols = ["id"] + rtrans + rrot + ctrans + crot
     index = [header.index(c) for c in cols]
-    rows = [r for r in reader if any(cell.strip() for cell in r)]
     if not rows:
         raise CalibrationError(f"{path}: no pose rows")
-    values = _values(path, header, rows, cols, index)
+    values = _values(path, rows, cols, index)
     ids = check_ids(path, values[:, 0])
     nr = len(rrot)
+    if rform == "quaternion":
+        _check_quaternions(path, rows, rprefix, values[:, 4 : 4 + nr])
+    if cform == "quaternion":
+        _check_quaternions(path, rows, cprefix, values[:, 4 + nr + 3 : 4 + nr + 3 + 4])
     robot = geo.make_transform(_rotations(rform, values[:, 4 : 4 + nr]), values[:, 1:4])
     c0 = 4 + nr
     camera = geo.make_transform(_rotations(cform, values[:, c0 + 3 :]), values[:, c0 : c0 + 3])

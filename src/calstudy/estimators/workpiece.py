@@ -23,11 +23,36 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.estimation import Estimate, levenberg_marquardt
+from calstudy.core.estimation import Estimate, check_condition, levenberg_marquardt
 
 #: (datum index, workpiece axis) of the six equations F1..F6 of Eq. 3: A:y,z  B:x,y,z  C:z
 RPS_EQUATIONS = ((0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 2))
 DATUM_NAMES = ("A (slot)", "B (hole)", "C (plane)")
+#: condition number of the 3-2-1 Jacobian above which the frame is undetermined (a fixture
+#: of a few hundred mm gives about 1e3)
+MAX_RPS_CONDITION = 1e8
+#: largest residual (mm) of Eq. 3 accepted at the solution: six equations in six unknowns are
+#: solved exactly unless the measured datums contradict the CAD coordinates
+MAX_RPS_RESIDUAL = 1e-6
+_RPS_ADVICE = (
+    "the measured datums contradict the CAD coordinates (datum C measured on the line through "
+    "A and B, or datums swapped); check which datum is which"
+)
+
+
+def _check_solution(est: Estimate, p_b, p_w, label: str) -> Estimate:
+    """Refuse an unobservable frame (condition number) or equations left unsatisfied."""
+    check_condition(est.condition_number, MAX_RPS_CONDITION, f"{label}: the frame", _RPS_ADVICE)
+    res = rps_equations(est.value, p_b, p_w)
+    k = int(np.argmax(np.abs(res)))
+    if abs(res[k]) > MAX_RPS_RESIDUAL * max(1.0, np.abs(p_w).max()):
+        datum, axis = RPS_EQUATIONS[k]
+        raise CalibrationError(
+            f"{label}: equation F{k + 1} (datum {DATUM_NAMES[datum]}, workpiece "
+            f"{'xyz'[axis]}) is left at {res[k]:.3g} mm: no rigid frame maps the measured "
+            "datums onto the CAD coordinates; " + _RPS_ADVICE
+        )
+    return est
 
 
 def check_datums(datums_base, datums_work) -> tuple[np.ndarray, np.ndarray]:
@@ -104,6 +129,8 @@ def rps_frame_penalty(
     """
     p_b, p_w = check_datums(datums_base, datums_work)
     init = geo.check_transform("initial base2work", initial)
+    if not isinstance(max_nfev, int | np.integer) or max_nfev < 1:
+        raise CalibrationError(f"max_nfev must be a positive integer; got {max_nfev!r}")
     if not np.isfinite(penalty) or penalty <= 0:
         raise CalibrationError(f"penalty factor M must be positive and finite; got {penalty}")
     weight = np.sqrt(penalty)
@@ -128,7 +155,7 @@ def rps_frame_penalty(
     det = np.linalg.det(est.value[:3, :3])
     if det < 0:
         raise CalibrationError(f"the penalty solution is a reflection (det R = {det:.4f})")
-    return est
+    return _check_solution(est, p_b, p_w, f"RPS penalty LM (M = {penalty:g})")
 
 
 def rps_frame_so3(datums_base, datums_work, initial) -> Estimate:
@@ -137,6 +164,13 @@ def rps_frame_so3(datums_base, datums_work, initial) -> Estimate:
     Parameters are as in :func:`rps_frame_penalty`. ``params`` is ``[T, rotvec]`` of the
     correction ``base2work = [R_init exp(w) | T]``; the covariance is that of unit-variance
     datum coordinates (scale it by the datum measurement variance).
+
+    Raises
+    ------
+    CalibrationError
+        On bad shapes or degenerate CAD datums, non-convergence, a frame the measured datums
+        leave undetermined (condition number above :data:`MAX_RPS_CONDITION`) or equations the
+        solution cannot satisfy (measured datums contradicting the CAD).
     """
     p_b, p_w = check_datums(datums_base, datums_work)
     init = geo.check_transform("initial base2work", initial)
@@ -152,7 +186,7 @@ def rps_frame_so3(datums_base, datums_work, initial) -> Estimate:
         to_value=unpack,
         sigma=1.0,
     )
-    return est
+    return _check_solution(est, p_b, p_w, "RPS on SO(3)")
 
 
 def rps_frame_batch(
@@ -207,6 +241,11 @@ def rps_frame_batch(
         # left perturbation R <- exp(w) R moves R p by w x (R p) = -[R p]x w
         v = rp[:, di, :]
         jac[:, :, 3:] = -geo.skew(v)[:, np.arange(6), ai, :]
+        cond = np.linalg.cond(jac)
+        if not np.all(np.isfinite(cond)) or cond.max() > MAX_RPS_CONDITION:
+            k = int(np.argmax(np.where(np.isfinite(cond), cond, np.inf)))
+            where = f"the frame of panel {k}"
+            check_condition(float(cond[k]), MAX_RPS_CONDITION, where, _RPS_ADVICE)
         try:
             step = np.linalg.solve(jac, -res[..., None])[..., 0]
         except np.linalg.LinAlgError as exc:

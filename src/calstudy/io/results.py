@@ -36,6 +36,11 @@ NOTEBOOKS_DIR = REPO_ROOT / "notebooks"
 SOURCE_DIR = Path(__file__).resolve().parents[1]
 FLOAT_FORMAT = "%.6g"
 
+#: Notebook parameters that say how a run was executed, not what it computed (workers, a Dask
+#: scheduler, the resume cache, progress bars, where results go): ``run.json`` leaves them out,
+#: so that the same seed gives the same bytes on one core, two, or a cluster.
+EXECUTION_PARAMETERS = ("n_jobs", "scheduler", "cache_dir", "progress", "results_dir")
+
 #: Distributions whose versions ``run.json`` records (the pinned runtime dependencies).
 PINNED_PACKAGES = (
     "numpy",
@@ -366,7 +371,8 @@ def write_run_json(
     out_dir : str or pathlib.Path
         Result folder (created if missing).
     parameters : mapping
-        The notebook parameters; values must be JSON serialisable (numpy scalars and arrays and
+        The notebook parameters (those of :data:`EXECUTION_PARAMETERS` are left out); values
+        must be JSON serialisable (numpy scalars and arrays and
         paths are converted).
     seed : int
         Seed of the run's ``numpy.random.Generator``.
@@ -390,7 +396,7 @@ def write_run_json(
         raise CalibrationError(f"seed is {seed!r} ({type(seed).__name__}); expected an integer")
     record = {
         "notebook": None if notebook is None else _resolve_notebook(notebook).stem,
-        "parameters": dict(parameters),
+        "parameters": {k: v for k, v in parameters.items() if k not in EXECUTION_PARAMETERS},
         "python": platform.python_version(),
         "seed": int(seed),
         "source_digest": source_digest(notebook),

@@ -33,16 +33,18 @@ loading.
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Annotated, Literal
 
 import numpy as np
 import pinocchio as pin
+from pydantic import Field, model_validator
 
+from calstudy.core import paths, schema
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import check_transform, rotation_error, translation_error
-from calstudy.core.paths import data_path
 
 CONVENTIONS = ("dh", "mdh")
 LINK_FIELDS = ("a", "alpha", "d", "theta", "beta")
@@ -512,27 +514,110 @@ def _check_rng(rng) -> None:
 # loading
 
 
-def _field(entry: dict, key: str, where: str) -> float:
-    if key not in entry:
-        raise CalibrationError(f"{where} lacks the key {key!r}")
-    try:
-        return float(entry[key])
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{where}: {key} is not a number ({entry[key]!r})") from None
+#: largest link length or offset accepted (mm): 10 m, beyond any serial robot
+MAX_LINK_MM = 1e4
+_Length = Annotated[float, Field(ge=-MAX_LINK_MM, le=MAX_LINK_MM, allow_inf_nan=False)]
+_Angle = Annotated[float, Field(ge=-360.0, le=360.0, allow_inf_nan=False)]
+_JointLimit = Annotated[float, Field(ge=-720.0, le=720.0, allow_inf_nan=False)]
 
 
-def load_robot(name: str) -> Robot:
-    """Read the robot ``data/robots/<name>.toml``.
+class LinkEntry(schema.Schema):
+    """One ``[[link]]`` of a robot table (mm and degrees)."""
+
+    convention: Literal["dh", "mdh"]
+    a_mm: _Length
+    alpha_deg: _Angle
+    d_mm: _Length
+    theta_deg: _Angle
+    beta_deg: _Angle = 0.0
+    qmin_deg: _JointLimit
+    qmax_deg: _JointLimit
+    parallel: bool = False
+
+    @model_validator(mode="after")
+    def _range(self):
+        if self.qmin_deg >= self.qmax_deg:
+            raise ValueError(
+                f"qmin_deg = {self.qmin_deg:g} must be below qmax_deg = {self.qmax_deg:g}"
+            )
+        return self
+
+
+class RobotTolerances(schema.Schema):
+    """The ``[tolerances]`` table: standard deviations of the link parameters."""
+
+    sigma_length_mm: Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)]
+    sigma_angle_deg: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)]
+    justification: str = ""
+
+
+class RobotFile(schema.Schema):
+    """A robot table ``data/robots/<name>.toml``."""
+
+    name: str = Field(min_length=1)
+    source: dict[str, str] = {}
+    link: list[LinkEntry] = Field(min_length=1, max_length=12)
+    tolerances: RobotTolerances | None = None
+
+    @model_validator(mode="after")
+    def _one_convention(self):
+        conventions = sorted({entry.convention for entry in self.link})
+        if len(conventions) > 1:
+            raise ValueError(f"links mix conventions {conventions}; use one")
+        return self
+
+
+def _check_robot_units(path, table: RobotFile) -> None:
+    """Refuse a table whose angles look like radians or lengths like metres."""
+    for i, entry in enumerate(table.link):
+        for key in ("alpha_deg", "theta_deg", "beta_deg"):
+            value = getattr(entry, key)
+            if value != 0 and min(abs(abs(value) - math.pi / 2), abs(abs(value) - math.pi)) < 1e-3:
+                raise CalibrationError(
+                    f"{path}: link #{i + 1}.{key} = {value:g} looks like radians (pi/2 or pi); the "
+                    "table holds degrees"
+                )
+    lengths = [abs(v) for e in table.link for v in (e.a_mm, e.d_mm)]
+    if max(lengths) < 10.0:
+        raise CalibrationError(
+            f"{path}: every a_mm and d_mm is below 10 (largest {max(lengths):g}): they look like "
+            "metres; the table holds millimetres"
+        )
+
+
+def robot_file(name: str | Path) -> Path:
+    """The path of robot table ``name``: a file stem of ``data/robots/`` or a path to a
+    ``.toml`` file; FileNotFoundError naming it (and the stems available) if it is missing."""
+    name_s = str(name)
+    if isinstance(name, Path) or name_s.endswith(".toml") or "/" in name_s:
+        path = Path(name_s)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such robot table")
+        return path
+    path = paths.DATA_DIR / "robots" / f"{name_s}.toml"
+    if not path.is_file():
+        have = sorted(p.stem for p in (paths.DATA_DIR / "robots").glob("*.toml"))
+        raise FileNotFoundError(
+            f"data/robots/{name_s}.toml: no such robot table; available: {', '.join(have)}"
+        )
+    return path
+
+
+def load_robot(name: str | Path) -> Robot:
+    """Read a robot table: ``data/robots/<name>.toml``, or a path to one's own ``.toml`` file.
 
     The file has a top-level ``name`` (display name), a ``[source]`` table, one ``[[link]]`` per
     joint with ``convention``, ``a_mm``, ``alpha_deg``, ``d_mm``, ``theta_deg``, ``beta_deg``,
     ``qmin_deg``, ``qmax_deg`` (and optionally ``parallel``), and a ``[tolerances]`` table with
-    ``sigma_length_mm`` and ``sigma_angle_deg``.
+    ``sigma_length_mm`` and ``sigma_angle_deg``. The schema (:class:`RobotFile`) checks every key
+    (unknown keys are refused, so a misspelt key is not silently a default), every range
+    (lengths within +-10 m, angles within +-360 deg, ``qmin_deg < qmax_deg``, tolerances >= 0)
+    and the units (an angle of 1.5708 looks like radians, all lengths below 10 like metres).
 
     Parameters
     ----------
-    name : str
-        File stem, e.g. ``"kuka_kr16_2"``.
+    name : str or pathlib.Path
+        File stem, e.g. ``"kuka_kr16_2"``, or a path ending in ``.toml``.
 
     Returns
     -------
@@ -542,49 +627,43 @@ def load_robot(name: str) -> Robot:
     Raises
     ------
     FileNotFoundError
-        If the file does not exist.
+        If the file does not exist (the message lists the tables available).
     CalibrationError
-        If a key is missing or a value is not a number.
+        If the file is not valid TOML or breaks the schema; the message names the file, the
+        key (``link #2.a_mm``, entries counted from 1), the value and the allowed range.
     """
-    path = data_path("robots", f"{name}.toml")
-    with path.open("rb") as handle:
-        table = tomllib.load(handle)
-    where = f"data/robots/{path.name}"
-    entries = table.get("link", [])
-    if not entries:
-        raise CalibrationError(f"{where} has no [[link]] entries (0 links)")
-    links, qmin, qmax = [], [], []
-    for i, entry in enumerate(entries, start=1):
-        at = f"{where} link {i}"
-        if "convention" not in entry:
-            raise CalibrationError(f"{at} lacks the key 'convention'")
-        links.append(
-            Link(
-                entry["convention"],
-                a=_field(entry, "a_mm", at),
-                alpha=math.radians(_field(entry, "alpha_deg", at)),
-                d=_field(entry, "d_mm", at),
-                theta=math.radians(_field(entry, "theta_deg", at)),
-                beta=math.radians(_field(entry, "beta_deg", at)),
-                parallel=bool(entry.get("parallel", False)),
-            )
+    path = robot_file(name)
+    in_data = path.parent == paths.DATA_DIR / "robots"
+    where = f"data/robots/{path.name}" if in_data else str(path)
+    raw = schema.read_toml(path, "robot table")
+    raw.setdefault("name", Path(str(name)).stem)
+    table = schema.validate(RobotFile, raw, where)
+    _check_robot_units(where, table)
+    links = [
+        Link(
+            entry.convention,
+            a=entry.a_mm,
+            alpha=math.radians(entry.alpha_deg),
+            d=entry.d_mm,
+            theta=math.radians(entry.theta_deg),
+            beta=math.radians(entry.beta_deg),
+            parallel=entry.parallel,
         )
-        qmin.append(math.radians(_field(entry, "qmin_deg", at)))
-        qmax.append(math.radians(_field(entry, "qmax_deg", at)))
-    tol = table.get("tolerances")
+        for entry in table.link
+    ]
     tolerances = None
-    if tol is not None:
+    if table.tolerances is not None:
         tolerances = {
-            "sigma_length_mm": _field(tol, "sigma_length_mm", f"{where} [tolerances]"),
-            "sigma_angle_deg": _field(tol, "sigma_angle_deg", f"{where} [tolerances]"),
+            "sigma_length_mm": table.tolerances.sigma_length_mm,
+            "sigma_angle_deg": table.tolerances.sigma_angle_deg,
         }
     return Robot(
-        table.get("name", name),
+        table.name,
         links,
-        qmin,
-        qmax,
+        [math.radians(e.qmin_deg) for e in table.link],
+        [math.radians(e.qmax_deg) for e in table.link],
         tolerances=tolerances,
-        source=table.get("source", {}),
+        source=dict(table.source),
     )
 
 

@@ -27,8 +27,6 @@ def test_notebook02_runs_on_user_csvs(tmp_path):
         )
     params = ci_parameters(notebook.stem)
     params |= {
-        "n_trials": 2,
-        "n_sweep_trials": 2,
         "hybrid_csv": str(paths["hybrid"]),
         "cmm_csv": str(paths["cmm"]),
         "results_dir": str(tmp_path / "out"),

@@ -8,61 +8,77 @@ import pytest
 from calstudy import CalibrationError
 from calstudy.papers.hybrid import compensation, report
 
+PUBLISHED_R = np.array([28, 58, 63, 10, 15])  # the paper's correlation counts (Table 1)
 
-def _claim_inputs(size_mm, scatter_mm, within, uncompensated, r_above):
-    n = 20
+
+def _claim_inputs(size_mm, scatter_mm, within, uncompensated, r_counts, n=200):
     rng = np.random.default_rng(11)
-    systematic = pd.DataFrame(
-        {
-            "trial": np.arange(n),
-            "systematic_median_mm": size_mm + rng.normal(0, 0.01, n),
-            "scatter_median_mm": scatter_mm + rng.normal(0, 0.001, n),
-            "lilliefors_not_rejected": 95.0,
-            "mean_nonzero": 90.0,
-        }
-    )
     trials = pd.DataFrame(
         {
             "trial": np.arange(n),
             "n_compensation": 10,
+            "systematic_coord_median_mm": size_mm + rng.normal(0, 0.01, n),
+            "systematic_median_mm": 1.7 * size_mm + rng.normal(0, 0.01, n),
+            "coord_above_2mm": 50.0,
+            "scatter_median_mm": scatter_mm + rng.normal(0, 0.001, n),
+            "lilliefors_not_rejected": 95.0,
+            "mean_nonzero": 90.0,
             "within_0p3": within + rng.normal(0, 0.5, n),
             "within_0p3_uncompensated": uncompensated + rng.normal(0, 0.5, n),
-            "r_above_0p7": r_above + rng.normal(0, 0.5, n),
+            "within_0p3_oracle": 100.0,
+            "r_above_0p7": 85.0,
             "beyond_0p5": 0.0,
             "n_vectors": 174,
             "n_fixed": 6,
         }
     )
-    return systematic, trials
+    for k in range(5):
+        trials[f"deviation_bin{k}"] = [37, 82, 49, 6, 0][k]
+        trials[f"correlation_bin{k}"] = r_counts[k] if np.ndim(r_counts) == 1 else r_counts[:, k]
+    return trials
 
 
 def test_claims_reproduced_when_the_trials_match_the_paper():
-    rows = report.production_claims(*_claim_inputs(3.0, 0.06, 96.0, 30.0, 86.0), 10, "nb")
+    rows, controls = report.production_claims(
+        _claim_inputs(3.0, 0.06, 96.0, 30.0, PUBLISHED_R), 10, "nb"
+    )
     assert [r.id for r in rows] == ["hybrid.systematic", "hybrid.deviation", "hybrid.correlation"]
     assert [r.verdict for r in rows] == ["reproduced"] * 3
-    assert "168 coordinates" in rows[2].note
+    assert rows[2].reproduced == pytest.approx(0.0, abs=1e-3)
+    assert [c["verdict"] for c in controls] == ["not reproduced", "reproduced"]
 
 
-def test_claims_not_reproduced_without_an_effect():
+def test_claims_fail_without_an_effect_or_with_another_distribution():
     # a mean deviation no larger than the scatter is not systematic; compensation that gains
-    # nothing over the raw readings is no effect
-    rows = report.production_claims(*_claim_inputs(0.05, 0.06, 96.0, 96.0, 86.0), 10, "nb")
-    assert [r.verdict for r in rows[:2]] == ["not reproduced", "not reproduced"]
-    rows = report.production_claims(*_claim_inputs(1.0, 0.06, 80.0, 30.0, 100.0), 10, "nb")
-    assert [r.verdict for r in rows] == ["direction only"] * 3
+    # nothing over the raw readings is no effect; every r above 0.9 is not the paper's spread
+    rows, _ = report.production_claims(
+        _claim_inputs(0.05, 0.06, 96.0, 96.0, np.array([168, 0, 0, 0, 0])), 10, "nb"
+    )
+    assert [r.verdict for r in rows] == ["not reproduced"] * 3
+    rows, _ = report.production_claims(_claim_inputs(1.0, 0.06, 80.0, 30.0, PUBLISHED_R), 10, "nb")
+    assert [r.verdict for r in rows[:2]] == ["direction only"] * 2
+
+
+def test_correlation_distance_of_stations_drawn_from_the_published_bins():
+    """Stations whose 168 coefficients are drawn from the published bins meet the 5 % critical
+    distance in at least 95 % of cases: the bound is a test that a faithful station passes."""
+    rng = np.random.default_rng(4)
+    counts = rng.multinomial(168, PUBLISHED_R / PUBLISHED_R.sum(), size=2000)
+    d = report.bin_distance(counts, PUBLISHED_R / PUBLISHED_R.sum() * 100)
+    assert np.mean(d <= report.kolmogorov_bound(168)) >= 0.95  # binned: conservative
 
 
 def test_robot_error_sweep_summary_uses_the_claims_verdicts():
     parts = []
     for scale, size in ((1.0, 1.0), (1.5, 3.0)):
-        systematic, trials = _claim_inputs(size, 0.06, 96.0, 30.0, 86.0)
-        parts.append(systematic.merge(trials, on="trial").assign(robot_error_scale=scale))
-    summary = report.summarise_robot_error_sweep(pd.concat(parts), 10, "nb")
+        trials = _claim_inputs(size, 0.06, 96.0, 30.0, PUBLISHED_R, n=20)
+        parts.append(trials.assign(robot_error_scale=scale))
+    summary = report.summarise_robot_error_sweep(pd.concat(parts))
     assert summary["robot_error_scale"].tolist() == [1.0, 1.5]
     assert summary["systematic_verdict"].tolist() == ["direction only", "reproduced"]
     assert summary["deviation_verdict"].tolist() == ["reproduced"] * 2
-    expected = np.median(parts[1]["systematic_median_mm"])
-    assert summary["systematic_median_mm"].iloc[1] == pytest.approx(expected)
+    expected = np.median(parts[1]["systematic_coord_median_mm"])
+    assert summary["systematic_coord_median_mm"].iloc[1] == pytest.approx(expected)
     assert (summary["stations"] == 20).all()
 
 

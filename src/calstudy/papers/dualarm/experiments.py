@@ -25,12 +25,13 @@ from scipy.spatial import cKDTree
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.core.montecarlo import Experiment
 from calstudy.estimators import sfm as mk
 from calstudy.estimators.fitting import fit_rigid, fit_sphere, solve_pnp, solve_pnp_ransac
 from calstudy.estimators.handeye import MIN_PAIR_ROTATION, base_to_base, opencv_handeye
 from calstudy.estimators.icp import weighted_icp
 from calstudy.papers.dualarm import simulate as sim
-from calstudy.papers.dualarm.scenario import ARMS, SPHERES, Scenario
+from calstudy.papers.dualarm.scenario import ARMS, SPHERES, Scenario, load_scenario
 
 # ----------------------------------------------------------------------------------------------
 # 1. hand-eye by Tsai-Lenz (Eq. 1-2)
@@ -131,11 +132,14 @@ def marker_error(scn: Scenario, points) -> float:
 # 5. the circular-plate comparison (Table 3)
 
 
-def plate_base_to_base(scn: Scenario, cam2flange_est, rng: np.random.Generator) -> np.ndarray:
+def plate_base_to_base(
+    scn: Scenario, cam2flange_est, rng: np.random.Generator, sigma_px: float | None = None
+) -> np.ndarray:
     """Baseline: a circle plate halfway between the arms (overlapping field), each arm images it
-    from ``calibration_poses`` poses from its own side; RANSAC-PnP poses; Eq. 11."""
+    from ``calibration_poses`` poses from its own side, circle centres to ``sigma_px``;
+    RANSAC-PnP poses; Eq. 11."""
     flanges, plate2cams = [], []
-    for reported, uvs in sim.circular_plate_images(scn, rng):
+    for reported, uvs in sim.circular_plate_images(scn, rng, sigma_px):
         k = scn.rig.left.K
         p2c = [solve_pnp_ransac(scn.plate_points, uv, k, scn.ransac_threshold_px) for uv in uvs]
         flanges.append(reported)
@@ -149,15 +153,21 @@ def plate_base_to_base(scn: Scenario, cam2flange_est, rng: np.random.Generator) 
 # 4. sphere scans and M3DHE-ICP (Eq. 3-4)
 
 
-def scans_in_base(scn, arm, centre_world, radius, n_views, rng, cam2flange_est):
-    """A multi-view scan of one sphere by arm ``arm``: clouds in its base by Eq. 3 with the
-    reported poses (drifting) and the estimated hand-eye; list of ``(N, 3)`` arrays."""
-    reported, clouds = sim.sphere_scans(scn, arm, centre_world, radius, n_views, rng)
-    return [geo.apply(g @ cam2flange_est, p) for g, p in zip(reported, clouds, strict=True)]
+def scans_in_base(scn, arm, centre_world, radius, n_views, rng, cam2flange_est, drift=True):
+    """A scan of one sphere by arm ``arm`` from ``n_views`` poses: ``(clouds in its base by Eq. 3
+    with the reported poses and the estimated hand-eye, the same clouds with the true poses and
+    the true hand-eye)``, each a list of ``(N, 3)`` arrays. ``drift``: the poses of a multi-view
+    scan drift."""
+    reported, true, clouds = sim.sphere_scans(scn, arm, centre_world, radius, n_views, rng, drift)
+    return (
+        [geo.apply(g @ cam2flange_est, p) for g, p in zip(reported, clouds, strict=True)],
+        [geo.apply(g @ scn.cam2flange[arm - 1], p) for g, p in zip(true, clouds, strict=True)],
+    )
 
 
 def icp_correct(scn: Scenario, clouds: list[np.ndarray]) -> list[np.ndarray]:
-    """M3DHE-ICP: every cloud after the first moved onto the first by weighted ICP (Eq. 4)."""
+    """M3DHE-ICP: every cloud after the first moved onto the first by weighted ICP (Eq. 4),
+    each alignment ended once its update is below the noise."""
     tree = cKDTree(clouds[0])
     out = [clouds[0]]
     for p in clouds[1:]:
@@ -168,6 +178,7 @@ def icp_correct(scn: Scenario, clouds: list[np.ndarray]) -> list[np.ndarray]:
             z_threshold_mm=scn.icp_z_threshold_mm,
             max_iterations=scn.icp_max_iterations,
             max_pair_mm=scn.icp_max_pair_mm,
+            stop_below_noise=True,
             tree=tree,
         )
         out.append(geo.apply(res.transform, p))
@@ -180,26 +191,35 @@ def centre_errors(clouds: list[np.ndarray]) -> np.ndarray:
     return np.linalg.norm(c[1:] - c[0], axis=1)
 
 
-def icp_experiment(scn: Scenario, cam2flange_est, rng: np.random.Generator) -> pd.DataFrame:
-    """Figs. 5-6: per arm and sphere, centre-distance errors of views 1.. before/after ICP."""
+def icp_rows(scn: Scenario, cam2flange_est, rng: np.random.Generator, icp: bool = True):
+    """Figs. 5-6: per arm, sphere and view 1.., the centre-distance error before ICP, after it
+    (``icp``), and with the errors between views removed from the simulation (``oracle_mm``:
+    the clouds mapped with the true flange poses and hand-eye, what a perfect correction
+    reaches)."""
     rows = []
     for arm in ARMS:
         for s in SPHERES:
             r = scn.sphere_radius[s]
-            clouds = scans_in_base(
-                scn,
-                arm,
-                sim.sphere_place(scn, arm, r),
-                r,
-                scn.icp_views,
-                rng,
-                cam2flange_est[arm - 1],
+            place = sim.sphere_place(scn, arm, r)
+            clouds, exact = scans_in_base(
+                scn, arm, place, r, scn.icp_views, rng, cam2flange_est[arm - 1]
             )
             before = centre_errors(clouds)
-            after = centre_errors(icp_correct(scn, clouds))
-            for k, (b, a) in enumerate(zip(before, after, strict=True)):
-                rows.append({"arm": arm, "sphere": s, "view": k + 1, "before_mm": b, "after_mm": a})
-    return pd.DataFrame(rows)
+            after = centre_errors(icp_correct(scn, clouds)) if icp else before * np.nan
+            oracle = centre_errors(exact)
+            for k in range(len(before)):
+                rows.append(
+                    {
+                        "part": "icp",
+                        "arm": arm,
+                        "sphere": s,
+                        "view": k + 1,
+                        "before_mm": float(before[k]),
+                        "after_mm": float(after[k]),
+                        "oracle_mm": float(oracle[k]),
+                    }
+                )
+    return rows
 
 
 def _centre_rows(name: str, group: int, c12, ref, truth) -> list[dict]:
@@ -210,12 +230,13 @@ def _centre_rows(name: str, group: int, c12, ref, truth) -> list[dict]:
         d = np.abs(c12[k] - ref)
         rows.append(
             {
+                "part": "global",
                 "method": name,
                 "group": group,
                 "pose": k + 1,
-                "dx_mm": d[0],
-                "dy_mm": d[1],
-                "dz_mm": d[2],
+                "dx_mm": float(d[0]),
+                "dy_mm": float(d[1]),
+                "dz_mm": float(d[2]),
                 "euclid_mm": float(np.linalg.norm(c12[k] - ref)),
                 "euclid_truth_mm": float(np.linalg.norm(c12[k] - truth)),
             }
@@ -223,145 +244,144 @@ def _centre_rows(name: str, group: int, c12, ref, truth) -> list[dict]:
     return rows
 
 
-def global_experiment(scn: Scenario, cam2flange_est, b2b1: dict, rng) -> pd.DataFrame:
-    """Tables 1-3: sphere A at ``global_groups`` places between the arms; arm 2's ICP-corrected
-    multi-view cloud gives the reference centre in base 2; each of arm 1's ICP-corrected clouds
-    is mapped into base 2 with each estimate in ``b2b1`` (name -> base2_to_base1)."""
+def global_rows(scn: Scenario, cam2flange_est, b2b1: dict, rng, oracle: bool = True) -> list:
+    """Tables 1-3: sphere A at ``global_groups`` places between the arms. The reading of the
+    paper's reference centre: the centre fitted to all of arm 2's clouds of the placement
+    together (its ``global_poses`` poses, each an ordinary move with the arm's repeatability, no
+    multi-view drift), in base 2. Each of arm 1's poses is one scan, its fitted centre mapped into
+    base 2 with each estimate in ``b2b1`` (name -> base2_to_base1). With ``oracle``, also the
+    method ``true calibration``: the same scans with every calibrated transform true and the
+    poses exact (the test's measurement floor)."""
     r = scn.sphere_radius["A"]
     rows = []
     for g, off in enumerate(scn.placement_offsets_mm[: scn.global_groups]):
         centre = sim.global_sphere_place(scn, off, r)
-        arm2 = icp_correct(
-            scn, scans_in_base(scn, 2, centre, r, scn.global_poses, rng, cam2flange_est[1])
+        arm2, arm2_exact = scans_in_base(
+            scn, 2, centre, r, scn.global_poses, rng, cam2flange_est[1], drift=False
         )
         ref = fit_sphere(np.concatenate(arm2))[0]
         truth = geo.apply(scn.world2base[1], centre)
-        arm1 = icp_correct(
-            scn, scans_in_base(scn, 1, centre, r, scn.global_poses, rng, cam2flange_est[0])
+        arm1, arm1_exact = scans_in_base(
+            scn, 1, centre, r, scn.global_poses, rng, cam2flange_est[0], drift=False
         )
         c1 = np.array([fit_sphere(p)[0] for p in arm1])
         for name, t in b2b1.items():
             rows += _centre_rows(name, g + 1, geo.apply(geo.invert(t), c1), ref, truth)
-    return pd.DataFrame(rows)
+        if oracle:
+            # no calibration error anywhere: true hand-eyes and base-to-base, exact poses
+            ref0 = fit_sphere(np.concatenate(arm2_exact))[0]
+            c0 = np.array([fit_sphere(p)[0] for p in arm1_exact])
+            c0 = geo.apply(geo.invert(scn.base2_to_base1), c0)
+            rows += _centre_rows("true calibration", g + 1, c0, ref0, truth)
+    return rows
 
 
 # ----------------------------------------------------------------------------------------------
-# one trial and the Monte Carlo
-
-
-def calibrate_station(scn: Scenario, rng: np.random.Generator):
-    """Steps 1-3 and 5 on one simulated station: ``(cam2flange_est (2, 4, 4), reconstruction,
-    {"coded markers": b2b1, "circular plate": b2b1})``."""
-    cam2flange, recon, ours = coded_marker_chain(scn, rng)
-    circ = plate_base_to_base(scn, cam2flange, rng)
-    return cam2flange, recon, {"coded markers": ours, "circular plate": circ}
+# the trials and their experiments (factories rebuilt by name from experiments.json)
 
 
 def _transform_error(quantity: str, estimate, truth) -> dict:
     return {
+        "part": "calibration",
         "quantity": quantity,
         "rotation_deg": float(np.degrees(geo.rotation_error(estimate, truth))),
         "translation_mm": float(geo.translation_error(estimate, truth)),
     }
 
 
-def run_trial(scn: Scenario, rng: np.random.Generator) -> dict:
-    """One simulated replication of the paper's experiments; a dict of DataFrames."""
-    cam2flange, recon, b2b1 = calibrate_station(scn, rng)
-    cal = [
+def _scenario(scenario_toml: str, drift_scale: float = 1.0) -> Scenario:
+    scn = load_scenario(scenario_toml or None)
+    return scn.replace(
+        drift_step_mm=scn.drift_step_mm * drift_scale,
+        drift_step_rad=scn.drift_step_rad * drift_scale,
+    )
+
+
+def station_trial(scn: Scenario, rng: np.random.Generator, plate_sigma_px: float) -> list:
+    """One simulated replication of the paper's experiments (steps 1-5), with the controls on
+    the same draws: rows of parts ``calibration``, ``bundle``, ``icp`` (before, after, oracle)
+    and ``global`` (methods: coded markers, circular plate, and the controls ``true
+    calibration`` (no calibration error: the test's floor) and ``no calibration`` (Eq. 11
+    replaced by the identity))."""
+    cam2flange, recon, ours = coded_marker_chain(scn, rng)
+    circ = plate_base_to_base(scn, cam2flange, rng, plate_sigma_px)
+    b2b1 = {
+        "coded markers": ours,
+        "circular plate": circ,
+        "no calibration": np.eye(4),
+    }
+    rows = [
         _transform_error(f"hand-eye arm {a}", cam2flange[a - 1], scn.cam2flange[a - 1])
         for a in ARMS
     ]
-    cal += [
-        _transform_error(f"base-to-base, {name}", t, scn.base2_to_base1) for name, t in b2b1.items()
+    rows += [
+        _transform_error(f"base-to-base, {name}", b2b1[name], scn.base2_to_base1)
+        for name in ("coded markers", "circular plate")
     ]
-    bundle = {
-        "rms_px": recon.bundle.rms_px,
-        "rms_mm": recon.bundle.rms_mm,
-        "marker_rms_mm": marker_error(scn, recon.bundle.points),
-        "clusters": len(recon.clusters),
-        "nfev": recon.bundle.nfev,
-    }
+    rows.append(
+        {
+            "part": "bundle",
+            "rms_px": recon.bundle.rms_px,
+            "rms_mm": recon.bundle.rms_mm,
+            "marker_rms_mm": marker_error(scn, recon.bundle.points),
+            "clusters": len(recon.clusters),
+        }
+    )
+    rows += icp_rows(scn, cam2flange, rng)
+    rows += global_rows(scn, cam2flange, b2b1, rng)
+    return rows
+
+
+def station_experiment(
+    scenario_toml: str = "",
+    n_trials: int = 200,
+    drift_scale: float = 1.0,
+    plate_sigma_px: float = 0.1,
+) -> Experiment:
+    """The whole chain, ``n_trials`` trials, drift and plate noise as calibrated (rule 11)."""
+    return Experiment(
+        "station",
+        station_trial,
+        _scenario(scenario_toml, drift_scale),
+        n_trials,
+        ({"plate_sigma_px": float(plate_sigma_px)},),
+    )
+
+
+def drift_trial(scn: Scenario, rng: np.random.Generator, drift_scale: float) -> dict:
+    """The before-ICP error of the multi-view scans with the drift steps scaled by
+    ``drift_scale``, with hand-eyes calibrated as in the station trial: mean over arms, spheres
+    and views, and per arm and sphere."""
+    sc = scn.replace(
+        drift_step_mm=scn.drift_step_mm * drift_scale,
+        drift_step_rad=scn.drift_step_rad * drift_scale,
+    )
+    df = pd.DataFrame(icp_rows(sc, hand_eyes(sc, rng), rng, icp=False))
+    per = df.groupby(["arm", "sphere"])["before_mm"].mean()
     return {
-        "calibration": pd.DataFrame(cal),
-        "bundle": pd.DataFrame([bundle]),
-        "icp": icp_experiment(scn, cam2flange, rng),
-        "global": global_experiment(scn, cam2flange, b2b1, rng),
+        "before_mm": float(per.mean()),
+        **{f"before_{a}{s}_mm": float(v) for (a, s), v in per.items()},
     }
 
 
-def monte_carlo(scn: Scenario, seed: int, n_trials: int, progress: bool = False) -> dict:
-    """``n_trials`` independent trials (streams spawned from ``seed``); DataFrames with a
-    ``trial`` column."""
-    if n_trials < 1:
-        raise CalibrationError(f"n_trials must be >= 1; got {n_trials}")
-    streams = np.random.SeedSequence(seed).spawn(n_trials)
-    parts: dict[str, list] = {}
-    for t, ss in enumerate(streams):
-        out = run_trial(scn, np.random.default_rng(ss))
-        for key, df in out.items():
-            parts.setdefault(key, []).append(df.assign(trial=t))
-        if progress:
-            print(f"trial {t + 1}/{n_trials}", flush=True)
-    return {k: pd.concat(v, ignore_index=True) for k, v in parts.items()}
+def drift_experiment(scenario_toml: str = "", n_trials: int = 30, scales=(1.0,)) -> Experiment:
+    """Before-ICP error against the drift scale: the calibration curve of the drift (rule 11,
+    target: the paper's before-ICP errors)."""
+    points = tuple({"drift_scale": float(s)} for s in scales)
+    return Experiment("drift_pilot", drift_trial, _scenario(scenario_toml), n_trials, points)
 
 
-# ----------------------------------------------------------------------------------------------
-# sweeps
+def plate_trial(scn: Scenario, rng: np.random.Generator, plate_sigma_px: float) -> dict:
+    """The circular-plate route alone (hand-eye, plate, Eq. 11, the Tables 1-2 test) with
+    circle centres good to ``plate_sigma_px``: its mean Euclidean sphere-centre error."""
+    cam2flange = hand_eyes(scn, rng)
+    circ = plate_base_to_base(scn, cam2flange, rng, plate_sigma_px)
+    df = pd.DataFrame(global_rows(scn, cam2flange, {"circular plate": circ}, rng, oracle=False))
+    return {"plate_euclid_mm": float(df["euclid_mm"].mean())}
 
 
-def _icp_sweep(variants, key: str, seed: int, stream: int, n_trials: int) -> pd.DataFrame:
-    """ICP experiment on each ``(value, scenario)`` of ``variants`` with the true hand-eye; per
-    trial the mean error before and after ICP and their ratio."""
-    rows = []
-    for i, (value, sc) in enumerate(variants):
-        for t, ss in enumerate(np.random.SeedSequence([seed, stream, i]).spawn(n_trials)):
-            df = icp_experiment(sc, sc.cam2flange, np.random.default_rng(ss))
-            before, after = df["before_mm"].mean(), df["after_mm"].mean()
-            rows.append(
-                {
-                    key: value,
-                    "trial": t,
-                    "before_mm": before,
-                    "after_mm": after,
-                    "ratio": after / before,
-                }
-            )
-    return pd.DataFrame(rows)
-
-
-def drift_sweep(scn: Scenario, seed: int, scales, n_trials: int) -> pd.DataFrame:
-    """ICP experiment with the drift steps scaled by each of ``scales``."""
-    variants = [
-        (s, scn.replace(drift_step_mm=scn.drift_step_mm * s, drift_step_rad=scn.drift_step_rad * s))
-        for s in scales
-    ]
-    return _icp_sweep(variants, "drift_scale", seed, 7, n_trials)
-
-
-def density_sweep(scn: Scenario, seed: int, counts, n_trials: int) -> pd.DataFrame:
-    """ICP experiment with ``counts`` points per scan: the density of the clouds sets how well
-    point-to-point pairs stand for corresponding points, hence the error left after ICP."""
-    variants = [(int(n), scn.replace(points_per_scan=int(n))) for n in counts]
-    return _icp_sweep(variants, "points_per_scan", seed, 13, n_trials)
-
-
-def bridge_sweep(scn: Scenario, seed: int, counts, n_trials: int) -> pd.DataFrame:
-    """Base-to-base error of the coded-marker chain against the number of survey images that see
-    both marker groups (the link between the groups); ``n_trials`` trials per count."""
-    rows = []
-    for i, n in enumerate(counts):
-        sc = scn.replace(survey_bridge_views=int(n))
-        for t, ss in enumerate(np.random.SeedSequence([seed, 11, i]).spawn(n_trials)):
-            _, recon, b2b = coded_marker_chain(sc, np.random.default_rng(ss))
-            err = _transform_error("", b2b, sc.base2_to_base1)
-            rows.append(
-                {
-                    "bridge_views": int(n),
-                    "trial": t,
-                    "rotation_deg": err["rotation_deg"],
-                    "translation_mm": err["translation_mm"],
-                    "marker_rms_mm": marker_error(sc, recon.bundle.points),
-                }
-            )
-    return pd.DataFrame(rows)
+def plate_experiment(scenario_toml: str = "", n_trials: int = 30, sigmas=(0.1,)) -> Experiment:
+    """Plate error against its circle-centre noise: the calibration curve of the plate's
+    detection noise (rule 11, target: the paper's 0.556 mm for the plate)."""
+    points = tuple({"plate_sigma_px": float(s)} for s in sigmas)
+    return Experiment("plate_pilot", plate_trial, _scenario(scenario_toml), n_trials, points)

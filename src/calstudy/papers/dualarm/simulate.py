@@ -110,16 +110,23 @@ def observe_markers(scn: Scenario, world2cam, rng: np.random.Generator) -> mk.Vi
 
 
 def plate_images(
-    scn: Scenario, plate2world, cam2world, rng: np.random.Generator, outliers: bool = False
+    scn: Scenario,
+    plate2world,
+    cam2world,
+    rng: np.random.Generator,
+    outliers: bool = False,
+    sigma_px: float | None = None,
 ) -> np.ndarray:
     """Circle centres ``(n, N, 2)`` (px) of the plate at ``plate2world`` in the left image of
-    each of the ``n`` cameras ``cam2world``, with ``sigma_px`` noise; with ``outliers``, a
+    each of the ``n`` cameras ``cam2world``, with ``sigma_px`` noise (the scenario's unless
+    given); with ``outliers``, a
     fraction ``plate_outlier_rate`` of them moved by ``plate_outlier_px`` in a random direction
     (gross detection errors)."""
     uvs = np.empty((len(cam2world), len(scn.plate_points), 2))
     for k, c2w in enumerate(cam2world):
         true = geo.invert(c2w) @ plate2world
-        uv = scn.rig.left.observe(true, scn.plate_points, scn.sigma_px, rng)
+        sig = scn.sigma_px if sigma_px is None else sigma_px
+        uv = scn.rig.left.observe(true, scn.plate_points, sig, rng)
         if outliers:
             bad = rng.random(len(uv)) < scn.plate_outlier_rate
             lo, hi = scn.plate_outlier_px
@@ -141,10 +148,14 @@ def handeye_images(scn: Scenario, arm: int, rng: np.random.Generator):
     return reported, plate_images(scn, plate2world, cam2world, rng)
 
 
-def circular_plate_images(scn: Scenario, rng: np.random.Generator) -> list:
+def circular_plate_images(
+    scn: Scenario, rng: np.random.Generator, sigma_px: float | None = None
+) -> list:
     """Table 3's comparison: a circle plate halfway between the arms (overlapping field), each
     arm images it from ``calibration_poses`` poses from its own side, with gross detection
-    errors. Per arm ``(reported flange2base (n, 4, 4), circle centres (n, N, 2))``."""
+    errors and circle centres good to ``sigma_px`` (calibrated to the paper's plate figure,
+    rule 11; the scenario's marker noise unless given). Per arm ``(reported flange2base
+    (n, 4, 4), circle centres (n, N, 2))``."""
     mid = mid_point(scn)
     plate2world = geo.make_transform(np.eye(3), [mid[0], mid[1], 0.0])
     out = []
@@ -159,7 +170,8 @@ def circular_plate_images(scn: Scenario, rng: np.random.Generator) -> list:
             axis=axis,
         )
         _, reported = arm_poses(scn, arm, cam2world, rng, drift=False)
-        out.append((reported, plate_images(scn, plate2world, cam2world, rng, outliers=True)))
+        uv = plate_images(scn, plate2world, cam2world, rng, outliers=True, sigma_px=sigma_px)
+        out.append((reported, uv))
     return out
 
 
@@ -225,13 +237,16 @@ def scan_sphere(scn: Scenario, centre_world, radius: float, cam2world, rng) -> n
     return local + rng.normal(0.0, scn.point_sigma_mm, local.shape)
 
 
-def sphere_scans(scn: Scenario, arm: int, centre_world, radius: float, n_views: int, rng):
-    """A multi-view scan of one sphere by arm ``arm`` (the arm drifting from view to view):
-    ``(reported flange2base (n_views, 4, 4), clouds)``, each cloud ``(points_per_scan, 3)`` in
-    the left camera frame."""
+def sphere_scans(
+    scn: Scenario, arm: int, centre_world, radius: float, n_views: int, rng, drift: bool = True
+):
+    """A scan of one sphere by arm ``arm`` from ``n_views`` poses (with ``drift``, the arm
+    drifting from view to view; else each pose with its repeatability only): ``(reported
+    flange2base (n_views, 4, 4), true flange2base, clouds)``, each cloud ``(points_per_scan,
+    3)`` in the left camera frame."""
     cam2world = view_poses(rng, centre_world, scn.working_distance_mm, n_views, scn.icp_tilt)
-    _, reported = arm_poses(scn, arm, cam2world, rng, drift=True)
-    return reported, [scan_sphere(scn, centre_world, radius, c, rng) for c in cam2world]
+    true, reported = arm_poses(scn, arm, cam2world, rng, drift=drift)
+    return reported, true, [scan_sphere(scn, centre_world, radius, c, rng) for c in cam2world]
 
 
 def sphere_place(scn: Scenario, arm: int, radius: float) -> np.ndarray:

@@ -203,10 +203,14 @@ def robot_error_figure(summary: pd.DataFrame, default: float = 1.0):
     for k, edge in enumerate((mid / 1.5, mid * 1.5)):
         label = f"verdict band {mid / 1.5:g}-{mid * 1.5:g} mm" if k == 0 else None
         ax_a.axhline(edge, color="0.4", ls="--", lw=1, label=label)
-    y = summary["systematic_median_mm"]
-    ax_a.plot(x, y, "o-", label="median point, median over stations")
+    ax_a.plot(x, summary["systematic_median_mm"], "s--", color="0.5", label="3-D reading")
+    y = summary["systematic_coord_median_mm"]
+    ax_a.plot(x, y, "o-", label="per coordinate (judged), median over stations")
     ax_a.fill_between(
-        x, summary["systematic_median_mm_low"], summary["systematic_median_mm_high"], alpha=0.2
+        x,
+        summary["systematic_coord_median_mm_low"],
+        summary["systematic_coord_median_mm_high"],
+        alpha=0.2,
     )
     for xi, yi, verdict in zip(x, y, summary["systematic_verdict"], strict=True):
         ax_a.annotate(

@@ -66,7 +66,7 @@ ONE_STEP_ML = "one-step ML"
 NULL = "nothing identified"
 ORACLE = "ideal identification"
 TRUTH = "true parameters"
-#: the multi-step routes (issue 15): as the paper describes it, reordered, alternated, two-step
+#: the multi-step routes: as the paper describes it, reordered, alternated, two-step
 ROUTES = (
     "three-step",
     "three-step reordered",

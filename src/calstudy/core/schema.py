@@ -1,0 +1,330 @@
+"""Validation of the files a user hands in: pydantic schemas with messages that name the place.
+
+A file's schema is a :class:`Schema` (a pydantic model that forbids unknown keys, so a misspelt
+key is reported rather than ignored). :func:`validate` checks a parsed TOML table or a CSV row
+against it and turns pydantic's :class:`~pydantic.ValidationError` into one
+:class:`~calstudy.core.errors.CalibrationError` whose message names the file, every bad key (or
+row and column), the value found and the allowed range::
+
+    data/robots/my_robot.toml: link #2.a_mm = 68000.0: must be <= 10000.0
+    my_handeye.csv: row 7, column 'sz': '12,5' is not a number (decimal comma? write 12.5)
+
+:func:`load_toml` reads and validates a TOML file in one call; :func:`read_csv_table` reads a CSV
+the way a spreadsheet writes it (byte-order mark, ``;`` as separator, ``#`` comment lines) and
+:func:`validate_rows` checks its rows. The range types (:data:`Finite`, :data:`PositiveFinite`,
+...) are the building blocks of the schemas.
+
+A paper's ``scenario.py`` uses it as::
+
+    class Station(Schema):
+        sphere_radius_mm: PositiveFinite
+        views_per_sphere: PositiveInt
+        loss_rate: Fraction
+
+    class ScenarioFile(Schema):
+        station: Station
+        robot: str
+
+    raw = load_toml(path, ScenarioFile, "hybrid scenario")   # CalibrationError naming key
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+import tomllib
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Annotated, Any, TypeVar, get_args
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from calstudy.core.errors import CalibrationError
+
+M = TypeVar("M", bound=BaseModel)
+
+#: a finite float (NaN and infinity refused)
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+#: a finite float > 0
+PositiveFinite = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+#: a finite float >= 0
+NonNegativeFinite = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+#: a probability or rate in [0, 1]
+Fraction = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+#: an integer >= 1
+PositiveInt = Annotated[int, Field(ge=1)]
+#: an integer >= 0
+NonNegativeInt = Annotated[int, Field(ge=0)]
+
+
+class Schema(BaseModel):
+    """Base of every file schema: unknown keys are errors, values are checked strictly enough
+    that ``"12"`` is not silently a number in a TOML file but numbers may be ints or floats."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
+
+
+_BOUNDS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
+
+
+def _key(loc: Sequence[Any]) -> str:
+    """``('link', 1, 'a_mm')`` -> ``link #2.a_mm`` (entries of an array counted from 1, as a
+    reader of the file counts them)."""
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f" #{part + 1}"
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
+
+
+def _submodel(annotation) -> type[BaseModel] | None:
+    """The pydantic model inside ``annotation`` (``Model``, ``list[Model]``, ``Model | None``)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in get_args(annotation):
+        found = _submodel(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _field_bounds(model: type[BaseModel] | None, loc: Sequence[Any]) -> dict[str, Any]:
+    """The bounds (gt, ge, lt, le) declared on the field at ``loc`` of ``model``, if any."""
+    current, info = model, None
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        if current is None or part not in current.model_fields:
+            return {}
+        info = current.model_fields[part]
+        current = _submodel(info.annotation)
+    if info is None:
+        return {}
+    out = {}
+    for meta in info.metadata:
+        for key in _BOUNDS:
+            if getattr(meta, key, None) is not None:
+                out[key] = getattr(meta, key)
+    return out
+
+
+def _describe(err: dict, model: type[BaseModel] | None = None) -> str:
+    """The allowed range or type of one pydantic error, in words."""
+    kind, ctx = err.get("type", ""), err.get("ctx") or {}
+    if any(k in ctx for k in _BOUNDS):
+        ctx = {**_field_bounds(model, err["loc"]), **ctx}
+    bounds = [f"{_BOUNDS[k]} {ctx[k]}" for k in _BOUNDS if k in ctx]
+    if bounds:
+        return "must be " + " and ".join(bounds)
+    if kind == "missing":
+        return "missing (required)"
+    if kind == "extra_forbidden":
+        return "unknown key (misspelt?)"
+    if kind == "finite_number":
+        return "must be a finite number"
+    if kind in ("float_parsing", "int_parsing", "float_type", "int_type"):
+        return "is not a number" if kind.startswith("float") else "is not an integer"
+    if kind == "int_from_float":
+        return "is not an integer"
+    if kind == "literal_error":
+        return f"is not one of {ctx.get('expected', '')}"
+    return str(err.get("msg", kind)).replace("Value error, ", "")
+
+
+def _value(err: dict) -> str:
+    if err.get("type") in ("missing",):
+        return ""
+    value = err.get("input")
+    if isinstance(value, dict | list) and len(repr(value)) > 60:
+        return ""
+    return f" = {value!r}"
+
+
+def format_errors(
+    exc: ValidationError,
+    source: str | Path,
+    prefix: str = "",
+    model: type[BaseModel] | None = None,
+) -> str:
+    """One message for all errors of ``exc``: ``source: key = value: allowed range; ...``
+    (the whole declared range of the key when ``model`` is given)."""
+    parts = []
+    for err in exc.errors(include_url=False):
+        key = _key(err["loc"])
+        key = f"{prefix}{key}" if prefix else key
+        parts.append(f"{key}{_value(err)}: {_describe(err, model)}")
+    return f"{source}: " + "; ".join(parts)
+
+
+def validate(model: type[M], data: Any, source: str | Path, prefix: str = "") -> M:
+    """``model`` validated from ``data``; a :class:`CalibrationError` naming ``source``, each bad
+    key (with ``prefix`` in front, e.g. ``"station."``), its value and the allowed range."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise CalibrationError(format_errors(exc, source, prefix, model)) from None
+
+
+def read_toml(path: str | Path, what: str) -> dict:
+    """The TOML table of ``path``; FileNotFoundError naming the path and ``what`` if missing,
+    CalibrationError with the parser's line and column if it is not valid TOML."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file (the {what})")
+    try:
+        with path.open("rb") as handle:
+            return tomllib.load(handle)
+    except tomllib.TOMLDecodeError as exc:
+        raise CalibrationError(f"{path}: not valid TOML ({exc})") from exc
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(f"{path}: not a UTF-8 text file ({exc.reason})") from exc
+
+
+def load_toml(path: str | Path, model: type[M], what: str) -> M:
+    """Read the TOML file ``path`` (the ``what``, for messages) and validate it against
+    ``model``."""
+    return validate(model, read_toml(path, what), path)
+
+
+# ----------------------------------------------------------------------------------------------
+# CSV files
+
+
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
+
+
+def number_problem(text: str) -> str:
+    """Why ``text`` is not a finite number, in words (for messages)."""
+    if text == "":
+        return "is not a number (empty cell)"
+    if _DECIMAL_COMMA.match(text):
+        return f"is not a number (decimal comma? write {text.replace(',', '.')})"
+    try:
+        value = float(text)
+    except ValueError:
+        return "is not a number"
+    return "is not finite" if not math.isfinite(value) else ""
+
+
+def parse_number(path: str | Path, line: int, column: str, text: str) -> float:
+    """``float(text)`` of the cell in row ``line`` (1-based, the header is row 1) and ``column``
+    of the CSV file ``path``; CalibrationError naming all three if it is not a finite number."""
+    problem = number_problem(text)
+    if problem:
+        raise CalibrationError(f"{path}: row {line}, column {column!r}: {text!r} {problem}")
+    return float(text)
+
+
+def read_csv_table(path: str | Path, what: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
+    """Header and rows of a spreadsheet-written CSV file.
+
+    Accepts a UTF-8 byte-order mark, ``,`` or ``;`` as the separator (``;`` when the header has
+    no ``,``, as European spreadsheets write it), ``#`` comment lines and blank lines.
+
+    Returns
+    -------
+    header : list of str
+        Stripped column names.
+    rows : list of (int, list of str)
+        File line number (1-based, as a spreadsheet shows it) and stripped cells of each row.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a file (naming it and ``what``).
+    CalibrationError
+        For an empty file, a file that is not UTF-8 text, or a row whose cell count differs
+        from the header's (naming the row; a decimal comma is the usual cause).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file (the {what})")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(
+            f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); save it as "
+            "CSV UTF-8"
+        ) from None
+    lines = [
+        (i, ln)
+        for i, ln in enumerate(text.splitlines(), start=1)
+        if ln.strip() and not ln.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise CalibrationError(f"{path}: the file is empty (no header)")
+    first = lines[0][1]
+    delimiter = ";" if ";" in first and "," not in first else ","
+    parsed = list(csv.reader(io.StringIO("\n".join(ln for _, ln in lines)), delimiter=delimiter))
+    header = [h.strip() for h in parsed[0]]
+    rows = []
+    for (line, _), cells in zip(lines[1:], parsed[1:], strict=True):
+        if len(cells) != len(header):
+            hint = (
+                " (a decimal comma such as 12,5 splits a cell in two: write 12.5)"
+                if len(cells) > len(header) and delimiter == ","
+                else ""
+            )
+            raise CalibrationError(
+                f"{path}: row {line} has {len(cells)} cells; the header has {len(header)}{hint}"
+            )
+        rows.append((line, [c.strip() for c in cells]))
+    return header, rows
+
+
+def require_columns(path: str | Path, header: Iterable[str], columns: Iterable[str]) -> None:
+    """CalibrationError naming the file and the missing columns, if any."""
+    have = set(header)
+    missing = [c for c in columns if c not in have]
+    if missing:
+        raise CalibrationError(
+            f"{path}: missing column(s) {', '.join(missing)} (the header has "
+            f"{', '.join(header) or 'nothing'})"
+        )
+
+
+def validate_rows(
+    model: type[M], header: Sequence[str], rows: Sequence[tuple[int, Sequence[str]]], path
+) -> list[M]:
+    """Each row (from :func:`read_csv_table`) validated against ``model``; the first bad cell is
+    reported with its row, column, text and what is allowed."""
+    out = []
+    fields = model.model_fields
+    for line, cells in rows:
+        record = {h: c for h, c in zip(header, cells, strict=True) if h in fields}
+        try:
+            out.append(model.model_validate(record))
+        except ValidationError as exc:
+            err = exc.errors(include_url=False)[0]
+            column = str(err["loc"][0]) if err["loc"] else "?"
+            text = record.get(column, "")
+            problem = number_problem(text) if err["type"].startswith(("float", "finite")) else ""
+            raise CalibrationError(
+                f"{path}: row {line}, column {column!r}: {text!r} "
+                f"{problem or _describe(err, model)}"
+            ) from None
+    return out
+
+
+__all__ = [
+    "Finite",
+    "Fraction",
+    "NonNegativeFinite",
+    "NonNegativeInt",
+    "PositiveFinite",
+    "PositiveInt",
+    "Schema",
+    "format_errors",
+    "load_toml",
+    "number_problem",
+    "parse_number",
+    "read_csv_table",
+    "read_toml",
+    "require_columns",
+    "validate",
+    "validate_rows",
+]

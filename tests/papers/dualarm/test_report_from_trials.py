@@ -1,0 +1,76 @@
+"""The committed tables, claims and controls of notebook 05 recomputed from its committed trial
+rows with the report functions (no simulation)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from calstudy.core.paths import RESULTS_DIR
+from calstudy.io.results import CLAIM_COLUMNS
+from calstudy.papers.dualarm import report
+from calstudy.papers.dualarm.scenario import load_published
+
+FOLDER = RESULTS_DIR / "05_dualarm_global_calibration"
+RTOL = 2e-5
+
+pytestmark = pytest.mark.skipif(
+    not (FOLDER / "trials_station.csv").is_file(), reason="notebook 05 results not committed"
+)
+
+
+def _trials(name: str) -> pd.DataFrame:
+    return pd.read_csv(FOLDER / f"trials_{name}.csv")
+
+
+def _compare(fresh: pd.DataFrame, name: str) -> None:
+    stored = pd.read_csv(FOLDER / f"{name}.csv")
+    fresh = pd.read_csv(pd.io.common.StringIO(fresh.to_csv(index=False)))
+    assert list(fresh.columns) == list(stored.columns), name
+    assert len(fresh) == len(stored), name
+    for col in stored.columns:
+        if pd.api.types.is_numeric_dtype(stored[col]) and pd.api.types.is_numeric_dtype(fresh[col]):
+            np.testing.assert_allclose(
+                fresh[col].to_numpy(float),
+                stored[col].to_numpy(float),
+                rtol=RTOL,
+                atol=1e-12,
+                equal_nan=True,
+                err_msg=f"{name}: {col}",
+            )
+        else:
+            assert fresh[col].astype(str).tolist() == stored[col].astype(str).tolist(), name
+
+
+def test_tables_recompute_from_the_trials():
+    published = load_published()
+    trials = _trials("station")
+    targets = report.published_figures(published)
+    _compare(
+        report.calibration_table(
+            _trials("drift_pilot"), "drift_scale", "before_mm", targets["icp_before"]
+        ),
+        "drift_calibration",
+    )
+    _compare(
+        report.calibration_table(
+            _trials("plate_pilot"), "plate_sigma_px", "plate_euclid_mm", targets["plate"]
+        ),
+        "plate_calibration",
+    )
+    _compare(report.calibration_summary(trials), "calibration_summary")
+    _compare(report.icp_summary(report.part(trials, "icp"), published), "icp_summary")
+    glob = report.part(trials, "global")
+    _compare(report.table1(glob, published), "table1_axis_errors")
+    _compare(report.table2(glob, published), "table2_euclidean_errors")
+    _compare(report.table3(glob, published), "table3_methods")
+
+
+def test_claims_and_controls_recompute_from_the_trials():
+    claims, controls = report.dualarm_claims(_trials("station"), load_published(), FOLDER.name)
+    rows = [dataclasses.asdict(c) for c in claims]
+    _compare(pd.DataFrame(rows, columns=list(CLAIM_COLUMNS)), "claims")
+    _compare(pd.DataFrame(controls), "controls")

@@ -1,0 +1,552 @@
+# ruff: noqa: E501  (the catalogue is a table: one case per line)
+"""Catalogue of bad inputs (issue 19): each raises CalibrationError (or an OSError naming the path)
+whose message names the key number or name; and a property test of the fitters on random input.
+
+Every case is one bad input through a public function or a user-data reader of core, models,
+the shared estimators, io and claims. The ids read as "<function>-<what is wrong>".
+"""
+
+from __future__ import annotations
+
+import atexit
+import shutil
+import tempfile
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.configuration import set_hypothesis_home_dir
+from hypothesis.extra import numpy as hnp
+
+from calstudy import CalibrationError
+from calstudy.core import estimation, schema
+from calstudy.core import geometry as geo
+from calstudy.core.circles import fit_circle_2d
+from calstudy.estimators import fitting as ft
+from calstudy.estimators import handeye as he
+from calstudy.estimators import workpiece as wp
+from calstudy.estimators.handeye_poses import calibrate_handeye
+from calstudy.estimators.posefile import read_pose_list, write_pose_list
+from calstudy.io.results import aggregate_claims
+from calstudy.models.kinematics import load_robot
+from calstudy.models.sensors import PinholeCamera
+from calstudy.models.targets import Sphere
+
+# hypothesis keeps a cache folder (.hypothesis/) even without an example database: put it in a
+# temporary folder removed at exit, so no run leaves one in the checkout
+_HOME = tempfile.mkdtemp(prefix="calstudy-hypothesis-")
+set_hypothesis_home_dir(_HOME)
+atexit.register(shutil.rmtree, _HOME, ignore_errors=True)
+settings.register_profile(
+    "bad_inputs",
+    derandomize=True,
+    database=None,
+    deadline=None,
+    max_examples=40,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+PROFILE = settings.get_profile("bad_inputs")
+
+# ----------------------------------------------------------------------------------------------
+# fixtures of good data, made once
+
+S2F = geo.make_transform(geo.euler_zyx_to_matrix(10.0, 50.0, -5.0), np.array([-46.0, -4.5, 413.0]))
+X_B = np.array([1000.0, 350.0, 0.0])
+K = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
+DATUMS_WORK = np.array([[1100.0, 250.0, 0.0], [300.0, 250.0, 0.0], [700.0, 1050.0, 0.0]])
+NOMINAL = geo.invert(geo.make_transform(np.eye(3), [300.0, -500.0, 0.0]))
+
+
+def _poses(n_trans=4, n_rot=6, seed=0):
+    rng = np.random.default_rng(seed)
+    base_rot = geo.euler_zyx_to_matrix(20.0, 170.0, 5.0)
+    base_pos = np.array([900.0, 300.0, 700.0])
+    trans = geo.make_transform(
+        np.broadcast_to(base_rot, (n_trans, 3, 3)), base_pos + rng.uniform(-15, 15, (n_trans, 3))
+    )
+    rv = rng.normal(size=(n_rot, 3))
+    rv *= np.deg2rad(rng.uniform(10, 30, n_rot))[:, None] / np.linalg.norm(rv, axis=1)[:, None]
+    rot = geo.make_transform(
+        base_rot @ geo.rotvec_to_matrix(rv), base_pos + rng.uniform(-15, 15, (n_rot, 3))
+    )
+    return trans, rot
+
+
+def _centres(flange2base, x_b=X_B):
+    s2b = flange2base @ S2F
+    return np.einsum("nji,nj->ni", s2b[:, :3, :3], x_b - s2b[:, :3, 3])
+
+
+TRANS, ROT = _poses()
+ALL = np.concatenate([TRANS, ROT])
+NOISE = np.random.default_rng(1).normal(0, 0.02, (len(ALL), 3))
+CENTRES = _centres(ALL) + NOISE
+MOVED = np.concatenate([_centres(TRANS), _centres(ROT, X_B + [5.0, 0, 0])]) + NOISE
+ONLY_T, _ = _poses(n_trans=8, n_rot=1, seed=5)
+SQUARE = np.array([[0.0, 0], [100, 0], [100, 100], [0, 100], [50, 30]])
+UV = SQUARE * 2.0 + 50.0
+CUBE = np.array(
+    [[0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100], [100, 100, 0], [100, 0, 100.0]]
+)
+
+
+def _cell(n=8, seed=3):
+    rng = np.random.default_rng(seed)
+    a = geo.make_transform(
+        geo.rotvec_to_matrix(rng.normal(0, 0.5, (n, 3))), rng.uniform(-300, 300, (n, 3))
+    )
+    z = geo.make_transform(np.eye(3), [800.0, 0, 0])
+    b = geo.invert(a @ S2F) @ z  # target2camera = inv(X) inv(A) Z
+    return a, b
+
+
+CELL_A, CELL_B = _cell()
+
+# ----------------------------------------------------------------------------------------------
+# user files
+
+HEADER = "id,group,x,y,z,a,b,c,sx,sy,sz"
+
+
+def _sphere_rows(header=HEADER, angle=1.0, length=1.0, sensor=1.0):
+    meas = he.SphereMeasurements(
+        ids=np.arange(1, len(ALL) + 1),
+        group=np.array(["translation"] * len(TRANS) + ["rotation"] * len(ROT)),
+        flange2base=ALL,
+        centres=CENTRES,
+    )
+    df = meas.to_frame()
+    df[["a", "b", "c"]] *= angle
+    df[["x", "y", "z"]] *= length
+    df[["sx", "sy", "sz"]] *= sensor
+    lines = [header]
+    for row in df.itertuples(index=False):
+        lines.append(",".join(str(v) if isinstance(v, str) else f"{v:.12g}" for v in row))
+    return lines
+
+
+def _csv(tmp_path, lines, name="m.csv", encoding="utf-8"):
+    path = tmp_path / name
+    path.write_text("\n".join(lines) + "\n", encoding=encoding)
+    return path
+
+
+def _edit(lines, row, col, text):
+    """Cell ``col`` (0-based) of file row ``row`` (1-based, header row 1) replaced by text."""
+    out = list(lines)
+    cells = out[row - 1].split(",")
+    cells[col] = text
+    out[row - 1] = ",".join(cells)
+    return out
+
+
+def sphere_csv(kind):
+    def make(tmp_path):
+        lines = _sphere_rows()
+        if kind == "radians":
+            lines = _sphere_rows(angle=np.pi / 180)
+        elif kind == "flange_metres":
+            lines = _sphere_rows(length=1e-3)
+        elif kind == "sensor_metres":
+            lines = _sphere_rows(sensor=1e-3)
+        elif kind == "all_metres":
+            lines = _sphere_rows(length=1e-3, sensor=1e-3)
+        elif kind == "decimal_comma_quoted":
+            lines = _edit(lines, 4, 2, '"12,5"')
+        elif kind == "decimal_comma_split":
+            lines = _edit(lines, 4, 2, "12,5")
+        elif kind == "semicolon_decimal_comma":
+            lines = [ln.replace(",", ";") for ln in lines]
+            lines = _edit([ln.replace(";", ",") for ln in lines], 1, 0, "id")
+            lines = [ln.replace(",", ";") for ln in lines]
+            cells = lines[4].split(";")
+            cells[8] = "3,25"
+            lines[4] = ";".join(cells)
+        elif kind == "empty_cell":
+            lines = _edit(lines, 3, 9, "")
+        elif kind == "nan_cell":
+            lines = _edit(lines, 5, 5, "nan")
+        elif kind == "bad_group":
+            lines = _edit(lines, 6, 1, "rotate")
+        elif kind == "duplicate_id":
+            lines = _edit(lines, 7, 0, "1")
+        elif kind == "fractional_id":
+            lines = _edit(lines, 7, 0, "7.5")
+        elif kind == "missing_column":
+            lines = [",".join(ln.split(",")[:-1]) for ln in lines]
+        elif kind == "header_only":
+            lines = lines[:1]
+        elif kind == "empty":
+            lines = []
+        elif kind == "mixed_units":
+            lines[0] = lines[0].replace("sx,sy", "sx_m,sy")
+        elif kind == "two_units":
+            lines = [ln + ",1.0" for ln in lines]
+            lines[0] = HEADER + ",x_m"
+        elif kind == "extra_cells":
+            lines = _edit(lines, 8, 10, "1.0,2.0")
+        elif kind == "latin1":
+            return _csv(tmp_path, [*lines, "# caf\xe9"], encoding="latin-1")
+        elif kind == "missing_file":
+            return tmp_path / "no_such.csv"
+        return _csv(tmp_path, lines)
+
+    return make
+
+
+POSE_OK = None
+
+
+def pose_csv(kind):
+    def make(tmp_path):
+        path = write_pose_list(tmp_path / "p.csv", CELL_A, CELL_B)
+        lines = path.read_text().splitlines()
+        if kind == "missing_file":
+            return tmp_path / "none.csv"
+        if kind == "empty":
+            lines = []
+        elif kind == "no_id":
+            lines[0] = lines[0].replace("id,", "nr,", 1)
+        elif kind == "two_robot_prefixes":
+            lines[0] = lines[0].replace("target2camera", "base2gripper")
+        elif kind == "quaternion_norm":
+            lines = _edit(lines, 3, 4, "0.5")
+        elif kind == "decimal_comma":
+            lines = _edit(lines, 2, 1, '"12,5"')
+        elif kind == "short_row":
+            lines[2] = ",".join(lines[2].split(",")[:-1])
+        elif kind == "no_rows":
+            lines = lines[:1]
+        elif kind == "bad_unit":
+            lines[0] = lines[0].replace("_mm", "_km")
+        elif kind == "text_cell":
+            lines = _edit(lines, 4, 6, "n/a")
+        return _csv(tmp_path, lines, "p.csv")
+
+    return make
+
+
+ROBOT = """name = "test robot"
+[[link]]
+convention = "dh"
+a_mm = 260.0
+alpha_deg = -90.0
+d_mm = 675.0
+theta_deg = 0.0
+beta_deg = 0.0
+qmin_deg = -185.0
+qmax_deg = 185.0
+[[link]]
+convention = "dh"
+a_mm = 680.0
+alpha_deg = 0.0
+d_mm = 0.0
+theta_deg = 0.0
+beta_deg = 0.0
+qmin_deg = -155.0
+qmax_deg = 35.0
+[tolerances]
+sigma_length_mm = 0.5
+sigma_angle_deg = 0.05
+"""
+
+
+def robot_toml(old, new):
+    def make(tmp_path):
+        path = tmp_path / "robot.toml"
+        text = ROBOT.replace(old, new, 1) if old else new
+        path.write_text(text)
+        return path
+
+    return make
+
+
+# ----------------------------------------------------------------------------------------------
+# the catalogue: (id, function of tmp_path, error type, match)
+
+E = CalibrationError
+CASES = [
+    # fit_rotation
+    ("fit_rotation-shape", lambda p: ft.fit_rotation(np.ones((4, 2)), np.ones((4, 2))), E, r"shape \(4, 2\)"),
+    ("fit_rotation-nan", lambda p: ft.fit_rotation([[np.nan, 0, 0]] * 3, np.eye(3)), E, "non-finite"),
+    ("fit_rotation-one_vector", lambda p: ft.fit_rotation([[1.0, 0, 0]], [[1.0, 0, 0]]), E, "2"),
+    ("fit_rotation-collinear", lambda p: ft.fit_rotation([[1.0, 0, 0], [2, 0, 0], [3, 0, 0]], [[1.0, 0, 0], [2, 0, 0], [3, 0, 0]]), E, "collinear"),
+    ("fit_rotation-lengths", lambda p: ft.fit_rotation(np.eye(3), np.eye(3)[:2]), E, "3.*2|2.*3"),
+    ("fit_rotation-text", lambda p: ft.fit_rotation([["a", "b", "c"]] * 3, np.eye(3)), E, "v_from"),
+    # fit_rigid
+    ("fit_rigid-two_points", lambda p: ft.fit_rigid(CUBE[:2], CUBE[:2]), E, "3"),
+    ("fit_rigid-collinear", lambda p: ft.fit_rigid(CUBE[[0, 1]].tolist() + [[200, 0, 0]], CUBE[:3]), E, "line|collinear"),
+    ("fit_rigid-lengths", lambda p: ft.fit_rigid(CUBE, CUBE[:4]), E, "6.*4|4.*6"),
+    ("fit_rigid-inf", lambda p: ft.fit_rigid(CUBE, np.where(CUBE == 100, np.inf, CUBE)), E, "non-finite"),
+    ("fit_rigid-ragged", lambda p: ft.fit_rigid([[0, 0, 0], [1, 2]], CUBE[:2]), E, "p_from"),
+    # fit_sphere
+    ("fit_sphere-three_points", lambda p: ft.fit_sphere(CUBE[:3]), E, "4"),
+    ("fit_sphere-coplanar", lambda p: ft.fit_sphere(np.c_[SQUARE, np.zeros(5)]), E, "coplanar"),
+    ("fit_sphere-coincident", lambda p: ft.fit_sphere(np.ones((5, 3))), E, "coincide"),
+    ("fit_sphere-nan", lambda p: ft.fit_sphere(np.r_[CUBE, [[np.nan, 0, 0]]]), E, "non-finite"),
+    # fit_circle_2d
+    ("fit_circle_2d-two_points", lambda p: fit_circle_2d([[0.0, 0], [1, 1]]), E, "3"),
+    ("fit_circle_2d-collinear", lambda p: fit_circle_2d([[0.0, 0], [1, 1], [2, 2], [3, 3]]), E, "line|collinear"),
+    ("fit_circle_2d-method", lambda p: fit_circle_2d(SQUARE, method="hough"), E, "hough"),
+    # fit_homography
+    ("fit_homography-three_points", lambda p: ft.fit_homography(SQUARE[:3], UV[:3]), E, "at least 4 points; got 3"),
+    ("fit_homography-3_of_4_collinear", lambda p: ft.fit_homography([[0, 0], [1, 0], [2, 0], [0, 1]], [[0, 0], [10, 0], [20, 0], [0, 10]]), E, "no 3 may lie on a line"),
+    ("fit_homography-all_collinear", lambda p: ft.fit_homography([[0, 0], [1, 0], [2, 0], [3, 0]], UV[:4]), E, "line|collinear"),
+    ("fit_homography-image_collinear", lambda p: ft.fit_homography(SQUARE, [[0, 0], [1, 1], [2, 2], [3, 3], [4, 4]]), E, "image points"),
+    ("fit_homography-lengths", lambda p: ft.fit_homography(SQUARE, UV[:4]), E, "5.*4|4.*5"),
+    # homography_to_pose
+    ("homography_to_pose-rank_2", lambda p: ft.homography_to_pose(np.outer([1, 2, 1], [1, 1, 1]) + np.outer([0, 1, 0], [1, 0, 2]), K), E, "H is singular \\(rank 2"),
+    ("homography_to_pose-zero", lambda p: ft.homography_to_pose(np.zeros((3, 3)), K), E, "singular"),
+    ("homography_to_pose-k_lower", lambda p: ft.homography_to_pose(np.eye(3), [[800, 0, 320], [5, 800, 240], [0, 0, 1]]), E, "upper triangular"),
+    ("homography_to_pose-k_negative_f", lambda p: ft.homography_to_pose(np.eye(3), np.diag([-800.0, 800, 1])), E, "fx > 0"),
+    ("homography_to_pose-shape", lambda p: ft.homography_to_pose(np.eye(4), K), E, r"\(3, 3\)"),
+    ("homography_to_pose-stretched", lambda p: ft.homography_to_pose(K @ np.diag([1.0, 10.0, 500.0]), K), E, r"\|r2\|/\|r1\| = 10"),
+    # solve_pnp
+    ("solve_pnp-three_points", lambda p: ft.solve_pnp(CUBE[:3], UV[:3], K), E, "4 points; got 3"),
+    ("solve_pnp-skew", lambda p: ft.solve_pnp(CUBE, UV[:1].repeat(6, 0) + CUBE[:, :2], [[800, 2, 320], [0, 800, 240], [0, 0, 1]]), E, r"K\[0,1\] = 2"),
+    ("solve_pnp-collinear", lambda p: ft.solve_pnp([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], UV[:4], K), E, "line|collinear"),
+    ("solve_pnp-nonplanar_five", lambda p: ft.solve_pnp(CUBE[:5], UV[:5], K), E, "at least 6 points for SOLVEPNP_ITERATIVE; got 5"),
+    ("solve_pnp-nan_pixels", lambda p: ft.solve_pnp(CUBE, np.full((6, 2), np.nan), K), E, "non-finite"),
+    ("solve_pnp_ransac-threshold", lambda p: ft.solve_pnp_ransac(CUBE, UV[:1].repeat(6, 0), K, -1.0), E, "threshold_px"),
+    ("solve_pnp_ransac-three", lambda p: ft.solve_pnp_ransac(CUBE[:3], UV[:3], K, 2.0), E, "4 points; got 3"),
+    # sphere hand-eye
+    ("rotation_from_translations-orientation", lambda p: he.rotation_from_translations(ROT[:4], CENTRES[4:8]), E, "not pure translations"),
+    ("rotation_from_translations-three", lambda p: he.rotation_from_translations(TRANS[:3], CENTRES[:3]), E, "at least 4 positions; got 3"),
+    ("rotation_from_translations-collinear", lambda p: he.rotation_from_translations(geo.make_transform(np.broadcast_to(TRANS[0, :3, :3], (4, 3, 3)), np.outer(np.arange(4.0), [10, 0, 0])), CENTRES[:4]), E, "one line"),
+    ("translation_from_rotations-pure", lambda p: he.translation_from_rotations(TRANS, CENTRES[:4], S2F[:3, :3]), E, "pure translations"),
+    ("translation_from_rotations-parallel", lambda p: he.translation_from_rotations(geo.make_transform(geo.rotvec_to_matrix(np.outer(np.deg2rad([0, 10, 20, 30]), [0, 0, 1])), np.zeros((4, 3))), CENTRES[:4], S2F[:3, :3]), E, "parallel \\(condition number"),
+    ("sphere_handeye_ml-translation_only", lambda p: he.sphere_handeye_ml(ONLY_T, _centres(ONLY_T), 0.02, S2F), E, "condition number"),
+    ("sphere_handeye_ml-sphere_moved", lambda p: he.sphere_handeye_ml(ALL, MOVED, 0.02, S2F, ids=np.arange(1, 11), misfit="raise"), E, "chi2/dof = .* id \\d+"),
+    ("sphere_handeye_ml-sigma_zero", lambda p: he.sphere_handeye_ml(ALL, CENTRES, 0.0, S2F), E, "sigma must be positive"),
+    ("sphere_handeye_ml-sigma_nan", lambda p: he.sphere_handeye_ml(ALL, CENTRES, [0.02, np.nan, 0.02], S2F), E, "sigma must be positive"),
+    ("sphere_handeye_ml-sigma_shape", lambda p: he.sphere_handeye_ml(ALL, CENTRES, [0.1, 0.2], S2F), E, "one per sensor axis"),
+    ("sphere_handeye_ml-two_poses", lambda p: he.sphere_handeye_ml(ALL[:2], CENTRES[:2], 0.02, S2F), E, "at least 3 poses; got 2"),
+    ("sphere_handeye_ml-ids_length", lambda p: he.sphere_handeye_ml(ALL, CENTRES, 0.02, S2F, ids=[1, 2]), E, "2 ids for 10"),
+    ("sphere_handeye_ml-policy", lambda p: he.sphere_handeye_ml(ALL, MOVED, 0.02, S2F, misfit="ignore"), E, "ignore"),
+    ("sphere_handeye_ml-centres_shape", lambda p: he.sphere_handeye_ml(ALL, CENTRES[:, :2], 0.02, S2F), E, r"shape \(10, 2\)"),
+    ("sphere_handeye_ml-not_rigid", lambda p: he.sphere_handeye_ml(ALL, CENTRES, 0.02, S2F * 1.01), E, "initial sensor2flange"),
+    ("sphere_handeye_crb-sigma_zero", lambda p: he.sphere_handeye_crb(ALL, _centres(ALL), 0.0, S2F, X_B), E, "sigma must be positive"),
+    ("sphere_handeye_crb-translation_only", lambda p: he.sphere_handeye_crb(ONLY_T, _centres(ONLY_T), 0.02, S2F, X_B), E, "condition number"),
+    ("opencv_handeye-method", lambda p: he.opencv_handeye(CELL_A, CELL_B, "Tsay"), E, "Tsay"),
+    ("opencv_handeye-two_poses", lambda p: he.opencv_handeye(CELL_A[:2], CELL_B[:2], "Tsai"), E, "at least 3 poses; got 2"),
+    ("opencv_handeye-lengths", lambda p: he.opencv_handeye(CELL_A, CELL_B[:5], "Park"), E, r"\(8, 4, 4\).*\(5, 4, 4\)"),
+    ("opencv_handeye-small_rotation", lambda p: he.opencv_handeye(np.concatenate([CELL_A[:1], CELL_A[:1], CELL_A[1:]]), np.concatenate([CELL_B[:1], CELL_B[:1], CELL_B[1:]]), "Tsai", min_pair_rotation=he.MIN_PAIR_ROTATION), E, "poses 0 and 1"),
+    # workpiece 3-2-1
+    ("rps_frame_so3-datums_contradict_cad", lambda p: wp.rps_frame_so3([[0.0, 0, 0], [800, 0, 0], [400, 0, 0]], DATUMS_WORK, NOMINAL), E, "condition number"),
+    ("rps_frame_so3-cad_a_equals_b", lambda p: wp.rps_frame_so3(DATUMS_WORK, DATUMS_WORK[[0, 0, 2]], NOMINAL), E, "A and B coincide"),
+    ("rps_frame_so3-cad_c_on_line", lambda p: wp.rps_frame_so3(DATUMS_WORK, [[0, 0, 0], [100, 0, 0], [50, 0.5, 0]], NOMINAL), E, "0.5 mm from the line"),
+    ("rps_frame_so3-shape", lambda p: wp.rps_frame_so3(DATUMS_WORK[:2], DATUMS_WORK, NOMINAL), E, r"\(2, 3\)"),
+    ("rps_frame_penalty-penalty", lambda p: wp.rps_frame_penalty(DATUMS_WORK, DATUMS_WORK, NOMINAL, penalty=0.0), E, "penalty factor M"),
+    ("rps_frame_penalty-max_nfev", lambda p: wp.rps_frame_penalty(DATUMS_WORK, DATUMS_WORK, NOMINAL, max_nfev=0), E, "max_nfev"),
+    ("rps_frame_batch-shape", lambda p: wp.rps_frame_batch(DATUMS_WORK, DATUMS_WORK, NOMINAL), E, r"\(N, 3, 3\)"),
+    ("rps_frame_batch-degenerate", lambda p: wp.rps_frame_batch(np.array([[[0.0, 0, 0], [800, 0, 0], [400, 0, 0]]]), DATUMS_WORK, NOMINAL), E, "panel 0"),
+    # calibrate_handeye (pose lists)
+    ("calibrate_handeye-lengths", lambda p: calibrate_handeye(CELL_A, CELL_B[:6]), E, "8 robot poses but 6 camera poses"),
+    ("calibrate_handeye-method", lambda p: calibrate_handeye(CELL_A, CELL_B, method="Tsay"), E, "Tsay"),
+    ("calibrate_handeye-convention", lambda p: calibrate_handeye(CELL_A, CELL_B, convention="world2camera"), E, "world2camera"),
+    ("calibrate_handeye-one_sigma", lambda p: calibrate_handeye(CELL_A, CELL_B, sigma_rot=0.001), E, "both sigma_rot and sigma_trans"),
+    ("calibrate_handeye-sigma_inf", lambda p: calibrate_handeye(CELL_A, CELL_B, sigma_rot=np.inf, sigma_trans=0.1), E, "positive and finite"),
+    ("calibrate_handeye-bottom_row", lambda p: calibrate_handeye(CELL_A + np.eye(4)[3] * 0 + np.pad(np.ones((8, 1, 4)), ((0, 0), (3, 0), (0, 0))), CELL_B), E, "bottom row"),
+    ("calibrate_handeye-unit", lambda p: calibrate_handeye(CELL_A, CELL_B, robot_unit="km"), E, "km"),
+    ("calibrate_handeye-misfit_policy", lambda p: calibrate_handeye(CELL_A, CELL_B, misfit="warn"), E, "warn"),
+    ("calibrate_handeye-misfit", lambda p: calibrate_handeye(CELL_A, np.concatenate([CELL_B[:4], geo.make_transform(CELL_B[4:, :3, :3], CELL_B[4:, :3, 3] + [5.0, 0, 0])]), sigma_rot=1e-4, sigma_trans=0.01, misfit="raise", check_convention="off"), E, "chi2/dof = .*pose \\d"),
+    # the fixed-sphere CSV
+    ("read_sphere_csv-missing_file", sphere_csv("missing_file"), FileNotFoundError, "no_such.csv"),
+    ("read_sphere_csv-empty", sphere_csv("empty"), E, "empty"),
+    ("read_sphere_csv-header_only", sphere_csv("header_only"), E, "no measurement rows"),
+    ("read_sphere_csv-radians", sphere_csv("radians"), E, "look like radians.*a_rad"),
+    ("read_sphere_csv-flange_in_metres", sphere_csv("flange_metres"), E, "flange positions x, y, z are all below 10.*metres"),
+    ("read_sphere_csv-sensor_in_metres", sphere_csv("sensor_metres"), E, "sphere centres sx, sy, sz are all below 10.*metres"),
+    ("read_sphere_csv-all_in_metres", sphere_csv("all_metres"), E, "below 10.*metres"),
+    ("read_sphere_csv-decimal_comma_quoted", sphere_csv("decimal_comma_quoted"), E, r"row 4, column 'x': '12,5' .*write 12\.5"),
+    ("read_sphere_csv-decimal_comma_split", sphere_csv("decimal_comma_split"), E, r"row 4 has 12 cells; the header has 11 \(a decimal comma"),
+    ("read_sphere_csv-semicolon_decimal_comma", sphere_csv("semicolon_decimal_comma"), E, r"row 5, column 'sx': '3,25'.*write 3\.25"),
+    ("read_sphere_csv-empty_cell", sphere_csv("empty_cell"), E, r"row 3, column 'sy': '' is not a number"),
+    ("read_sphere_csv-nan_cell", sphere_csv("nan_cell"), E, r"row 5, column 'a': 'nan'"),
+    ("read_sphere_csv-bad_group", sphere_csv("bad_group"), E, r"row 6, column 'group': 'rotate' is not one of"),
+    ("read_sphere_csv-duplicate_id", sphere_csv("duplicate_id"), E, "id 1 appears more than once"),
+    ("read_sphere_csv-fractional_id", sphere_csv("fractional_id"), E, "7.5 is not an integer"),
+    ("read_sphere_csv-missing_column", sphere_csv("missing_column"), E, "missing column 'sz'"),
+    ("read_sphere_csv-mixed_units", sphere_csv("mixed_units"), E, "mix declared and undeclared units"),
+    ("read_sphere_csv-column_twice", sphere_csv("two_units"), E, "column 'x' is given twice"),
+    ("read_sphere_csv-extra_cells", sphere_csv("extra_cells"), E, "row 8 has 12 cells"),
+    ("read_sphere_csv-not_utf8", sphere_csv("latin1"), E, "not a UTF-8 text file"),
+    # the pose-list CSV
+    ("read_pose_list-missing_file", pose_csv("missing_file"), FileNotFoundError, "none.csv"),
+    ("read_pose_list-empty", pose_csv("empty"), E, "empty"),
+    ("read_pose_list-no_id", pose_csv("no_id"), E, "missing column 'id'"),
+    ("read_pose_list-no_camera_prefix", pose_csv("two_robot_prefixes"), E, "exactly one prefix"),
+    ("read_pose_list-quaternion_norm", pose_csv("quaternion_norm"), E, r"row 3, columns flange2base_qw..flange2base_qz: the quaternion has norm"),
+    ("read_pose_list-decimal_comma", pose_csv("decimal_comma"), E, r"row 2, column 'flange2base_x_mm': '12,5'.*write 12\.5"),
+    ("read_pose_list-short_row", pose_csv("short_row"), E, "row 3 has 14 cells; the header has 15"),
+    ("read_pose_list-no_rows", pose_csv("no_rows"), E, "no pose rows"),
+    ("read_pose_list-unit", pose_csv("bad_unit"), E, "one unit of mm, cm, m, in"),
+    ("read_pose_list-text_cell", pose_csv("text_cell"), E, r"row 4, column 'flange2base_qy': 'n/a' is not a number"),
+    # robot tables
+    ("load_robot-unknown_name", lambda p: load_robot("kuka_kr16"), FileNotFoundError, "kuka_kr16.toml.*available: .*kuka_kr16_2"),
+    ("load_robot-missing_path", lambda p: load_robot(p / "none.toml"), FileNotFoundError, "none.toml"),
+    ("load_robot-not_toml", robot_toml(None, "name = \n"), E, "not valid TOML"),
+    ("load_robot-missing_key", robot_toml("theta_deg = 0.0\nbeta_deg = 0.0\nqmin_deg = -155.0", "beta_deg = 0.0\nqmin_deg = -155.0"), E, r"link #2.theta_deg: missing"),
+    ("load_robot-misspelt_key", robot_toml("d_mm = 675.0", "d_mn = 675.0"), E, r"link #1.d_mn = 675.0: unknown key"),
+    ("load_robot-negative_range", robot_toml("qmax_deg = 35.0", "qmax_deg = -200.0"), E, r"link #2.*qmin_deg = -155 must be below qmax_deg = -200"),
+    ("load_robot-huge_length", robot_toml("a_mm = 680.0", "a_mm = 68000.0"), E, r"link #2.a_mm = 68000.0: must be >= -10000.0 and <= 10000.0"),
+    ("load_robot-angle_range", robot_toml("alpha_deg = -90.0", "alpha_deg = -900.0"), E, r"link #1.alpha_deg = -900.0: must be >= -360"),
+    ("load_robot-radians", robot_toml("alpha_deg = -90.0", "alpha_deg = -1.5708"), E, r"link #1.alpha_deg = -1.5708 looks like radians"),
+    ("load_robot-metres", lambda p: robot_toml(None, ROBOT.replace("260.0", "0.26").replace("675.0", "0.675").replace("680.0", "0.68"))(p), E, "below 10.*metres"),
+    ("load_robot-convention", robot_toml('convention = "dh"', 'convention = "DH2"'), E, r"link #1.convention = 'DH2': is not one of"),
+    ("load_robot-mixed_conventions", robot_toml('convention = "dh"', 'convention = "mdh"'), E, "mix conventions"),
+    ("load_robot-no_links", robot_toml(None, 'name = "x"\n'), E, "link: missing"),
+    ("load_robot-negative_tolerance", robot_toml("sigma_length_mm = 0.5", "sigma_length_mm = -0.5"), E, r"tolerances.sigma_length_mm = -0.5: must be >= 0"),
+    ("load_robot-text_number", robot_toml("d_mm = 675.0", 'd_mm = "about 675"'), E, r"link #1.d_mm = 'about 675': is not a number"),
+    ("load_robot-nan", robot_toml("d_mm = 675.0", "d_mm = nan"), E, r"link #1.d_mm = nan: must be a finite number"),
+    # models
+    ("robot.fk-length", lambda p: load_robot("kuka_kr16_2").fk(np.zeros(5)), E, "5 values; the KUKA KR 16-2 has 6 joints"),
+    ("robot.fk-nan", lambda p: load_robot("kuka_kr16_2").fk([0, 0, np.nan, 0, 0, 0]), E, "joint 3"),
+    ("robot.random_configurations-rng", lambda p: load_robot("kuka_kr16_2").random_configurations(7, 3), E, "numpy.random.Generator"),
+    ("sphere-negative_radius", lambda p: Sphere(radius_mm=-12.7), E, "-12.7 mm"),
+    ("sphere-centre_shape", lambda p: Sphere(centre=np.zeros(2)), E, r"centre has shape \(2,\)"),
+    ("camera-negative_focal", lambda p: PinholeCamera(fx=-800, fy=800, cx=320, cy=240, width=640, height=480), E, "focal lengths must be positive"),
+    ("camera-dist_length", lambda p: PinholeCamera(fx=800, fy=800, cx=320, cy=240, width=640, height=480, dist=(0.1, 0.2, 0.0)), E, r"0, 4, 5, 8, 12 or 14 .*got \(0.1, 0.2, 0.0\)"),
+    # core
+    ("levenberg_marquardt-underdetermined", lambda p: estimation.levenberg_marquardt(lambda x: x[:1], np.zeros(3)), E, "1 equations for 3 unknowns"),
+    ("levenberg_marquardt-nan_start", lambda p: estimation.levenberg_marquardt(lambda x: x, np.array([np.nan, 0.0])), E, "starting point is not finite"),
+    ("levenberg_marquardt-unobservable", lambda p: estimation.levenberg_marquardt(lambda x: np.array([x[0] + x[1] - 1, x[0] + x[1] - 1]), np.zeros(2), max_condition=1e8), E, "condition number"),
+    ("schema.validate-range", lambda p: schema.validate(type("S", (schema.Schema,), {"__annotations__": {"rate": schema.Fraction}}), {"rate": 1.5}, "s.toml", "station."), E, r"s.toml: station.rate = 1.5: must be >= 0 and <= 1"),
+    ("geometry.check_transform-not_rigid", lambda p: geo.check_transform("sensor2flange", np.diag([1.0, 1, 2, 1])), E, "sensor2flange"),
+    ("aggregate_claims-misspelt_folder", lambda p: aggregate_claims(p / "reslts"), FileNotFoundError, "reslts"),
+]
+
+
+@pytest.mark.parametrize(("make", "error", "match"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+def test_bad_input_is_refused(tmp_path, make, error, match):
+    from calstudy.estimators.handeye import read_sphere_measurements
+
+    with pytest.raises(error, match=match):
+        out = make(tmp_path)
+        # the file cases return the path of the broken file: read it with its reader
+        if hasattr(out, "suffix") and out.name in ("m.csv", "no_such.csv"):
+            read_sphere_measurements(out)
+        elif hasattr(out, "suffix") and out.name in ("p.csv", "none.csv"):
+            read_pose_list(out)
+        elif hasattr(out, "suffix") and out.suffix == ".toml":
+            load_robot(out)
+
+
+def test_catalogue_size():
+    assert len(CASES) >= 80 and len({c[0] for c in CASES}) == len(CASES)
+
+
+# ----------------------------------------------------------------------------------------------
+# good files still read: spreadsheet exports and declared units
+
+
+def test_spreadsheet_exports_and_declared_units_read(tmp_path):
+    ref = he.read_sphere_measurements(_csv(tmp_path, _sphere_rows(), "ref.csv"))
+    bom = he.read_sphere_measurements(_csv(tmp_path, _sphere_rows(), "bom.csv", "utf-8-sig"))
+    np.testing.assert_allclose(bom.flange2base, ref.flange2base)
+    semi = _csv(tmp_path, [ln.replace(",", ";") for ln in _sphere_rows()], "semi.csv")
+    np.testing.assert_allclose(he.read_sphere_measurements(semi).centres, ref.centres)
+    header = "id,group,x_m,y_m,z_m,a_rad,b_rad,c_rad,sx_mm,sy_mm,sz_mm"
+    lines = _sphere_rows(header, angle=np.pi / 180, length=1e-3)
+    declared = he.read_sphere_measurements(_csv(tmp_path, lines, "declared.csv"))
+    np.testing.assert_allclose(declared.flange2base, ref.flange2base, atol=1e-5)
+
+
+def test_misfit_is_flagged_by_default():
+    from calstudy import CalibrationWarning
+
+    with pytest.warns(CalibrationWarning, match="chi2/dof"):
+        est = he.sphere_handeye_ml(ALL, MOVED, 0.02, S2F)
+    assert est.fit is not None and est.fit.too_large and est.flags
+    good = he.sphere_handeye_ml(ALL, CENTRES, 0.02, S2F, misfit="raise")
+    assert good.fit.ok and not good.flags
+
+
+# ----------------------------------------------------------------------------------------------
+# property test: random finite input of the right shapes gives finite output or CalibrationError
+
+_FLOATS = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False, width=64)
+
+
+def _arrays(shape):
+    return hnp.arrays(np.float64, shape, elements=_FLOATS)
+
+
+def _finite(out):
+    if hasattr(out, "covariance") and hasattr(out, "x"):  # HandEyeResult
+        parts = [out.x, out.z, out.covariance]
+    elif isinstance(out, estimation.Estimate):
+        parts = [out.value, out.params] + ([out.covariance] if out.covariance is not None else [])
+    elif isinstance(out, tuple):
+        parts = [np.asarray(v, dtype=float) for v in out]
+    else:
+        parts = [out]
+    return all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in parts)
+
+
+def _check(fn, *args, **kw):
+    try:
+        out = fn(*args, **kw)
+    except CalibrationError:
+        return
+    assert _finite(out), f"{fn.__name__} returned a non-finite value"
+
+
+def _pose(v):
+    return geo.make_transform(geo.rotvec_to_matrix(np.clip(v[:3], -3, 3)), v[3:])
+
+
+@PROFILE
+@given(st.integers(1, 8).flatmap(lambda n: st.tuples(_arrays((n, 3)), _arrays((n, 3)))))
+def test_property_point_fitters(data):
+    a, b = data
+    _check(ft.fit_rigid, a, b)
+    _check(ft.fit_rotation, a, b)
+    _check(ft.fit_sphere, a)
+    _check(fit_circle_2d, a[:, :2])
+
+
+@PROFILE
+@given(st.integers(1, 7).flatmap(lambda n: st.tuples(_arrays((n, 2)), _arrays((n, 2)), _arrays((n, 3)))))
+def test_property_homography_and_pnp(data):
+    xy, uv, obj = data
+    _check(ft.fit_homography, xy, uv + 320.0)
+    try:
+        h = ft.fit_homography(xy, uv + 320.0)
+    except CalibrationError:
+        h = np.eye(3) + np.diag(xy[0].tolist() + [0.0]) * 1e-3
+    _check(ft.homography_to_pose, h, K)
+    _check(ft.solve_pnp, obj, uv + 320.0, K)
+
+
+@PROFILE
+@given(_arrays((3, 3)), _arrays((6,)))
+def test_property_rps_frames(datums, nominal):
+    init = _pose(nominal * 1e-2)
+    _check(wp.rps_frame_so3, datums, DATUMS_WORK, init)
+    _check(wp.rps_frame_penalty, datums, DATUMS_WORK, init, max_nfev=200)
+    _check(wp.rps_frame_batch, datums[None], DATUMS_WORK, init)
+
+
+@PROFILE
+@given(st.integers(2, 8).flatmap(lambda n: st.tuples(_arrays((n, 6)), _arrays((n, 3)))), st.floats(1e-3, 1.0))
+def test_property_sphere_handeye(data, sigma):
+    poses, centres = data
+    flange = np.stack([_pose(v) for v in poses])
+    _check(he.sphere_handeye_ml, flange, centres, sigma, S2F, misfit="off")
+    _check(he.sphere_handeye_crb, flange, centres, sigma, S2F, X_B)
+    half = max(len(flange) // 2, 1)
+    _check(he.sphere_handeye, flange[:half], centres[:half], flange[half:], centres[half:])
+
+
+@settings(PROFILE, max_examples=10)
+@given(st.integers(3, 5).flatmap(lambda n: st.tuples(_arrays((n, 6)), _arrays((n, 6)))))
+def test_property_calibrate_handeye(data):
+    robot, camera = data
+    _check(
+        calibrate_handeye,
+        np.stack([_pose(v) for v in robot]),
+        np.stack([_pose(v) for v in camera]),
+        check_convention="off",
+    )
