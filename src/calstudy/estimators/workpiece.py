@@ -40,9 +40,17 @@ _RPS_ADVICE = (
 )
 
 
-def _check_solution(est: Estimate, p_b, p_w, label: str) -> Estimate:
-    """Refuse an unobservable frame (condition number) or equations left unsatisfied."""
-    check_condition(est.condition_number, MAX_RPS_CONDITION, f"{label}: the frame", _RPS_ADVICE)
+def _check_solution(est: Estimate, p_b, p_w, label: str, condition: bool = True) -> Estimate:
+    """Refuse an unobservable frame (condition number) or equations left unsatisfied.
+
+    ``condition=False`` skips the condition number: the penalty problem's 12-entry Jacobian is
+    conditioned by the penalty weight ``M``, not by the datums (whose geometry the SO(3)
+    solution and :func:`check_datums` judge).
+    """
+    if condition:
+        check_condition(
+            est.condition_number, MAX_RPS_CONDITION, f"{label}: the frame", _RPS_ADVICE
+        )
     res = rps_equations(est.value, p_b, p_w)
     k = int(np.argmax(np.abs(res)))
     if abs(res[k]) > MAX_RPS_RESIDUAL * max(1.0, np.abs(p_w).max()):
@@ -155,7 +163,7 @@ def rps_frame_penalty(
     det = np.linalg.det(est.value[:3, :3])
     if det < 0:
         raise CalibrationError(f"the penalty solution is a reflection (det R = {det:.4f})")
-    return _check_solution(est, p_b, p_w, f"RPS penalty LM (M = {penalty:g})")
+    return _check_solution(est, p_b, p_w, f"RPS penalty LM (M = {penalty:g})", condition=False)
 
 
 def rps_frame_so3(datums_base, datums_work, initial) -> Estimate:

@@ -6,12 +6,19 @@ Modules, lowest first (a module imports only those before it):
   and base (Eq. 1-6) on Pinocchio;
 - :mod:`~calstudy.papers.selfcal.identify`: sphere fit, bad-input checks, one-step identification
   (Eq. 10-11), its covariance, the three-step route and identifiability;
+- :mod:`~calstudy.papers.selfcal.design`: base parameters by column-pivoted QR and D-optimal
+  selection of measuring poses;
+- :mod:`~calstudy.papers.selfcal.measured`: your own cell: the measurement files (reader and
+  writer), identification on measured data with outliers flagged, the validation report;
 - :mod:`~calstudy.papers.selfcal.scenario`: the simulated cell and the published numbers, read
   from ``data/selfcal/scenario.toml``;
 - :mod:`~calstudy.papers.selfcal.simulate`: true stations, planned views, scans, tracker readings;
 - :mod:`~calstudy.papers.selfcal.experiments`: trials, Monte Carlo, noise sweep, identifiability
   designs;
-- :mod:`~calstudy.papers.selfcal.report`: summary tables, figures and claim rows.
+- :mod:`~calstudy.papers.selfcal.report`: summary tables, figures and claim rows;
+- :mod:`~calstudy.papers.selfcal.report_owncell`: tables and figures of your cell and of the
+  pose-selection study.
 
-``model`` and ``identify`` know nothing of the simulation, so they serve measured data as well.
+``model``, ``identify``, ``design`` and ``measured`` know nothing of the simulation, so they
+serve measured data as well.
 """

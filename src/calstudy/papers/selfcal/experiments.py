@@ -12,6 +12,11 @@ rebuild it from ``experiments.json`` and recompute stored trials:
   compliance.
 - :func:`noise_sweep_experiment`: the same trial with all noise scaled.
 - :func:`basin_experiment`: :func:`basin_trial`, convergence from starts farther and farther away.
+- :func:`pose_selection_experiment`: :func:`pose_selection_trial`, D-optimal against random
+  measuring poses of the same number.
+
+:func:`simulated_cell` and :func:`write_example_measurements` give the simulated cell as measured
+data (the notebook's default and ``data/selfcal/example_measurements``).
 
 The engine hands every trial its own generator (seed, experiment, sweep point, trial index).
 """
@@ -27,9 +32,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calstudy.core.config import scenario_file
+from calstudy.core.config import read_toml, scenario_file
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, trial_rng
+from calstudy.papers.selfcal.design import candidate_jacobians, observability, select_poses
 from calstudy.papers.selfcal.identify import (
     RANK_RTOL,
     Identification,
@@ -43,6 +49,7 @@ from calstudy.papers.selfcal.identify import (
     three_step_reordered,
     two_step,
 )
+from calstudy.papers.selfcal.measured import MeasuredCell, write_cell
 from calstudy.papers.selfcal.model import (
     IS_LENGTH,
     N_PARAMS,
@@ -57,6 +64,7 @@ from calstudy.papers.selfcal.simulate import (
     Station,
     draw_placements,
     draw_station,
+    plan_views,
     poor_start,
     simulate,
 )
@@ -381,3 +389,159 @@ def identifiability_designs(scenario: Scenario, meas: Measurements, params) -> d
         "parameters": pd.concat(parameters, ignore_index=True),
         "summary": pd.DataFrame(summary),
     }
+
+
+# ----------------------------------------------------------------------------------------------
+# pose selection (issue 21): optimised against random poses of the same number
+
+OPTIMISED = "optimised (D-optimal)"
+RANDOM = "random"
+
+
+def candidate_views(scenario: Scenario, spheres_base, per_sphere: int, rng) -> tuple:
+    """Candidate joint angles (k per_sphere, 6) and their sphere index: ``per_sphere`` reachable
+    views of each placement, planned with the nominal robot and sensor (:func:`plan_views`)."""
+    views = [plan_views(scenario, c, per_sphere, rng) for c in np.asarray(spheres_base, float)]
+    return np.vstack(views), np.repeat(np.arange(len(views)), per_sphere)
+
+
+def _measure_selection(scenario, st, Q, sphere, chosen, rng) -> Measurements:
+    k = len(st.spheres_base)
+    views = [Q[chosen][sphere[chosen] == s] for s in range(k)]
+    return simulate(scenario, st, st.spheres_base, 0, rng, views=views)
+
+
+def _selection_row(scenario, st, meas, val, blocks) -> dict:
+    row = dict(observability(blocks))
+    try:
+        params = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS).params
+    except CalibrationError:
+        return row | {"converged": False}
+    return row | {
+        "converged": True,
+        "param_error": scaled_error(params, st.true_params),
+        **_validate(params, val, st.true_params),
+    }
+
+
+def pose_selection_trial(
+    scenario: Scenario, rng: np.random.Generator, sizes: str, per_sphere: int
+) -> list[dict]:
+    """One drawn cell calibrated from ``N`` optimised and ``N`` random poses, for each ``N``.
+
+    Candidates: ``per_sphere`` planned views of each of the cell's spheres. Optimised: the ``N``
+    that maximise D-optimality of the scaled Jacobian at the nominal parameters and the sphere
+    positions (:func:`calstudy.papers.selfcal.design.select_poses`); random: ``N`` drawn
+    uniformly from the same candidates. Both are measured (new noise), identified from the good
+    start and validated on the same 10 new placements. One row per (N, selection).
+    ``sizes`` is the list of ``N`` as one string of integers ("12 18 24 36": the engine's sweep
+    points hold scalars).
+    """
+    st = draw_station(scenario, rng)
+    Q, sphere = candidate_views(scenario, st.spheres_base, per_sphere, rng)
+    blocks, _ = candidate_jacobians(st.nominal_params, Q, st.spheres_part, sphere)
+    val = simulate(scenario, st, draw_placements(scenario, scenario.n_validation, rng), 1, rng)
+    rows = []
+    for n in (int(v) for v in sizes.split()):
+        picks = {
+            OPTIMISED: select_poses(blocks, int(n)),
+            RANDOM: np.sort(rng.choice(len(Q), int(n), replace=False)),
+        }
+        for name, chosen in picks.items():
+            meas = _measure_selection(scenario, st, Q, sphere, chosen, rng)
+            row = _selection_row(scenario, st, meas, val, blocks[chosen])
+            rows.append({"n_poses": int(n), "selection": name, **row})
+    return rows
+
+
+def pose_selection_experiment(
+    scenario_toml: str = "",
+    n_trials: int = 200,
+    sizes: list[int] | None = None,
+    per_sphere: int = 15,
+) -> Experiment:
+    """:func:`pose_selection_trial` over ``n_trials`` cells.
+
+    ``sizes``: the numbers of poses compared (default 12, 24, 36); ``per_sphere``: candidate
+    views per sphere (default 15, 60 candidates).
+    """
+    sizes = [12, 24, 36] if sizes is None else [int(n) for n in sizes]
+    point = {"sizes": " ".join(str(n) for n in sizes), "per_sphere": int(per_sphere)}
+    return _experiment("pose_selection", pose_selection_trial, scenario_toml, n_trials, [point])
+
+
+# ----------------------------------------------------------------------------------------------
+# the simulated cell as measured data, and the example measurement folder
+
+
+def _example_data(scenario: Scenario, seed: int):
+    """Trial 0 of :func:`calibration_experiment`: station, calibration and validation sets."""
+    return _cell(scenario, trial_rng(seed, "calibration", {}, 0), scenario.compliance_scale)
+
+
+def _as_measured(meas: Measurements, sphere_offset: int = 0) -> Measurements:
+    """What a user has of simulated measurements: no truth, no noise model."""
+    return Measurements(meas.Q, meas.C, meas.P_ref, meas.sphere + sphere_offset)
+
+
+def simulated_cell(scenario: Scenario, seed: int) -> MeasuredCell:
+    """The notebook's simulated cell (trial 0 of the calibration experiment) as measured data:
+    24 calibration and 10 validation measurements, noise not declared."""
+    st, meas, val = _example_data(scenario, seed)
+    k = len(st.spheres_base)
+    spheres = np.vstack(
+        [meas.P_ref[[np.flatnonzero(meas.sphere == s)[0] for s in range(k)]], val.P_ref]
+    )
+    return MeasuredCell(
+        scenario.robot,
+        st.nominal_params,
+        _as_measured(meas),
+        _as_measured(val, k),
+        spheres,
+        np.arange(1, len(spheres) + 1),
+        {
+            "calibration": np.arange(1, len(meas) + 1),
+            "validation": np.arange(len(meas) + 1, len(meas) + len(val) + 1),
+        },
+        None,
+        f"the simulated cell (seed {seed})",
+        scenario.base_rough,
+        scenario.sensor_design,
+    )
+
+
+#: outliers planted in the example folder: (calibration row, displacement of C in mm)
+EXAMPLE_OUTLIERS = ((5, (1.5, -0.8, 0.6)), (17, (0.0, 2.0, -1.2)))
+
+
+def write_example_measurements(folder, scenario: Scenario | None = None, seed: int = 1) -> Path:
+    """Write the example measurement folder (``data/selfcal/example_measurements``).
+
+    The simulated cell of :func:`simulated_cell` as a user would write it: joint angles in
+    degrees to 0.001 deg, lengths to 0.001 mm, noise not declared, and two planted outliers
+    (:data:`EXAMPLE_OUTLIERS`: the fitted centre of two calibration views displaced, as by a
+    scan of the wrong sphere or a partly hidden cap).
+    """
+    scenario = load_scenario() if scenario is None else scenario
+    cell = simulated_cell(scenario, seed)
+    calib = cell.calibration
+    C = calib.C.copy()
+    for row, shift in EXAMPLE_OUTLIERS:
+        C[row] += shift
+    robot_file = Path(scenario_file("robots", f"{_robot_stem(scenario)}.toml"))
+    return write_cell(
+        folder,
+        robot_file,
+        cell.part2base,
+        cell.sensor2flange,
+        cell.spheres,
+        replace(calib, C=C),
+        cell.validation,
+        joint_decimals=3,
+        length_decimals=3,
+    )
+
+
+def _robot_stem(scenario: Scenario) -> str:
+    """Stem of the robot file the paper's scenario names (``robot`` of its TOML)."""
+    return str(read_toml(scenario_file("selfcal", "scenario.toml"), "selfcal scenario")["robot"])

@@ -64,9 +64,10 @@ class Measurements:
     C : (m, 3) fitted sphere centres in the sensor frame, mm (Eq. 7-8).
     P_ref : (m, 3) tracker reading of the sphere centre in the part frame, mm (``P^n``).
     sphere : (m,) index of the sphere placement.
-    C_true : (m, 3) centre in the sensor frame as the sensor stood (no scanner noise).
+    C_true : (m, 3) centre in the sensor frame as the sensor stood (no scanner noise); None for
+        measured data (the design is then evaluated at ``C``).
     cov : (m, 3, 3) covariance of ``P - P_ref`` in the part frame: scanner fit, repeatability and
-        tracker (the weights of the maximum-likelihood identification).
+        tracker (the weights of the maximum-likelihood identification); None: noise not declared.
     tracker_cov : (m, 3, 3) the tracker's part of ``cov``: one reading per sphere placement, so
         this error is common to all measurements of the same sphere (see :func:`covariance`).
     Q_true : (m, 6) joint angles as the robot actually stood (commanded plus any unmodelled
@@ -77,13 +78,18 @@ class Measurements:
     C: np.ndarray
     P_ref: np.ndarray
     sphere: np.ndarray
-    C_true: np.ndarray
-    cov: np.ndarray
-    tracker_cov: np.ndarray
+    C_true: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    tracker_cov: np.ndarray | None = None
     Q_true: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.Q)
+
+    @property
+    def C_design(self) -> np.ndarray:
+        """Sensor-frame centres for the design (Jacobian): ``C_true`` if known, else ``C``."""
+        return self.C if self.C_true is None else self.C_true
 
 
 def check_sphere_layout(centres, radius_mm: float) -> None:
@@ -193,6 +199,11 @@ def covariance(meas: Measurements) -> np.ndarray:
     ``meas.cov`` on the diagonal blocks; ``meas.tracker_cov`` between two measurements of the
     same sphere, whose tracker reading they share.
     """
+    if meas.cov is None or meas.tracker_cov is None:
+        raise CalibrationError(
+            f"the {len(meas)} measurements declare no noise (cov is None); maximum-likelihood "
+            "weights need the scanner, repeatability and tracker standard deviations"
+        )
     same = meas.sphere[:, None] == meas.sphere[None, :]
     full = np.where(same[:, :, None, None], meas.tracker_cov[:, None], 0.0)
     idx = np.arange(len(meas))
@@ -557,7 +568,8 @@ def _ml_std(meas: Measurements, jac: np.ndarray) -> np.ndarray:
 def identifiability(meas: Measurements, params, model: GlobalModel | None = None):
     """Rank, singular values and per-parameter identifiability of the Jacobian at ``params``.
 
-    Evaluated with the true sensor-frame centres ``meas.C_true`` (the design, not the noise).
+    Evaluated with the true sensor-frame centres ``meas.C_true`` (the design, not the noise), or
+    the measured ``meas.C`` when the truth is unknown.
 
     Returns
     -------
@@ -573,7 +585,7 @@ def identifiability(meas: Measurements, params, model: GlobalModel | None = None
         ``condition_number_raw`` (mm and rad columns).
     """
     model = default_model() if model is None else model
-    _, jac = model.points_and_jacobian(params, meas.Q, meas.C_true)
+    _, jac = model.points_and_jacobian(params, meas.Q, meas.C_design)
     js = scaled_jacobian(jac)
     _, s, vt = np.linalg.svd(js, full_matrices=False)
     rank = int(np.sum(s > s[0] * RANK_RTOL))

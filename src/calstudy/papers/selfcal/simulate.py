@@ -328,8 +328,13 @@ def simulate(
     views_per_sphere: int,
     rng: np.random.Generator,
     compliance_scale: float | None = None,
+    views: list[np.ndarray] | None = None,
 ) -> Measurements:
     """Measure each sphere placement (k, 3) from ``views_per_sphere`` robot positions.
+
+    ``views`` (one (n_k, 6) array of joint angles per placement) replaces the planned views: the
+    poses a selection chose (``views_per_sphere`` is then ignored; a placement without views is
+    read by the tracker but not measured).
 
     The true system moves (true robot, true base and sensor, joint deflection under the payload
     by :func:`joint_deflection`, repeatability); the scanner returns a noisy cap whose LLS fit
@@ -346,10 +351,15 @@ def simulate(
     )
     Q, Q_true, C, C_true, idx, cov, shared = [], [], [], [], [], [], []
     for k, centre in enumerate(placements):
-        views = plan_views(scenario, centre, views_per_sphere, rng)
-        stood = views + joint_deflection(scenario, station.true_robot, views, compliance_scale)
+        if views is None:
+            planned = plan_views(scenario, centre, views_per_sphere, rng)
+        elif len(views[k]) == 0:
+            continue
+        else:
+            planned = np.asarray(views[k], float).reshape(-1, 6)
+        stood = planned + joint_deflection(scenario, station.true_robot, planned, compliance_scale)
         poses = model.sensor2part(station.true_params, stood)
-        for q, q_true, pose in zip(views, stood, poses, strict=True):
+        for q, q_true, pose in zip(planned, stood, poses, strict=True):
             centre_fit, c_true, cov_view, tracker = _measure_view(
                 scenario, pose, truth_part[k], rng
             )

@@ -1,0 +1,264 @@
+"""Design of a ``selfcal`` calibration: base parameters and the choice of measuring poses.
+
+- :func:`base_parameters`: which parameters the poses identify alone, which only in combination
+  (and the combination), which not at all, by a column-pivoted QR decomposition of the scaled
+  identification Jacobian (the base-parameter analysis of FIGAROH and of Khalil and Dombre).
+- :func:`select_poses`: from a set of candidate poses, the ``N`` that maximise D-optimality
+  (``log det`` of the scaled information matrix), greedily, then improved by exchange;
+  :func:`observability` gives the indices of any selection.
+- :func:`candidate_jacobians`: the scaled Jacobian rows of each candidate at the nominal
+  parameters and the sphere readings (what is known before measuring).
+
+Nothing here knows the simulation: the inputs are a model, parameters, joint angles and points.
+Millimetres and radians; angles are scaled as in :func:`calstudy.papers.selfcal.identify.
+scaled_jacobian` (1 rad counts as ``ANGLE_SCALE_MM`` mm).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import scipy.linalg
+
+from calstudy.core.errors import CalibrationError
+from calstudy.papers.selfcal.identify import RANK_RTOL, scaled_jacobian
+from calstudy.papers.selfcal.model import (
+    ANGLE_SCALE_MM,
+    IS_LENGTH,
+    PARAM_NAMES,
+    GlobalModel,
+    default_model,
+)
+
+#: a coefficient of a base-parameter combination smaller than this (scaled units) is dropped
+COMBINATION_TOL = 1e-6
+
+ALONE = "identifiable alone"
+COMBINED = "only in combination"
+NONE = "not identifiable"
+
+
+# ----------------------------------------------------------------------------------------------
+# base parameters
+
+
+@dataclass
+class BaseParameters:
+    """Result of :func:`base_parameters`.
+
+    Attributes
+    ----------
+    rank : int
+        Numerical rank of the scaled Jacobian (relative tolerance ``rtol`` on the QR diagonal).
+    base : list of str
+        The base parameters (the first ``rank`` pivots), each written as its combination.
+    table : pandas.DataFrame
+        One row per parameter: ``name``, ``status`` (:data:`ALONE`, :data:`COMBINED` or
+        :data:`NONE`), ``pivot`` (QR order), ``r_diag`` (relative ``|R_kk|`` at its pivot) and
+        ``combination`` (the identifiable combination it enters, physical units).
+    """
+
+    rank: int
+    base: list[str]
+    table: pd.DataFrame
+
+
+def _term(coef: float, name: str) -> str:
+    sign = "-" if coef < 0 else "+"
+    mag = abs(coef)
+    return f"{sign} {name}" if math.isclose(mag, 1.0, rel_tol=1e-6) else f"{sign} {mag:.4g} {name}"
+
+
+def base_parameters(
+    jac, names=PARAM_NAMES, is_length=IS_LENGTH, rtol: float = RANK_RTOL
+) -> BaseParameters:
+    """Base parameters of an identification Jacobian by column-pivoted QR.
+
+    The columns are scaled (angles by ``ANGLE_SCALE_MM``) and normalised, then ``J P = Q R``
+    (:func:`scipy.linalg.qr` with pivoting). The first ``r`` pivots (``|R_kk| > rtol |R_00|``) are
+    the base parameters; every other column is ``J_b beta`` with ``beta = R_11^-1 R_12``, so the
+    data fix only ``theta_b + beta theta_d`` (written back in physical units). A parameter is
+    *identifiable alone* if it is a pivot and no dependent parameter enters its combination,
+    *only in combination* if it enters a combination with others, and *not identifiable* if its
+    column is zero.
+
+    Parameters
+    ----------
+    jac : array_like, shape (m, n)
+        Identification Jacobian (mm per mm, mm per rad).
+    names : sequence of str, length n
+    is_length : array_like of bool, length n
+        Lengths stay as given, angles are multiplied by ``ANGLE_SCALE_MM``.
+    """
+    jac = np.asarray(jac, float)
+    length = np.asarray(is_length, bool)
+    if jac.ndim != 2 or jac.shape[1] != len(names) or length.shape != (len(names),):
+        raise CalibrationError(
+            f"Jacobian of shape {jac.shape} for {len(names)} names and {length.shape} unit flags"
+        )
+    if not np.all(np.isfinite(jac)):
+        raise CalibrationError("the identification Jacobian has non-finite entries")
+    unit = np.where(length, 1.0, ANGLE_SCALE_MM)  # physical -> scaled parameter
+    js = jac / unit
+    norms = np.linalg.norm(js, axis=0)
+    scale = float(norms.max()) if norms.size and norms.max() > 0 else 1.0
+    zero = norms <= rtol * scale
+    jn = js / np.where(zero, 1.0, norms)
+    jn[:, zero] = 0.0
+    _, r, piv = scipy.linalg.qr(jn, mode="economic", pivoting=True)
+    diag = np.abs(np.diag(r))
+    rank = int(np.sum(diag > rtol * diag[0])) if diag.size and diag[0] > 0 else 0
+    beta = scipy.linalg.solve_triangular(r[:rank, :rank], r[:rank, rank:])
+    # in normalised units; back to physical: theta_b + sum beta (s_d n_d / (s_b n_b)) theta_d
+    beta[np.abs(beta) < COMBINATION_TOL] = 0.0
+    return _base_table(names, piv, rank, beta, diag / max(diag[0], 1e-300), zero, norms, unit)
+
+
+def _base_table(names, piv, rank, beta, rel, zero, norms, unit) -> BaseParameters:
+    n = len(names)
+    status = [ALONE] * n
+    combination = [""] * n
+    base = []
+    dep = piv[rank:]
+    for i, b in enumerate(piv[:rank]):
+        terms = [names[b]]
+        for j, d in enumerate(dep):
+            if beta[i, j] != 0.0 and not zero[d]:
+                coef = beta[i, j] * (unit[d] * norms[d]) / (unit[b] * norms[b])
+                terms.append(_term(coef, names[d]))
+        text = " ".join(terms)
+        base.append(text)
+        if len(terms) > 1:
+            status[b] = COMBINED
+            combination[b] = text
+            for j, d in enumerate(dep):
+                if beta[i, j] != 0.0 and not zero[d]:
+                    combination[d] = "; ".join(filter(None, [combination[d], text]))
+    for d in dep:
+        status[d] = NONE if zero[d] or not combination[d] else COMBINED
+    order = np.empty(n, int)
+    order[piv] = np.arange(n)
+    r_diag = np.zeros(n)
+    r_diag[piv[: len(rel)]] = rel
+    table = pd.DataFrame(
+        {
+            "name": list(names),
+            "status": status,
+            "pivot": order + 1,
+            "r_diag": r_diag,
+            "combination": combination,
+        }
+    )
+    return BaseParameters(rank, base, table)
+
+
+# ----------------------------------------------------------------------------------------------
+# pose selection
+
+
+def candidate_jacobians(params, Q, sphere_part, sphere, model: GlobalModel | None = None):
+    """Scaled Jacobian blocks (k, 3, 30) of candidate poses, before anything is measured.
+
+    Each candidate ``i`` is a joint vector ``Q[i]`` aimed at the sphere ``sphere[i]`` whose
+    tracker reading is ``sphere_part[sphere[i]]``; its sensor-frame centre is predicted by the
+    model at ``params`` (the nominal estimate), which is where the Jacobian is evaluated.
+    """
+    model = default_model() if model is None else model
+    Q = np.asarray(Q, float)
+    target = np.asarray(sphere_part, float)[np.asarray(sphere, int)]
+    poses = model.sensor2part(params, Q)
+    C = np.einsum("mji,mj->mi", poses[:, :3, :3], target - poses[:, :3, 3])
+    _, jac = model.points_and_jacobian(params, Q, C)
+    return scaled_jacobian(jac).reshape(len(Q), 3, -1), C
+
+
+def observability(blocks) -> dict:
+    """Indices of a selection of scaled Jacobian blocks (k, 3, n).
+
+    ``log_det``: ``log det(J^T J) / n`` (D-optimality per parameter); ``min_sv``: smallest
+    singular value of ``J`` (O1 of Sun and Hollerbach); ``condition``: largest over smallest.
+    """
+    b = np.asarray(blocks, float)
+    j = b.reshape(-1, b.shape[-1])
+    s = np.linalg.svd(j, compute_uv=False)
+    if len(s) < b.shape[-1] or s[-1] <= 0:
+        return {"log_det": -math.inf, "min_sv": 0.0, "condition": math.inf}
+    return {
+        "log_det": float(2.0 * np.log(s).sum() / b.shape[-1]),
+        "min_sv": float(s[-1]),
+        "condition": float(s[0] / s[-1]),
+    }
+
+
+def _gains(blocks: np.ndarray, info_inv: np.ndarray) -> np.ndarray:
+    """``log det(I_3 + J_i M^-1 J_i^T)`` for every candidate block ``J_i`` (rank-3 update)."""
+    k, _, p = blocks.shape
+    weighted = (blocks.reshape(-1, p) @ info_inv).reshape(k, 3, p)
+    g = np.matmul(weighted, blocks.transpose(0, 2, 1))
+    g += np.eye(3)
+    sign, logdet = np.linalg.slogdet(g)
+    return np.where(sign > 0, logdet, -np.inf)
+
+
+def select_poses(blocks, n: int, exchange_rounds: int = 2, ridge: float = 1e-6) -> np.ndarray:
+    """Indices of ``n`` candidate poses maximising ``det(J^T J)`` of their scaled Jacobian.
+
+    Greedy: each step adds the candidate with the largest gain ``log det(I + J_i M^-1 J_i^T)``
+    (``M`` the information so far plus ``ridge`` times its mean diagonal). Exchange: then, up to
+    ``exchange_rounds`` times, each chosen pose is swapped for the best unchosen one if that
+    raises ``log det``.
+
+    Parameters
+    ----------
+    blocks : array_like, shape (k, 3, p)
+        Scaled Jacobian blocks of the candidates (:func:`candidate_jacobians`).
+    n : int
+        Poses to choose, ``3 n >= p`` and ``n <= k``.
+    """
+    b = np.asarray(blocks, float)
+    if b.ndim != 3 or b.shape[1] != 3:
+        raise CalibrationError(f"candidate blocks have shape {b.shape}; expected (k, 3, p)")
+    k, _, p = b.shape
+    if not 3 * n >= p or n > k:
+        raise CalibrationError(
+            f"cannot choose {n} poses from {k} candidates for {p} parameters "
+            f"(need {math.ceil(p / 3)} <= n <= {k})"
+        )
+    full = np.einsum("kap,kaq->pq", b, b)
+    reg = ridge * max(float(np.trace(full)) / p / k, 1e-300) * np.eye(p)
+    info = reg.copy()
+    chosen: list[int] = []
+    free = np.ones(k, bool)
+    for _ in range(n):
+        gain = _gains(b, np.linalg.inv(info))
+        gain[~free] = -np.inf
+        best = int(np.argmax(gain))
+        chosen.append(best)
+        free[best] = False
+        info += b[best].T @ b[best]
+    for _ in range(exchange_rounds):
+        if not _exchange_round(b, chosen, free, info, reg):
+            break
+    return np.array(sorted(chosen))
+
+
+def _exchange_round(b, chosen, free, info, reg) -> bool:
+    """One pass of single swaps (in place); True if any swap improved ``log det``."""
+    improved = False
+    for slot in range(len(chosen)):
+        out = chosen[slot]
+        without = info - b[out].T @ b[out]
+        _, base = np.linalg.slogdet(without)
+        gain = _gains(b, np.linalg.inv(without))
+        gain[~free] = -np.inf
+        best = int(np.argmax(gain))
+        _, current = np.linalg.slogdet(info)
+        if base + gain[best] > current + 1e-9:
+            info += b[best].T @ b[best] - b[out].T @ b[out]
+            chosen[slot] = best
+            free[best], free[out] = False, True
+            improved = True
+    return improved

@@ -1,0 +1,124 @@
+"""Tables and figures of your own cell and of the pose-selection study (issue 21).
+
+- :func:`pose_selection_table` and :func:`pose_selection_figure`: optimised against random poses
+  of the same number, from the rows of
+  :func:`calstudy.papers.selfcal.experiments.pose_selection_experiment`;
+- :func:`residuals_figure` and :func:`validation_figure`: the per-measurement residuals with the
+  outliers and the held-out errors before and after against the requirement.
+"""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg", force=False)
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from calstudy.core.verdicts import median_interval  # noqa: E402
+from calstudy.papers.selfcal.experiments import OPTIMISED, RANDOM  # noqa: E402
+
+#: columns of the pose-selection rows compared between the two selections
+SELECTION_METRICS = {
+    "param_error": "parameter error (mm, angles at 1 m)",
+    "val_rms_mm": "validation error, RMS (mm)",
+    "model_rms_mm": "model error, RMS (mm)",
+}
+
+
+def _ratio(opt: pd.DataFrame, rnd: pd.DataFrame, column: str) -> np.ndarray:
+    """Per trial: random over optimised (both converged), paired by trial."""
+    both = (
+        opt.set_index("trial")[column]
+        .to_frame("o")
+        .join(rnd.set_index("trial")[column].to_frame("r"), how="inner")
+    )
+    both = both.dropna()
+    return (both["r"] / both["o"]).to_numpy(float)
+
+
+def pose_selection_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per number of poses: medians of each selection and the paired ratio random / optimised.
+
+    ``*_ratio_median`` above 1 means the optimised poses did better; ``*_ratio_ci_low/high`` is
+    the order-statistic 95 % interval of that median (:func:`median_interval`).
+    """
+    out = []
+    for n, group in rows.groupby("n_poses"):
+        opt = group[group["selection"] == OPTIMISED]
+        rnd = group[group["selection"] == RANDOM]
+        row = {
+            "n_poses": int(n),
+            "trials": int(len(opt)),
+            "optimised_converged": int(opt["converged"].sum()),
+            "random_converged": int(rnd["converged"].sum()),
+            "optimised_min_sv_median": float(opt["min_sv"].median()),
+            "random_min_sv_median": float(rnd["min_sv"].median()),
+        }
+        for col in SELECTION_METRICS:
+            row[f"optimised_{col}_median"] = float(opt[col].median())
+            row[f"random_{col}_median"] = float(rnd[col].median())
+            ratio = _ratio(opt, rnd, col)
+            med, lo, hi = median_interval(ratio) if len(ratio) >= 6 else (np.nan,) * 3
+            row |= {
+                f"{col}_ratio_median": med,
+                f"{col}_ratio_ci_low": lo,
+                f"{col}_ratio_ci_high": hi,
+            }
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+def pose_selection_figure(rows: pd.DataFrame, title: str):
+    """Error against the number of poses, optimised and random: median and quartiles."""
+    fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.8))
+    for ax, col in zip(axes, ("param_error", "val_rms_mm"), strict=True):
+        for name, style in ((OPTIMISED, "o-"), (RANDOM, "s--")):
+            sel = rows[rows["selection"] == name].groupby("n_poses")[col]
+            q = sel.quantile([0.25, 0.5, 0.75]).unstack()
+            ax.plot(q.index, q[0.5], style, label=f"{name} (median)")
+            ax.fill_between(q.index, q[0.25], q[0.75], alpha=0.2)
+        ax.set_xlabel("measuring poses N")
+        ax.set_ylabel(SELECTION_METRICS[col])
+        ax.grid(alpha=0.3)
+    n = rows["trial"].nunique()
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"{title} ({n} trials, band: quartiles)")
+    fig.tight_layout()
+    return fig
+
+
+def residuals_figure(residuals: pd.DataFrame, sigma_mm: float, threshold: float, title: str):
+    """Residual ``|e|`` per calibration measurement, outliers marked, with the rejection line."""
+    fig, ax = plt.subplots(figsize=(7.5, 3.5))
+    ok = ~residuals["outlier"].to_numpy(bool)
+    x = np.arange(len(residuals))
+    ax.bar(x[ok], residuals["error_mm"][ok], color="tab:blue", label="kept")
+    if (~ok).any():
+        ax.bar(x[~ok], residuals["error_mm"][~ok], color="tab:red", label="outlier")
+    ax.axhline(sigma_mm * np.sqrt(threshold), ls="--", color="k", label="rejection threshold")
+    ax.set_yscale("log")
+    ax.set_xticks(x, residuals["pose"].astype(str), fontsize=6, rotation=90)
+    ax.set_xlabel("pose")
+    ax.set_ylabel("|P - P_ref| (mm)")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def validation_figure(table: pd.DataFrame, requirement_mm: float, title: str):
+    """Held-out position errors before and after calibration, against the requirement."""
+    fig, ax = plt.subplots(figsize=(7.5, 3.5))
+    x = np.arange(len(table))
+    ax.bar(x - 0.2, table["before_mm"], 0.4, label="before (nominal)")
+    ax.bar(x + 0.2, table["after_mm"], 0.4, label="after (identified)")
+    ax.axhline(requirement_mm, ls="--", color="k", label=f"requirement {requirement_mm:g} mm")
+    ax.set_yscale("log")
+    ax.set_xlabel("held-out measurement")
+    ax.set_ylabel("position error (mm)")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
