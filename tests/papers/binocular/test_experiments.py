@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+import pandas as pd
 import pytest
 
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators import binocular as bino
 from calstudy.papers.binocular import experiments as ex
 from calstudy.papers.binocular.scenario import load_scenario
-from calstudy.papers.binocular.simulate import Imaging, World
+from calstudy.papers.binocular.simulate import Imaging, World, draw_world, view_calibrator
 
 
 @pytest.fixture(scope="module")
@@ -26,25 +25,37 @@ def test_defocus_shift_grows_with_the_circle_of_confusion(scenario):
     assert table["fused_rectified_shift_px"].iloc[1] < table["fused_shift_px"].iloc[1]
 
 
-def test_one_trial_runs_and_is_seeded(scenario):
-    a = ex.run_trial(scenario, np.random.default_rng(5))
-    assert a["table2"].shape == (7, 2) and a["fig13"].shape == (10, 2)
-    assert len(a["field"]) == 3
-    assert np.all(np.abs(a["table2"] - a["standard"][:, None]) < 0.5)
-    assert math.isfinite(a["fig13_standard"])
-    # same seed, same numbers; skipping the field check (drawn last) changes nothing else
-    b = ex.run_trial(scenario, np.random.default_rng(5), field=False)
-    assert b["field"] == []
-    for key in ("standard", "table2", "table3", "fig13"):
-        np.testing.assert_array_equal(a[key], b[key])
-    np.testing.assert_array_equal(a["handeye"]["updated"], b["handeye"]["updated"])
+def small_setup(scenario):
+    return ex.Setup(scenario, (0.0, 1.0), (0.0, 1.0))
+
+
+def test_one_trial_runs_is_seeded_and_shares_its_draws_across_scales(scenario):
+    setup = small_setup(scenario)
+    rows = pd.DataFrame(ex.binocular_trial(setup, np.random.default_rng(5)))
+    assert sorted(zip(rows["robot_scale"], rows["calibration_scale"], strict=True)) == [
+        (0.0, 1.0),
+        (1.0, 0.0),
+        (1.0, 1.0),
+    ]
+    assert np.isfinite(rows.drop(columns=[]).to_numpy(float)).all()
+    assert (rows.filter(regex="^err_").abs() < 0.5).all().all()
+    again = pd.DataFrame(ex.binocular_trial(setup, np.random.default_rng(5)))
+    pd.testing.assert_frame_equal(rows, again)
+    # the robot scale changes only the hand-eye steps: Tables 2-3 are the same rows
+    d = rows.set_index(["robot_scale", "calibration_scale"])
+    np.testing.assert_array_equal(
+        d.loc[(0.0, 1.0)].filter(like="t2_"), d.loc[(1.0, 1.0)].filter(like="t2_")
+    )
+    assert d.loc[(0.0, 1.0), "fig13_preliminary"] != d.loc[(1.0, 1.0), "fig13_preliminary"]
+    # the exact-camera oracle is the scale-0 hold-out without modification
+    assert d.loc[(1.0, 1.0), "t3_holdout_truecam"] == d.loc[(1.0, 0.0), "t3_holdout_without"]
 
 
 def test_holdout_modification_does_not_see_the_evaluated_target(scenario):
     pairs = bino.all_pairs(8)
     layout = scenario.layout
     standard = np.linalg.norm(layout[pairs[:, 0]] - layout[pairs[:, 1]], axis=1)
-    world = World(None, None, np.zeros((6, 3)), pairs, standard)
+    world = World(0, 0, np.zeros((6, 3)), pairs, standard, 0.0)
     measured = layout.copy()
     measured[0] += 0.05 * (layout[0] - layout[6]) / np.linalg.norm(layout[0] - layout[6])
     measured = bino.with_virtual(measured[:6])
@@ -56,29 +67,25 @@ def test_holdout_modification_does_not_see_the_evaluated_target(scenario):
 
 
 def test_rendered_pipeline_without_noise_or_defocus(scenario):
-    """Rendered, sharp, noise-free dots with a perfect sensor: distances to a few micrometres
-    (pixel-level Canny edges limit a rendered centre to a few hundredths of a pixel)."""
-    trial = ex.run_trial(
-        scenario, np.random.default_rng(2), imaging=Imaging(noise=False, defocus=False)
-    )
-    err = trial["table2"] - trial["standard"][:, None]
+    """Rendered, sharp, noise-free dots with an exactly calibrated sensor: distances to a few
+    micrometres (pixel-level Canny edges limit a rendered centre to a few hundredths of a pixel)."""
+    rng = np.random.default_rng(2)
+    imaging = Imaging(noise=False, defocus=False)
+    world = draw_world(scenario, rng, imaging)
+    model = world.model(scenario, 0.0)
+    views = view_calibrator(scenario, world, 3, rng, imaging, model)
+    raw, rect = views.points(model, 0.5)
+    np.testing.assert_array_equal(raw, rect)
+    err = bino.distances_to_p7(bino.with_virtual(raw)) - bino.distances_to_p7(scenario.layout)
     assert np.abs(err).max() < 0.01
-    np.testing.assert_array_equal(trial["table2"][:, 0], trial["table2"][:, 1])
 
 
-def test_calibration_sweep_rows_and_verdicts(scenario):
-    from calstudy.claims import VERDICTS
-
-    sweep = ex.calibration_sweep(scenario, 1, [0.0, 2.0], 2)
-    assert sweep["calibration_scale"].tolist() == [0.0, 2.0]
-    assert (sweep["n_trials"] == 2).all()
-    # larger camera errors, larger distance errors; the modification fits them away
-    assert sweep["t2_without"].iloc[1] > 2 * sweep["t2_without"].iloc[0]
-    assert (sweep["t3_with"] < 0.2 * sweep["t3_without"]).all()
-    for key in ("t2", "t3", "t3_holdout"):
-        assert (sweep[f"{key}_ratio_low"] <= sweep[f"{key}_ratio"]).all()
-        assert (sweep[f"{key}_ratio"] <= sweep[f"{key}_ratio_high"]).all()
-    assert set(sweep["verdict_coc"]) | set(sweep["verdict_observed_error"]) <= set(VERDICTS)
-    assert (sweep["verdict_observed_error"] != "not reproduced").all()
-    with pytest.raises(CalibrationError, match="at least 2"):
-        ex.calibration_sweep(scenario, 1, [1.0], 1)
+def test_factories_rebuild_the_same_experiment():
+    a = ex.binocular_experiment(n_trials=3, robot_scales=[1.0], calibration_scales=[0.0, 1.0])
+    b = ex.binocular_experiment(n_trials=3, robot_scales=[1.0], calibration_scales=[0.0, 1.0])
+    assert a.name == "binocular" and a.n_trials == 3 and a.scenario_key == b.scenario_key
+    c = ex.binocular_experiment(n_trials=3, robot_scales=[1.0], calibration_scales=[1.0])
+    assert c.scenario_key != a.scenario_key
+    assert ex.field_experiment(n_trials=2).name == "field"
+    with pytest.raises(CalibrationError, match="n_trials"):
+        ex.binocular_experiment(n_trials=0)

@@ -1,4 +1,5 @@
-"""Tests of calstudy.papers.binocular.report: tables beside the published values, claim rows."""
+"""Tests of calstudy.papers.binocular.report: tables beside the published values, verdicts by
+the v2 rule with their controls, on synthetic trial rows."""
 
 from __future__ import annotations
 
@@ -10,41 +11,56 @@ from calstudy.papers.binocular import report
 from calstudy.papers.binocular.scenario import load_scenario, published
 
 
-def fake_metrics(ratio: float, n: int = 8) -> pd.DataFrame:
-    """Trial metrics whose every step has RMSE(with) = ``ratio`` RMSE(without)."""
+def fake_trials(ratio: float, oracle: float, n: int = 40) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Trial rows whose every step has RMSE(with) = ``ratio`` RMSE(without), its oracle
+    ``oracle`` RMSE(without); field rows with ratio 1."""
     without = np.linspace(0.05, 0.08, n)
-    cols = {}
-    for a, b in (
-        ("t2_without", "t2_with"),
-        ("t3_without", "t3_with"),
-        ("t3_holdout_without", "t3_holdout_with"),
-        ("fig13_preliminary", "fig13_updated"),
-        ("field_preliminary_base", "field_updated_base"),
-        ("field_preliminary_flange", "field_updated_flange"),
+    cols = {"trial": np.arange(n), "robot_scale": 1.0, "calibration_scale": 1.0}
+    for a, b, o in (
+        ("t2_without", "t2_with", "t2_oracle"),
+        ("t3_holdout_without", "t3_holdout_with", "t3_holdout_truecam"),
+        ("fig13_preliminary", "fig13_updated", "fig13_true"),
     ):
-        cols[a], cols[b] = without, ratio * without
-    return pd.DataFrame({"trial": np.arange(n), **cols})
+        cols[a], cols[b], cols[o] = without, ratio * without, oracle * without
+    cols["t3_without"], cols["t3_with"] = without, 0.05 * without
+    for label in ("preliminary", "updated"):
+        cols[f"rot_err_{label}_mrad"] = without
+        cols[f"trans_err_{label}_mm"] = without
+    field = {"trial": np.arange(n)}
+    for label in ("preliminary", "updated"):
+        for frame in ("flange", "base"):
+            field[f"field_{label}_{frame}"] = without
+    return pd.DataFrame(cols), pd.DataFrame(field)
 
 
 def test_rmse_summary_puts_the_ratio_beside_the_paper():
-    summary = report.rmse_summary(fake_metrics(0.5))
-    assert len(summary) == 6
-    np.testing.assert_allclose(summary["ratio"], 0.5)
-    np.testing.assert_allclose(summary["ratio_low"], 0.5)
+    trials, field = fake_trials(0.5, 0.4)
+    summary = report.rmse_summary(trials, field)
+    assert len(summary) == 9
+    np.testing.assert_allclose(summary["ratio"].iloc[0], 0.5)
+    np.testing.assert_allclose(summary["ratio"].iloc[1], 0.4)
     t2 = published("calibrator", "table2_rmse")
     assert summary["published_ratio"].iloc[0] == pytest.approx(t2[1] / t2[0])
-    one = report.rmse_summary(fake_metrics(0.5, n=1))  # a single trial: its ratio thrice
-    np.testing.assert_allclose(one[["ratio", "ratio_low", "ratio_high"]].to_numpy(), 0.5)
 
 
-def test_claim_rows_name_the_four_claims():
-    rows = report.claim_rows(fake_metrics(0.5), "04_binocular_correction")
-    assert [r.id for r in rows] == [
+def test_verdicts_follow_the_oracle_gate_and_field_is_not_testable():
+    trials, field = fake_trials(0.8, 0.6)
+    claims, controls = report.claim_rows(trials, field, "04_binocular_correction")
+    assert [r.id for r in claims] == [
         "binocular.coc",
         "binocular.observed_error",
         "binocular.transformation",
         "binocular.field",
     ]
+    v = {r.id: r.verdict for r in claims}
+    assert v["binocular.coc"] == "reproduced" and v["binocular.transformation"] == "direction only"
+    assert v["binocular.field"] == "not testable"
+    assert {c["verdict"] for c in controls if c["control"] == "null"} == {"not reproduced"}
+    # a perfect correction that cannot be seen: the claim becomes not testable
+    trials, field = fake_trials(0.8, 1.0)
+    claims, _ = report.claim_rows(trials, field, "04_binocular_correction")
+    assert all(r.verdict == "not testable" for r in claims)
+    assert "the model lacks" in claims[0].note
 
 
 def test_layout_table_lists_the_eight_targets():

@@ -1,34 +1,43 @@
-"""Trials, Monte Carlo loops and sweeps of notebook 04 (binocular paper, Section 4).
+"""Trials and experiments of notebook 04 (binocular paper, Section 4).
 
-One :func:`run_trial` reproduces the paper's experiments (a)-(p) and the field check of
-Section 4.3 on one draw of everything random (:mod:`calstudy.papers.binocular.simulate`);
-:func:`monte_carlo` repeats it, :func:`trial_metrics` reduces each trial to its RMSEs, and the
-sweeps scale the robot's and the cameras' errors. :func:`defocus_shift` is the noise-free study
-of how defocus moves a detected centre.
+One :func:`binocular_trial` reproduces the paper's experiments (a)-(p) on one draw of everything
+random (:mod:`calstudy.papers.binocular.simulate`) and returns one row per (robot error scale,
+camera calibration error scale): the images are rendered once, for the default errors, and every
+other scale changes only what the errors act on (the calibrated sensor that triangulates, the
+flange poses the controller reports), so the sweeps share the trial's draws. The same trial also
+runs the oracle controls (the calibration views exposed again without defocus; the points
+triangulated with the exact cameras; Fig. 13 with the true hand-eye matrix). :func:`field_trial`
+is the field check of Section 4.3. :func:`binocular_experiment` and :func:`field_experiment` are
+the factories of :func:`calstudy.io.runs.run_experiments`. :func:`defocus_shift` is the
+noise-free study of how defocus moves a detected centre.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-from calstudy.claims import verdict_vs_published
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.stats import median_and_spread, rmse
+from calstudy.core.montecarlo import Experiment
+from calstudy.core.stats import rmse
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import detect_centre
-from calstudy.papers.binocular.scenario import Scenario, published
+from calstudy.papers.binocular.scenario import Scenario, load_scenario, paper_table
 from calstudy.papers.binocular.simulate import (
-    FieldRegion,
     Imaging,
+    Views,
     World,
     draw_world,
     expose_and_fuse,
     observe_field_region,
     rectified_centre,
+    reimage,
     render_blurred_dot,
     tracker_p7_distance,
     view_calibrator,
@@ -36,6 +45,19 @@ from calstudy.papers.binocular.simulate import (
 
 #: Table 2's rows: P1P7 ... P6P7 and P8P7 (indices of the targets measured to P7).
 TABLE2_ROWS = (0, 1, 2, 3, 4, 5, 7)
+#: Default sweeps: robot error scales (x the robot file's tolerances) and camera calibration error
+#: scales (x ``sensor.toml [calibration_uncertainty]``); 1 is the default of each.
+ROBOT_SCALES = (0.0, 0.5, 1.0, 2.0)
+CALIBRATION_SCALES = (0.0, 0.5, 1.0, 2.0, 3.0)
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What a trial reads: the station and the scales of the two sweeps."""
+
+    scenario: Scenario
+    robot_scales: tuple = ROBOT_SCALES
+    calibration_scales: tuple = CALIBRATION_SCALES
 
 
 # ----------------------------------------------------------------------------------------------
@@ -72,67 +94,145 @@ def holdout_distances(points8, world: World) -> np.ndarray:
     return out
 
 
-def _calibrate(scenario: Scenario, world: World, rng, imaging: Imaging) -> dict:
-    """Steps (a)-(n): calibration views, Tables 2 and 3, preliminary and updated hand-eye."""
-    n_cal = scenario.config["station"]["poses"]["n_calibration"]
-    flange, obs = view_calibrator(scenario, world, n_cal, rng, imaging)
-    raw8 = bino.with_virtual(np.array([o.raw for o in obs]))
-    rect8 = bino.with_virtual(np.array([o.rect for o in obs]))
-    mod8 = np.array(
-        [bino.modify_observed_error(p, world.standard_pairs, world.standard_mm)[0] for p in rect8]
-    )
+def standard_to_p7(world: World) -> np.ndarray:
+    """The CMM standards of Table 2's seven distances to P7, mm."""
     pairs = world.standard_pairs
-    standard = np.array([world.standard_mm[_pair_index(pairs, r, 6)] for r in TABLE2_ROWS])
-    table2 = np.column_stack(
-        [bino.distances_to_p7(raw8).mean(0), bino.distances_to_p7(rect8).mean(0)]
+    return np.array([world.standard_mm[_pair_index(pairs, r, 6)] for r in TABLE2_ROWS])
+
+
+def _modify(world: World, points8) -> np.ndarray:
+    return np.array(
+        [bino.modify_observed_error(p, world.standard_pairs, world.standard_mm)[0] for p in points8]
     )
-    table3 = np.column_stack([table2[:, 1], bino.distances_to_p7(mod8).mean(0)])
-    holdout = np.mean([holdout_distances(p, world) for p in rect8], axis=0)
-    poses = np.array([bino.calibrator_pose(scenario.layout[:6], r[:6]) for r in raw8])
-    pre = bino.preliminary_handeye(flange, poses)
-    upd, d_eta = bino.correct_transformation(flange, pre, rect8, mod8)
-    return {
-        "standard": standard,
-        "table2": table2,
-        "table3": table3,
-        "table3_holdout": holdout,
-        "handeye": {
-            "true": scenario.sensor2flange,
-            "preliminary": pre,
-            "updated": upd,
-            "d_eta": d_eta,
-        },
+
+
+def distance_figures(world: World, cal: Views, val: Views, sharp: Views, model, tol: float):
+    """Tables 2-3 of one trial triangulated with the calibrated sensor ``model``.
+
+    Returns ``(row, state)``: the row's distance figures (RMSEs and Table 2/3 errors per pair,
+    mm) and what the hand-eye steps need (calibrator poses, rectified and modified points of the
+    calibration views, modified P7 of the validation views).
+    """
+    std = standard_to_p7(world)
+    raw, rect = cal.points(model, tol)
+    raw8, rect8 = bino.with_virtual(raw), bino.with_virtual(rect)
+    mod8 = _modify(world, rect8)
+    d_raw = bino.distances_to_p7(raw8).mean(0)
+    d_rect = bino.distances_to_p7(rect8).mean(0)
+    d_mod = bino.distances_to_p7(mod8).mean(0)
+    hold = np.mean([holdout_distances(p, world) for p in rect8], axis=0)
+    sharp_raw, _ = sharp.points(model, tol)
+    d_sharp = bino.distances_to_p7(bino.with_virtual(sharp_raw)).mean(0)
+    row = {
+        "t2_without": rmse(d_raw - std),
+        "t2_with": rmse(d_rect - std),
+        "t2_oracle": rmse(d_sharp - std),
+        "t3_without": rmse(d_rect - std),
+        "t3_with": rmse(d_mod - std),
+        "t3_holdout_without": rmse(hold[:, 0] - std[:6]),
+        "t3_holdout_with": rmse(hold[:, 1] - std[:6]),
     }
+    names = paper_table("calibrator")["standard"]["names"]
+    for label, d in (("raw", d_raw), ("rect", d_rect), ("mod", d_mod)):
+        row.update({f"err_{label}_{n}": float(e) for n, e in zip(names, d - std, strict=True)})
+    _, vrect = val.points(model, tol)
+    state = {
+        "raw8": raw8,
+        "rect8": rect8,
+        "mod8": mod8,
+        "val_p7": _modify(world, bino.with_virtual(vrect))[:, 6],
+    }
+    return row, state
 
 
-def _validate(scenario: Scenario, world: World, pre, upd, rng, imaging: Imaging) -> dict:
-    """Fig. 13: ten more poses, P7 (rectified, modified) to the base origin with both matrices."""
-    n_val = scenario.config["station"]["poses"]["n_validation"]
-    vflange, vobs = view_calibrator(scenario, world, n_val, rng, imaging)
-    vmod = np.array(
-        [
-            bino.modify_observed_error(
-                bino.with_virtual(o.rect), world.standard_pairs, world.standard_mm
-            )[0]
-            for o in vobs
-        ]
-    )
-    p7_standard = tracker_p7_distance(scenario, rng, imaging)
-    fig13 = (
-        np.column_stack(
+def transformation_figures(scenario, state, flange, vflange, p7_standard: float) -> dict:
+    """Tables 4 and Fig. 13 of one trial: preliminary (AX = XB, Eq. 13) and updated (Eq. 14-22)
+    hand-eye matrices from the reported ``flange`` poses, their errors against the truth, and the
+    RMSE of P7's distance to the base origin over the validation poses ``vflange`` with each
+    matrix and with the true one (the oracle control)."""
+    poses = np.array([bino.calibrator_pose(scenario.layout[:6], r[:6]) for r in state["raw8"]])
+    pre = bino.preliminary_handeye(flange, poses)
+    upd, _ = bino.correct_transformation(flange, pre, state["rect8"], state["mod8"])
+    true = scenario.sensor2flange
+    row = {}
+    for label, h in (("preliminary", pre), ("updated", upd), ("true", true)):
+        d = np.array(
             [
-                np.linalg.norm(geo.apply(vflange[i] @ h, vmod[i, 6]), axis=-1)
-                for h in (pre, upd)
-                for i in range(n_val)
+                np.linalg.norm(geo.apply(f @ h, p))
+                for f, p in zip(vflange, state["val_p7"], strict=True)
             ]
         )
-        .reshape(2, n_val)
-        .T
-    )
-    return {"fig13": fig13, "fig13_standard": p7_standard}
+        row[f"fig13_{label}"] = rmse(d - p7_standard)
+    for label, h in (("preliminary", pre), ("updated", upd)):
+        row[f"rot_err_{label}_mrad"] = 1e3 * float(geo.rotation_error(h, true))
+        row[f"trans_err_{label}_mm"] = float(geo.translation_error(h, true))
+    return row
 
 
-def region_distances(region: FieldRegion, pre, upd) -> dict:
+def _views(scenario, world, rng, imaging, model1):
+    n_cal = scenario.config["station"]["poses"]["n_calibration"]
+    n_val = scenario.config["station"]["poses"]["n_validation"]
+    cal = view_calibrator(scenario, world, n_cal, rng, imaging, model1)
+    val = view_calibrator(scenario, world, n_val, rng, imaging, model1)
+    return cal, val
+
+
+def binocular_trial(setup: Setup, rng, defocus: bool = True) -> list[dict]:
+    """One replication of the paper's experiments (a)-(p), one row per sweep scale.
+
+    Rows: ``robot_scale`` 1 with every ``calibration_scale`` of ``setup``, and
+    ``calibration_scale`` 1 with every other ``robot_scale``; the default is (1, 1). Columns:
+    the RMSEs of Table 2 (``t2_without``, ``t2_with``; ``t2_oracle`` from the calibration views
+    exposed again without defocus: the same true poses and sharp images, fresh image noise; the
+    oracle control of the rectification), Table 3
+    (``t3_without``, ``t3_with``: the paper's protocol, scored on the very distances the
+    modification is fitted to), the leave-one-target-out check (``t3_holdout_without``,
+    ``t3_holdout_with``; ``t3_holdout_truecam``: without modification, triangulated with the
+    exact cameras, the oracle control of the modification), Fig. 13 (``fig13_preliminary``,
+    ``fig13_updated``; ``fig13_true``: with the true hand-eye matrix, the oracle control),
+    the hand-eye errors and the per-pair errors of Tables 2-3 (``err_{raw,rect,mod}_<pair>``).
+    ``defocus=False`` switches the defocus off everywhere (a test of the oracle's reach).
+    """
+    scenario = setup.scenario
+    imaging = Imaging(defocus=defocus)
+    world = draw_world(scenario, rng, imaging)
+    model1 = world.model(scenario, 1.0)
+    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    cal, val = _views(scenario, world, rng, imaging, model1)
+    p7_standard = tracker_p7_distance(scenario, rng, imaging)
+    sharp = reimage(scenario, cal, rng, Imaging(defocus=False), model1)
+    cal_scales = sorted({float(c) for c in setup.calibration_scales} | {0.0, 1.0})
+    # The ray-gap tolerance guards against wrong matches; the gap of a true match grows with the
+    # camera calibration error, so the guard widens with the calibration scale (values unchanged).
+    figures = {
+        c: distance_figures(world, cal, val, sharp, world.model(scenario, c), tol * max(1.0, c))
+        for c in cal_scales
+    }
+    robot_scales = sorted({float(r) for r in setup.robot_scales} | {1.0})
+    rows = []
+    combos = [(1.0, float(c)) for c in setup.calibration_scales]
+    combos += [(float(r), 1.0) for r in setup.robot_scales if float(r) != 1.0]
+    if (1.0, 1.0) not in combos:
+        combos.insert(0, (1.0, 1.0))
+    reported = {
+        r: (cal.reported(scenario, world, r), val.reported(scenario, world, r))
+        for r in robot_scales
+        if any(rc[0] == r for rc in combos)
+    }
+    for r, c in combos:
+        row, state = figures[c]
+        out = {"robot_scale": r, "calibration_scale": c, **row}
+        out["t3_holdout_truecam"] = figures[0.0][0]["t3_holdout_without"]
+        out.update(transformation_figures(scenario, state, *reported[r], p7_standard))
+        rows.append(out)
+    return rows
+
+
+# ----------------------------------------------------------------------------------------------
+# field regions (Section 4.3)
+
+
+def region_distances(region, pre, upd) -> dict:
     """Table 5 of one region: the distances from the first five SBRs to the sixth, averaged over
     the poses, with each hand-eye matrix, in the flange frame (``*_flange``) and in the base
     frame through the reported flange poses (``*_base``)."""
@@ -149,189 +249,89 @@ def region_distances(region: FieldRegion, pre, upd) -> dict:
     return out
 
 
-def run_trial(
-    scenario: Scenario,
-    rng,
-    robot_scale: float = 1.0,
-    imaging: Imaging | None = None,
-    field: bool = True,
-    calibration_scale: float = 1.0,
-) -> dict:
-    """One replication of the paper's experiments (a)-(p) and the field check (Section 4.3).
-
-    ``robot_scale`` and ``calibration_scale`` multiply the robot's and the cameras' errors
-    (:func:`~calstudy.papers.binocular.simulate.draw_world`); ``field=False`` skips the field
-    check, which is drawn last.
-
-    Returns
-    -------
-    dict
-        ``table2`` (7, 2): the 7 distances to P7 averaged over the 6 poses, without and with
-        rectification; ``table3`` (7, 2): with rectification, without and with the observed-error
-        modification; ``table3_holdout`` (6, 2): :func:`holdout_distances` averaged over the
-        poses; ``standard`` (7,): the CMM standard distances; ``handeye`` dict of the true,
-        preliminary and updated ``sensor2flange`` and ``d_eta``; ``fig13`` (10, 2): distances P7
-        to the base origin with the preliminary and updated matrix and ``fig13_standard``;
-        ``field`` list of per-region dicts (:func:`region_distances`).
-    """
-    imaging = imaging or Imaging()
-    world = draw_world(scenario, rng, robot_scale, imaging, calibration_scale)
-    out = _calibrate(scenario, world, rng, imaging)
-    pre, upd = out["handeye"]["preliminary"], out["handeye"]["updated"]
-    out.update(_validate(scenario, world, pre, upd, rng, imaging))
-    out["field"] = (
-        [
-            region_distances(observe_field_region(scenario, world, k, rng, imaging), pre, upd)
-            for k in range(3)
-        ]
-        if field
-        else []
-    )
-    return out
+def field_trial(setup: Setup, rng) -> dict:
+    """The field check of Section 4.3 on one draw: the calibration of (a)-(n) at the default
+    errors, then three regions of six SBRs from six poses each (Table 5). Columns: per region
+    ``k`` (1-3) and overall, the RMSE of the five distances with the preliminary and the
+    updated matrix, in the flange frame and in the base frame
+    (``field{k}_{preliminary,updated}_{flange,base}``, ``field_*`` over all 15)."""
+    scenario = setup.scenario
+    imaging = Imaging()
+    world = draw_world(scenario, rng, imaging)
+    model = world.model(scenario, 1.0)
+    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    n_cal = scenario.config["station"]["poses"]["n_calibration"]
+    cal = view_calibrator(scenario, world, n_cal, rng, imaging, model)
+    raw, rect = cal.points(model, tol)
+    rect8 = bino.with_virtual(rect)
+    state = {"raw8": bino.with_virtual(raw), "rect8": rect8, "mod8": _modify(world, rect8)}
+    poses = np.array([bino.calibrator_pose(scenario.layout[:6], r[:6]) for r in state["raw8"]])
+    pre = bino.preliminary_handeye(cal.flange2base, poses)
+    upd, _ = bino.correct_transformation(cal.flange2base, pre, state["rect8"], state["mod8"])
+    regions = [
+        region_distances(observe_field_region(scenario, world, k, rng, imaging, model), pre, upd)
+        for k in range(3)
+    ]
+    row = {}
+    for label in ("preliminary", "updated"):
+        for frame in ("flange", "base"):
+            errs = [f[f"{label}_{frame}"] - f["standard"] for f in regions]
+            for k, e in enumerate(errs):
+                row[f"field{k + 1}_{label}_{frame}"] = rmse(e)
+            row[f"field_{label}_{frame}"] = rmse(np.concatenate(errs))
+    return row
 
 
 # ----------------------------------------------------------------------------------------------
-# Monte Carlo
+# factories of the notebook's experiments
 
 
-def monte_carlo(
-    scenario: Scenario,
-    seed: int,
-    n_trials: int,
-    robot_scale: float = 1.0,
-    stream: int = 0,
-    progress: bool = False,
-    field: bool = True,
-    calibration_scale: float = 1.0,
-) -> list[dict]:
-    """``n_trials`` replications (:func:`run_trial`), seeded by ``(seed, stream, k)``."""
+def _scenario(scenario_dir: str) -> Scenario:
+    return load_scenario(scenario_dir or None)
+
+
+def scenario_key(setup: Setup) -> str:
+    """Cache fingerprint of a setup: the three tables, the robot's nominal model, tolerances and
+    base/tool frames, the hand-eye and calibrator frames and the sweep scales (the robot object
+    holds a pinocchio model without a stable form)."""
+    sc = setup.scenario
+    robot = sc.robot
+    parts = [
+        json.dumps(sc.config, sort_keys=True, default=str).encode(),
+        json.dumps(robot.tolerances, sort_keys=True).encode(),
+        np.ascontiguousarray(robot.parameters()).tobytes(),
+        np.ascontiguousarray(robot.base).tobytes(),
+        np.ascontiguousarray(robot.tool).tobytes(),
+        np.ascontiguousarray(sc.sensor2flange).tobytes(),
+        np.ascontiguousarray(sc.calibrator2base).tobytes(),
+        repr((setup.robot_scales, setup.calibration_scales)).encode(),
+    ]
+    return hashlib.sha256(b"|".join(parts)).hexdigest()
+
+
+def binocular_experiment(
+    scenario_dir: str = "",
+    n_trials: int = 200,
+    robot_scales=ROBOT_SCALES,
+    calibration_scales=CALIBRATION_SCALES,
+) -> Experiment:
+    """The Monte Carlo of Tables 2-4 and Fig. 13 with both sweeps (:func:`binocular_trial`)."""
     if n_trials < 1:
         raise CalibrationError(f"n_trials is {n_trials}; need at least 1")
-    out = []
-    for k in range(n_trials):
-        rng = np.random.default_rng(np.random.SeedSequence([seed, stream, k]))
-        out.append(
-            run_trial(scenario, rng, robot_scale, field=field, calibration_scale=calibration_scale)
-        )
-        if progress:
-            print(f"trial {k + 1}/{n_trials}", end="\r" if k + 1 < n_trials else "\n", flush=True)
-    return out
+    setup = Setup(
+        _scenario(scenario_dir),
+        tuple(float(r) for r in robot_scales),
+        tuple(float(c) for c in calibration_scales),
+    )
+    return Experiment(
+        "binocular", binocular_trial, setup, int(n_trials), scenario_key=scenario_key(setup)
+    )
 
 
-def _trial_row(k: int, t: dict) -> dict:
-    """The RMSEs of one trial (:func:`trial_metrics`)."""
-    std = t["standard"]
-    hand = t["handeye"]
-    row = {
-        "trial": k,
-        "t2_without": rmse(t["table2"][:, 0] - std),
-        "t2_with": rmse(t["table2"][:, 1] - std),
-        "t3_without": rmse(t["table3"][:, 0] - std),
-        "t3_with": rmse(t["table3"][:, 1] - std),
-        "t3_holdout_without": rmse(t["table3_holdout"][:, 0] - std[:6]),
-        "t3_holdout_with": rmse(t["table3_holdout"][:, 1] - std[:6]),
-        "fig13_preliminary": rmse(t["fig13"][:, 0] - t["fig13_standard"]),
-        "fig13_updated": rmse(t["fig13"][:, 1] - t["fig13_standard"]),
-    }
-    for label in ("preliminary", "updated"):
-        row[f"rot_err_{label}_mrad"] = 1e3 * float(geo.rotation_error(hand[label], hand["true"]))
-        row[f"trans_err_{label}_mm"] = float(geo.translation_error(hand[label], hand["true"]))
-    if t["field"]:
-        for label in ("preliminary", "updated"):
-            for frame in ("flange", "base"):
-                err = np.concatenate([f[f"{label}_{frame}"] - f["standard"] for f in t["field"]])
-                row[f"field_{label}_{frame}"] = rmse(err)
-    return row
-
-
-def trial_metrics(trials: list[dict]) -> pd.DataFrame:
-    """One row per trial: the RMSEs of Tables 2, 3, 5, Fig. 13 and the hand-eye errors."""
-    return pd.DataFrame([_trial_row(k, t) for k, t in enumerate(trials)])
-
-
-# ----------------------------------------------------------------------------------------------
-# sweeps
-
-
-def robot_sweep(scenario: Scenario, seed: int, scales, n_trials: int, progress: bool = False):
-    """Median Fig. 13 RMSE and hand-eye errors for each robot error scale (field check skipped)."""
-    rows = []
-    for j, scale in enumerate(scales):
-        m = trial_metrics(
-            monte_carlo(
-                scenario, seed, n_trials, scale, stream=100 + j, progress=progress, field=False
-            )
-        )
-        med = m.drop(columns="trial").median()
-        rows.append({"robot_scale": float(scale), "n_trials": n_trials, **med.to_dict()})
-    return pd.DataFrame(rows)
-
-
-def _calibration_row(metrics: pd.DataFrame, scale: float, n_trials: int) -> dict:
-    """One row of :func:`calibration_sweep` from the trial metrics at one scale."""
-    row = {"calibration_scale": float(scale), "n_trials": n_trials}
-    row.update(metrics.drop(columns="trial").median().to_dict())
-    for key in ("t2", "t3", "t3_holdout"):
-        ratio = metrics[f"{key}_with"] / metrics[f"{key}_without"]
-        median, lo, hi = median_and_spread(ratio)
-        row.update({f"{key}_ratio": median, f"{key}_ratio_low": lo, f"{key}_ratio_high": hi})
-    claims = {
-        "coc": ("t2", published("calibrator", "table2_rmse")),
-        "observed_error": ("t3", published("calibrator", "table3_rmse")),
-    }
-    for claim, (key, pub) in claims.items():
-        v = verdict_vs_published(
-            pub[1] / pub[0],
-            metrics[f"{key}_with"].to_numpy(),
-            metrics[f"{key}_without"].to_numpy(),
-            kind="ratio",
-            direction="lower",
-        )
-        row[f"verdict_{claim}"] = v.verdict
-    return row
-
-
-def calibration_sweep(
-    scenario: Scenario, seed: int, scales, n_trials: int, progress: bool = False
-) -> pd.DataFrame:
-    """Tables 2 and 3 and their verdicts for each scale of the cameras' calibration errors.
-
-    Every scale runs the same ``n_trials`` replications (random stream 200, field check
-    skipped): the trials share their robot, dot offsets, CMM errors, calibration poses and the
-    direction of the camera errors, whose size alone changes (image noise is drawn anew where a
-    region of interest changes size). Scale 0 is a sensor that matches Table 1 exactly.
-
-    Returns
-    -------
-    DataFrame
-        One row per scale: ``calibration_scale``, ``n_trials``, the median of every column of
-        :func:`trial_metrics`; for Table 2 (``t2``), Table 3 (``t3``) and the hold-out check
-        (``t3_holdout``) the median RMSE ratio with / without and its 95 % interval over the
-        trials (``*_ratio``, ``*_ratio_low``, ``*_ratio_high``); the verdicts of
-        ``binocular.coc`` and ``binocular.observed_error`` (``verdict_coc``,
-        ``verdict_observed_error``) by the rule of
-        :func:`calstudy.papers.binocular.report.claim_rows`.
-
-    Raises
-    ------
-    CalibrationError
-        If ``n_trials`` is below 2 (a verdict needs an interval) or a scale is negative.
-    """
-    if n_trials < 2:
-        raise CalibrationError(f"n_trials is {n_trials}; a verdict per scale needs at least 2")
-    rows = []
-    for scale in scales:
-        trials = monte_carlo(
-            scenario,
-            seed,
-            n_trials,
-            stream=200,
-            progress=progress,
-            field=False,
-            calibration_scale=float(scale),
-        )
-        rows.append(_calibration_row(trial_metrics(trials), scale, n_trials))
-    return pd.DataFrame(rows)
+def field_experiment(scenario_dir: str = "", n_trials: int = 30) -> Experiment:
+    """The Monte Carlo of Table 5 (:func:`field_trial`)."""
+    setup = Setup(_scenario(scenario_dir), (), ())
+    return Experiment("field", field_trial, setup, int(n_trials), scenario_key=scenario_key(setup))
 
 
 # ----------------------------------------------------------------------------------------------

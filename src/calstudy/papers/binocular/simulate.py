@@ -131,9 +131,7 @@ def render_blurred_dot(scenario: Scenario, camera: PinholeCamera, centre, normal
     radius = scenario.dot_radius_mm
     r_px = radius * camera.fx / centre[2]
     origin, shape = optics.roi_around(uv, r_px, 4.0 * delta_px + 10.0, camera.width, camera.height)
-    sharp = optics.render_dot(
-        camera.K, camera.dist_coeffs, centre, normal, radius, origin, shape
-    )
+    sharp = optics.render_dot(camera.K, camera.dist_coeffs, centre, normal, radius, origin, shape)
     return uv, origin, optics.defocus(sharp, delta_px)
 
 
@@ -160,20 +158,56 @@ def expose_and_fuse(
     )
 
 
-def image_dot(scenario, camera: PinholeCamera, centre_cam, normal_cam, rng, imaging: Imaging):
-    """Fused ROI of one dot in one camera: render, defocus (Eq. 4, 7), two exposures, fuse (Eq. 3).
+def render_rois(scenario, camera: PinholeCamera, centres_cam, normals_cam):
+    """Sharp ROIs of ``m`` dots in one camera, one ROI shape for all, large enough for each dot
+    with the margin its circle of confusion (Eq. 4) needs.
 
-    Returns ``(fused, origin, delta_px)``: the ROI, its top-left pixel, the true CoC radius.
+    Returns ``(sharp, origins, deltas)``: the ``(m, rows, cols)`` ROIs, their top-left pixels
+    ``(m, 2)`` and the true CoC radii ``(m,)``.
     """
-    delta = float(scenario.coc_radius_px(centre_cam[2])) if imaging.defocus else 0.0
-    _, origin, blurred = render_blurred_dot(scenario, camera, centre_cam, normal_cam, delta)
+    centres = np.asarray(centres_cam, dtype=float)
+    depth = centres[:, 2]
+    deltas = np.asarray(scenario.coc_radius_px(depth), dtype=float).reshape(-1)
+    uv = camera.project(centres)
+    r_px = float(np.max(scenario.dot_radius_mm * camera.fx / depth))
+    margin = float(np.max(4.0 * deltas)) + 10.0
+    rois = [optics.roi_around(p, r_px, margin, camera.width, camera.height) for p in uv]
+    origins = np.array([o for o, _ in rois])
+    sharp = optics.render_dots(
+        camera.K,
+        camera.dist_coeffs,
+        centres,
+        normals_cam,
+        scenario.dot_radius_mm,
+        origins,
+        rois[0][1],
+    )
+    return sharp, origins, deltas
+
+
+def image_dots(
+    scenario, camera: PinholeCamera, centres_cam, normals_cam, rng, imaging: Imaging, rendered=None
+):
+    """Fused ROIs of ``m`` dots in one camera: render (:func:`render_rois`, or the given
+    ``rendered`` triple of it), defocus (Eq. 4, 7), two exposures, fuse (Eq. 3), batched over
+    the dots.
+
+    Returns ``(fused, origins, deltas, rendered)``: the ``(m, rows, cols)`` ROIs, their top-left
+    pixels ``(m, 2)``, the CoC radii ``(m,)`` applied (zeros without defocus) and the
+    :func:`render_rois` triple.
+    """
+    if rendered is None:
+        rendered = render_rois(scenario, camera, centres_cam, normals_cam)
+    sharp, origins, true_deltas = rendered
+    deltas = true_deltas if imaging.defocus else np.zeros(len(true_deltas))
+    blurred = np.stack([optics.defocus(img, d) for img, d in zip(sharp, deltas, strict=True)])
     if not imaging.noise:
-        return blurred, origin, delta
+        return blurred, origins, deltas, rendered
     noise = scenario.config["sensor"]["noise"]
     fused = expose_and_fuse(
         scenario, blurred, rng, noise["read_noise_dn"], noise["electrons_per_dn"]
     )
-    return fused, origin, delta
+    return fused, origins, deltas, rendered
 
 
 def rectified_centre(scenario: Scenario, image, origin, delta_px: float) -> np.ndarray:
@@ -185,44 +219,63 @@ def rectified_centre(scenario: Scenario, image, origin, delta_px: float) -> np.n
 
 @dataclass
 class Observation:
-    """Dot centres of one pose: image points and triangulated sensor-frame points."""
+    """Detected dot centres of one pose in both cameras, ``(2, m, 2)`` px (left, right):
+    without (``uv_raw``) and with (``uv_rect``) the rectification."""
 
-    uv_raw: np.ndarray  # (2, m, 2) left/right
+    uv_raw: np.ndarray
     uv_rect: np.ndarray
-    raw: np.ndarray  # (m, 3) sensor frame, without rectification
-    rect: np.ndarray  # (m, 3) with rectification
+    rendered: tuple = ()  # per camera, the sharp ROIs of :func:`render_rois` (oracle re-imaging)
+
+    def points(self, sensor: StereoRig, tol_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """Sensor-frame points ``(m, 3)`` triangulated with the calibrated ``sensor`` (Eq. 1):
+        without and with the rectification."""
+        raw = bino.triangulate(sensor, self.uv_raw[0], self.uv_raw[1], tol_mm)
+        if self.uv_rect is self.uv_raw:
+            return raw, raw.copy()
+        return raw, bino.triangulate(sensor, self.uv_rect[0], self.uv_rect[1], tol_mm)
 
 
-def observe(scenario, true_sensor: StereoRig, sensor2base, dots_base, normal_base, rng, imaging):
+def observe(
+    scenario, model: StereoRig, sensor2base, dots_base, normal_base, rng, imaging, rendered=None
+) -> Observation:
     """Image the dots ``(m, 3)`` (base frame, one plate normal) from a true sensor pose.
 
-    The physical cameras are ``true_sensor``; centres are triangulated with the calibrated
-    ``scenario.sensor`` (Table 1). The rectification uses the CoC radius (Eq. 4) at the depth
-    of the unrectified triangulation, as a real system would.
+    The physical cameras are those of Table 1 (``scenario.sensor``); the calibrated ``model``
+    differs from them by the calibration errors of the trial. The rectification uses the CoC
+    radius (Eq. 4) at the depth of the unrectified triangulation with ``model``, as a real
+    system would. ``rendered`` (the ``Observation.rendered`` of an earlier call at the same
+    true pose) skips the rendering: the same sharp images exposed again.
     """
-    base2sensor = geo.invert(sensor2base)
-    dots_s = geo.apply(base2sensor, dots_base)
-    normal_s = base2sensor[:3, :3] @ normal_base
-    rois = [
-        [
-            image_dot(scenario, camera, geo.apply(s2c, p), s2c[:3, :3] @ normal_s, rng, imaging)
-            for p in dots_s
-        ]
-        for camera, s2c in true_sensor.cameras()
-    ]
+    rois = []
+    if rendered:
+        for c, (camera, _) in enumerate(scenario.sensor.cameras()):
+            rois.append(image_dots(scenario, camera, None, None, rng, imaging, rendered[c]))
+    else:
+        base2sensor = geo.invert(sensor2base)
+        dots_s = geo.apply(base2sensor, dots_base)
+        normal_s = base2sensor[:3, :3] @ normal_base
+        for camera, s2c in scenario.sensor.cameras():
+            n = np.tile(s2c[:3, :3] @ normal_s, (len(dots_s), 1))
+            rois.append(image_dots(scenario, camera, geo.apply(s2c, dots_s), n, rng, imaging))
+    kept = tuple(r[3] for r in rois)
     kwargs = scenario.detection
-    uv_raw = np.array([[detect_centre(img, o, **kwargs) for img, o, _ in row] for row in rois])
-    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
-    raw = bino.triangulate(scenario.sensor, uv_raw[0], uv_raw[1], tol)
+    uv_raw = np.array(
+        [
+            [detect_centre(img, o, **kwargs) for img, o in zip(f, org, strict=True)]
+            for f, org, _, _ in rois
+        ]
+    )
     if not imaging.defocus:
-        return Observation(uv_raw, uv_raw.copy(), raw, raw.copy())
+        return Observation(uv_raw, uv_raw, kept)
+    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    raw = bino.triangulate(model, uv_raw[0], uv_raw[1], tol)
     uv_rect = np.empty_like(uv_raw)
-    for c, (_, s2c) in enumerate(scenario.sensor.cameras()):
-        est = scenario.coc_radius_px(geo.apply(s2c, raw)[:, 2])
-        for i, (img, o, _) in enumerate(rois[c]):
-            uv_rect[c, i] = rectified_centre(scenario, img, o, est[i])
-    rect = bino.triangulate(scenario.sensor, uv_rect[0], uv_rect[1], tol)
-    return Observation(uv_raw, uv_rect, raw, rect)
+    for c, (_, s2c) in enumerate(model.cameras()):
+        est = np.atleast_1d(scenario.coc_radius_px(geo.apply(s2c, raw)[:, 2]))
+        fused, origins, _, _ = rois[c]
+        for i in range(len(raw)):
+            uv_rect[c, i] = rectified_centre(scenario, fused[i], origins[i], est[i])
+    return Observation(uv_raw, uv_rect, kept)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -244,80 +297,117 @@ def sigma_distance_mm(table: dict, length_mm) -> np.ndarray:
 
 @dataclass
 class World:
-    """The random truth of one trial."""
+    """The random truth of one trial.
 
-    robot: Robot
-    sensor: StereoRig
+    The robot's and the cameras' errors are kept as seeds, so that :meth:`robot` and
+    :meth:`model` give them at any scale from the same draws: at scale 2 the errors are exactly
+    twice those at scale 1.
+    """
+
+    robot_seed: int
+    camera_seed: int
     dot_offsets: np.ndarray  # (6, 3) calibrator frame
     standard_pairs: np.ndarray
     standard_mm: np.ndarray
+    repeatability_mm: float  # sigma per axis of the true flange about the commanded pose
+
+    def robot(self, scenario: Scenario, scale: float = 1.0) -> Robot:
+        """The true robot with its tolerances (``kuka_kr210.toml``) times ``scale``."""
+        tol = scenario.robot.tolerances
+        rng = np.random.default_rng(self.robot_seed)
+        return perturb_robot(
+            scenario.robot, rng, tol["sigma_length_mm"] * scale, tol["sigma_angle_deg"] * scale
+        )
+
+    def model(self, scenario: Scenario, scale: float = 1.0) -> StereoRig:
+        """The calibrated sensor: Table 1 plus the calibration errors of ``sensor.toml
+        [calibration_uncertainty]`` times ``scale`` (0: the calibration is exact)."""
+        if scale < 0:
+            raise CalibrationError(f"calibration scale is {scale}; it must be >= 0")
+        sigmas = scenario.config["sensor"]["calibration_uncertainty"]
+        sigmas = {k: v * scale for k, v in sigmas.items()}
+        return scenario.sensor.perturbed(sigmas, np.random.default_rng(self.camera_seed))
 
 
-def draw_world(
-    scenario: Scenario,
-    rng,
-    robot_scale: float = 1.0,
-    imaging: Imaging | None = None,
-    calibration_scale: float = 1.0,
-) -> World:
-    """Draw the true robot, the true cameras, the SBR dot offsets and the CMM standards.
-
-    ``robot_scale`` multiplies the robot tolerances, ``calibration_scale`` the cameras'
-    calibration uncertainty (``sensor.toml [calibration_uncertainty]``). Scales only change the
-    size of the errors: the same ``rng`` draws the same numbers at any scale, so with one seed
-    the true cameras at scale 2 differ from Table 1 by exactly twice those at scale 1.
-    """
-    if calibration_scale < 0:
-        raise CalibrationError(f"calibration_scale is {calibration_scale}; it must be >= 0")
+def draw_world(scenario: Scenario, rng, imaging: Imaging | None = None) -> World:
+    """Draw the true robot, the cameras' calibration errors, the SBR dot offsets and the CMM
+    standards. Without ``imaging.noise`` the SBRs are centred, the CMM and the robot's
+    repeatability exact (the robot and the cameras keep their errors: pass scale 0)."""
     imaging = imaging or Imaging()
-    tol = scenario.robot.tolerances
-    robot = perturb_robot(
-        scenario.robot,
-        rng,
-        tol["sigma_length_mm"] * robot_scale,
-        tol["sigma_angle_deg"] * robot_scale,
-    )
-    sigmas = scenario.config["sensor"]["calibration_uncertainty"]
-    sigmas = {k: v * calibration_scale * imaging.noise for k, v in sigmas.items()}
-    sensor = scenario.sensor.perturbed(sigmas, rng)
+    seeds = rng.integers(0, 2**63, size=2)
     sbr = scenario.config["calibrator"]["sbr"]
     offsets = uniform_disc(rng, 6, 1e-3 * sbr["dot_centring_um"] * imaging.noise)
     pairs = bino.all_pairs(8)
     lengths = np.linalg.norm(scenario.layout[pairs[:, 0]] - scenario.layout[pairs[:, 1]], axis=1)
     sigma = sigma_distance_mm(scenario.config["calibrator"]["cmm"], lengths) * imaging.noise
-    return World(robot, sensor, offsets, pairs, lengths + sigma * rng.standard_normal(len(lengths)))
+    standard = lengths + sigma * rng.standard_normal(len(lengths))
+    repeat = scenario.config["station"]["robot"]["repeatability_mm"] / 3.0 * imaging.noise
+    return World(int(seeds[0]), int(seeds[1]), offsets, pairs, standard, repeat)
 
 
-def _true_sensor_pose(scenario, world, q, rng, noise: bool) -> np.ndarray:
-    flange = world.robot.fk(q)
-    if noise:
-        sigma = scenario.config["station"]["robot"]["repeatability_mm"] / 3.0
-        flange = geo.perturb(flange, 0.0, sigma, rng)
-    return flange @ scenario.sensor2flange
+@dataclass
+class Views:
+    """Views of one target: joint angles ``q`` (n, 6) the controller commanded, the flange poses
+    it reports ``flange2base`` (nominal model), the true flange poses ``true_flange2base`` and
+    the observations."""
+
+    q: np.ndarray
+    flange2base: np.ndarray
+    true_flange2base: np.ndarray
+    observations: list
+
+    def reported(self, scenario: Scenario, world: World, robot_scale: float) -> np.ndarray:
+        """Reported flange poses ``(n, 4, 4)`` had the true robot's errors been ``robot_scale``
+        times those of the trial, for the same true flange poses (the images do not change):
+        the controller commands the joints that put a robot with those errors at the default
+        true pose, and reports the nominal model's pose of them. Scale 0: the truth (without
+        repeatability)."""
+        if robot_scale == 1.0:
+            return self.flange2base
+        true1 = world.robot(scenario, 1.0)
+        robot = world.robot(scenario, robot_scale)
+        out = []
+        for q in self.q:
+            q_s = robot.ik(true1.fk(q), q, tol=1e-9)
+            out.append(scenario.robot.fk(q_s))
+        return np.array(out)
+
+    def points(self, model: StereoRig, tol_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """Triangulated points ``(n, m, 3)`` of all views with ``model``: raw and rectified."""
+        pts = [o.points(model, tol_mm) for o in self.observations]
+        return np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
 
 
-def observe_from(scenario, world, q, dots, normal, rng, imaging) -> list[Observation]:
-    """Observations of the dots ``(m, 3)`` (base frame) from each joint configuration in ``q``."""
-    return [
-        observe(
-            scenario,
-            world.sensor,
-            _true_sensor_pose(scenario, world, qi, rng, imaging.noise),
-            dots,
-            normal,
-            rng,
-            imaging,
-        )
-        for qi in q
-    ]
+def view_target(scenario, world, target2base, dots, normal, n, rng, imaging, model) -> Views:
+    """``n`` views of dots ``(m, 3)`` (base frame) on a target frame ``target2base``."""
+    q, flange = viewpoints(scenario, target2base, n, rng)
+    true1 = world.robot(scenario, 1.0)
+    true_flange = np.array([true1.fk(qi) for qi in q])
+    obs = []
+    for t in true_flange:
+        t = geo.perturb(t, 0.0, world.repeatability_mm, rng) if world.repeatability_mm else t
+        sensor2base = t @ scenario.sensor2flange
+        obs.append(observe(scenario, model, sensor2base, dots, normal, rng, imaging))
+    return Views(q, flange, true_flange, obs)
 
 
-def view_calibrator(scenario, world, n, rng, imaging) -> tuple[np.ndarray, list[Observation]]:
-    """``n`` views of the calibrator: reported flange poses ``(n, 4, 4)`` and observations."""
-    q, flange = viewpoints(scenario, scenario.calibrator2base, n, rng)
+def view_calibrator(scenario, world, n, rng, imaging, model) -> Views:
+    """``n`` views of the calibrator's six SBRs."""
     dots = geo.apply(scenario.calibrator2base, scenario.layout[:6] + world.dot_offsets)
     normal = scenario.calibrator2base[:3, 2]
-    return flange, observe_from(scenario, world, q, dots, normal, rng, imaging)
+    return view_target(
+        scenario, world, scenario.calibrator2base, dots, normal, n, rng, imaging, model
+    )
+
+
+def reimage(scenario, views: Views, rng, imaging, model) -> Views:
+    """The same true poses (repeatability draw included) and the same sharp images exposed again
+    under other ``imaging`` switches, with fresh image noise (oracle controls)."""
+    obs = [
+        observe(scenario, model, None, None, None, rng, imaging, rendered=o.rendered)
+        for o in views.observations
+    ]
+    return Views(views.q, views.flange2base, views.true_flange2base, obs)
 
 
 def tracker_p7_distance(scenario: Scenario, rng, imaging: Imaging) -> float:
@@ -354,7 +444,7 @@ class FieldRegion:
     standard: np.ndarray
 
 
-def observe_field_region(scenario, world, k: int, rng, imaging) -> FieldRegion:
+def observe_field_region(scenario, world, k: int, rng, imaging, model) -> FieldRegion:
     """Draw field region ``k`` (``station.toml [field]``) and measure it from its poses."""
     cfg = scenario.config["station"]["field"]
     centre = np.array(cfg["centres_mm"][k], dtype=float)
@@ -363,11 +453,21 @@ def observe_field_region(scenario, world, k: int, rng, imaging) -> FieldRegion:
     layout = region_layout(cfg["standard_mm"][k]) + uniform_disc(
         rng, 6, 1e-3 * scenario.config["calibrator"]["sbr"]["dot_centring_um"] * imaging.noise
     )
-    q, flange = viewpoints(scenario, region2base, cfg["n_poses"], rng)
     dots = geo.apply(region2base, layout)
-    obs = observe_from(scenario, world, q, dots, region2base[:3, 2], rng, imaging)
-    pts = np.array([o.rect for o in obs])  # (poses, 6, 3)
+    views = view_target(
+        scenario,
+        world,
+        region2base,
+        dots,
+        region2base[:3, 2],
+        cfg["n_poses"],
+        rng,
+        imaging,
+        model,
+    )
+    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    _, pts = views.points(model, tol)  # (poses, 6, 3), rectified
     lt = scenario.config["station"]["laser_tracker"]
     true_d = np.linalg.norm(layout[:5] - layout[5], axis=1)
     standard = true_d + sigma_distance_mm(lt, true_d) * rng.standard_normal(5) * imaging.noise
-    return FieldRegion(cfg["regions"][k], cfg["names"][k], flange, pts, standard)
+    return FieldRegion(cfg["regions"][k], cfg["names"][k], views.flange2base, pts, standard)

@@ -1,0 +1,55 @@
+"""The committed results of notebook 04 follow from its committed trial rows: every table and the
+claims and controls are recomputed by the report functions (no simulation) and compared."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from calstudy.core.paths import RESULTS_DIR
+from calstudy.io.results import read_claims
+from calstudy.papers.binocular import report
+
+STEM = "04_binocular_correction"
+OUT = RESULTS_DIR / STEM
+
+
+@pytest.fixture(scope="module")
+def frames():
+    if not (OUT / "trials_binocular.csv").is_file():
+        pytest.skip("results/04_binocular_correction has not been regenerated with the engine yet")
+    return pd.read_csv(OUT / "trials_binocular.csv"), pd.read_csv(OUT / "trials_field.csv")
+
+
+def _same(got: pd.DataFrame, name: str) -> None:
+    want = pd.read_csv(OUT / f"{name}.csv")
+    got = pd.read_csv(pd.io.common.StringIO(got.to_csv(index=False)))
+    assert list(got.columns) == list(want.columns), name
+    for col in want:
+        if pd.api.types.is_numeric_dtype(want[col]):
+            pd.testing.assert_series_equal(got[col], want[col], rtol=2e-5, check_dtype=False)
+        else:
+            assert got[col].fillna("").tolist() == want[col].fillna("").tolist(), (name, col)
+
+
+def test_tables(frames):
+    trials, field = frames
+    _same(report.distance_table(trials, "table2"), "table2")
+    _same(report.distance_table(trials, "table3"), "table3")
+    _same(report.handeye_table(trials), "table4")
+    _same(report.field_table(field), "table5")
+    _same(report.rmse_summary(trials, field), "rmse_summary")
+    _same(report.sweep_table(trials, "robot"), "robot_sweep")
+    _same(report.sweep_table(trials, "calibration"), "calibration_sweep")
+
+
+def test_claims_and_controls(frames):
+    trials, field = frames
+    claims, controls = report.claim_rows(trials, field, STEM)
+    want = read_claims(OUT / "claims.csv")
+    got = pd.DataFrame([c.__dict__ for c in claims])
+    assert got["verdict"].tolist() == want["verdict"].tolist()
+    assert got["note"].tolist() == want["note"].fillna("").tolist()
+    for col in ("reproduced", "ci_low", "ci_high", "replication_rate"):
+        pd.testing.assert_series_equal(got[col], want[col], rtol=2e-5, check_dtype=False)
+    _same(pd.DataFrame(controls), "controls")
