@@ -15,12 +15,12 @@ from calstudy.claims import (
     CLAIM_COLUMNS,
     ClaimRow,
     claim_ids,
-    verdict_direction,
-    verdict_vs_ml,
-    verdict_vs_published,
+    claim_row,
+    control_rows,
 )
 from calstudy.core.paths import DATA_DIR
 from calstudy.core.stats import bootstrap_interval, percentile_interval, rmse
+from calstudy.core.verdicts import judge_controls
 from calstudy.io.results import (
     PINNED_PACKAGES,
     aggregate_claims,
@@ -28,6 +28,7 @@ from calstudy.io.results import (
     read_claims,
     source_digest,
     write_claims,
+    write_controls,
     write_figure,
     write_run_json,
     write_table,
@@ -253,149 +254,54 @@ def test_bootstrap_interval_vectorised_and_seeded():
 
 
 # ----------------------------------------------------------------------------------------------
-# verdicts
+# v2 claim rows and controls
 
 
-def paired(ratio, spread, n=400, seed=0):
+def paired(ratio, spread, n=200, seed=0):
     """Baseline errors around 0.049 mm and method errors ``ratio`` times them, with noise."""
     rng = np.random.default_rng(seed)
     base = rng.normal(0.049, 0.002, n)
     return base * ratio * (1.0 + spread * rng.standard_normal(n)), base
 
 
-def test_ratio_reproduced():
-    method, base = paired(0.84, 0.02)
-    v = verdict_vs_published(0.041 / 0.049, method, base, kind="ratio", direction="lower")
-    assert v.verdict == "reproduced"
-    assert v.reproduced == pytest.approx(0.84, abs=0.01)
-    assert v.ci_low < v.reproduced < v.ci_high < 1.0
-    assert v.significant and v.in_band and v.null == 1.0
+def test_claim_row_and_controls_round_trip(tmp_path):
+    method, base = paired(0.84, 0.05)
+    claim, null, oracle = judge_controls(
+        method, base, base * 0.5, published=0.041 / 0.049, baseline=base,
+        kind="ratio", direction="lower",
+    )
+    row = claim_row(
+        "binocular.coc", claim, published="0.049 -> 0.041", unit="ratio", notebook="04_demo",
+        null=null, oracle=oracle,
+    )
+    assert (row.verdict, row.null_control, row.oracle_control) == (
+        "reproduced", "not reproduced", "reproduced",
+    )
+    assert row.n == 200 and 0.9 < row.replication_rate <= 1.0
+    write_claims(tmp_path, [row])
+    back = read_claims(tmp_path / "claims.csv")
+    assert list(back.columns) == list(CLAIM_COLUMNS)
+    assert back.loc[0, "verdict"] == "reproduced" and back.loc[0, "n"] == 200
+    assert back.loc[0, "ci_low"] < back.loc[0, "reproduced"] < back.loc[0, "ci_high"]
+    rows = control_rows("binocular.coc", null, oracle)
+    assert [r["control"] for r in rows] == ["null", "oracle"] and rows[0]["definition"]
+    write_controls(tmp_path, rows)
+    controls = pd.read_csv(tmp_path / "controls.csv")
+    assert controls["verdict"].tolist() == ["not reproduced", "reproduced"]
 
 
-def test_ratio_direction_only():
-    method, base = paired(0.3, 0.02)
-    v = verdict_vs_published(0.041 / 0.049, method, base, kind="ratio", direction="lower")
-    assert v.verdict == "direction only"
-    assert v.significant and not v.in_band
-
-
-def test_ratio_interval_crossing_no_effect_is_not_reproduced():
-    # the median ratio is right on the published one, but single trials often show no gain
-    method, base = paired(0.84, 0.15)
-    v = verdict_vs_published(0.041 / 0.049, method, base, kind="ratio", direction="lower")
-    assert v.ci_high > 1.0 and v.in_band
-    assert v.verdict == "not reproduced"
-
-
-def test_ratio_opposite_direction_is_not_reproduced():
-    method, base = paired(1.3, 0.02)
-    v = verdict_vs_published(0.8, method, base, kind="ratio", direction="lower")
-    assert v.verdict == "not reproduced"
-    v = verdict_vs_published(1.3, method, base, kind="ratio", direction="higher")
-    assert v.verdict == "reproduced"
-
-
-def test_interval_touching_no_effect_is_not_significant():
-    v = verdict_vs_published(1.0, np.ones(50), kind="ratio", direction="lower")
-    assert v.verdict == "not reproduced"
-    assert not v.significant
-
-
-def test_ratio_samples_without_baseline():
-    ratios = np.random.default_rng(3).normal(0.42, 0.03, 300)
-    v = verdict_vs_published(0.080 / 0.192, ratios, kind="ratio", direction="lower")
-    assert v.verdict == "reproduced"
-    assert v.reproduced == pytest.approx(np.median(ratios))
-
-
-def test_value_against_paired_baseline():
-    rng = np.random.default_rng(4)
-    circular = rng.normal(0.556, 0.05, 300)
-    ours = rng.normal(0.12, 0.01, 300)
-    v = verdict_vs_published(0.100, ours, circular, kind="value", direction="lower")
-    assert v.verdict == "reproduced"
-    assert v.null == 0.0 and v.effect_high < 0.0
-    v = verdict_vs_published(0.100, ours + 0.1, circular, kind="value", direction="lower")
-    assert v.verdict == "direction only"  # 0.22 mm is beyond 1.5 x 0.100 mm
-
-
-def test_value_factor_band_edges_and_sign():
-    samples = np.full(20, 0.15)
-    assert verdict_vs_published(0.1, samples, kind="value", direction="higher").in_band
-    assert not verdict_vs_published(0.099, samples, kind="value", direction="higher").in_band
-    neg = verdict_vs_published(2.5, -np.full(20, 2.5), kind="value", direction="lower")
-    assert neg.verdict == "direction only" and not neg.in_band
-
-
-def test_percent_band():
-    rng = np.random.default_rng(5)
-    within = np.clip(rng.normal(88.0, 2.0, 300), 0, 100)
-    v = verdict_vs_published(96.55, within, 50.0, kind="percent", direction="higher")
-    assert v.verdict == "reproduced"  # 8.6 points below, inside the 10-point band
-    v = verdict_vs_published(96.55, within - 3.0, 50.0, kind="percent", direction="higher")
-    assert v.verdict == "direction only"  # 11.6 points below
-    edge = verdict_vs_published(90.0, np.full(30, 80.0), 50.0, kind="percent", direction="higher")
-    assert edge.verdict == "reproduced"  # exactly 10 points counts as inside
-    # compared with a paired baseline (before compensation) instead of a fixed null value
-    before = np.clip(rng.normal(5.0, 2.0, 300), 0, 100)
-    v = verdict_vs_published(96.55, within, before, kind="percent", direction="higher")
-    assert v.verdict == "reproduced" and v.effect_low > 0.0
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "match"),
-    [
-        ({"kind": "rate"}, "kind"),
-        ({"direction": "down"}, "direction"),
-        ({"published": 0.0, "kind": "value"}, "factor band around 0"),
-        ({"published": -0.5}, "positive"),
-        ({"samples": [0.8, np.nan, 0.9]}, "non-finite"),
-        ({"samples": [0.8]}, "at least 2"),
-        ({"baseline": [1.0, 1.0]}, "pair them"),
-        ({"baseline": [1.0, 0.0, 1.0]}, "ratio is undefined"),
-    ],
-)
-def test_verdict_vs_published_rejects_bad_input(kwargs, match):
-    args = {
-        "published": 0.8,
-        "samples": [0.8, 0.85, 0.9],
-        "kind": "ratio",
-        "direction": "lower",
-    }
-    args.update(kwargs)
-    with pytest.raises(CalibrationError, match=match):
-        verdict_vs_published(**args)
-
-
-def test_verdict_vs_ml():
-    rng = np.random.default_rng(6)
-    ml = np.abs(rng.normal(0.0, 0.1, 300))
-    close = ml * 1.1 + np.abs(rng.normal(0.0, 0.005, 300))
-    v = verdict_vs_ml(close, ml, works=True, rng=np.random.default_rng(0))
-    assert v.verdict == "reproduced"
-    assert v.ci_low < v.reproduced < v.ci_high
-    assert v.reproduced == pytest.approx(rmse(close) / rmse(ml))
-    again = verdict_vs_ml(close, ml, works=True, rng=np.random.default_rng(0))
-    assert again == v
-
-    worse = verdict_vs_ml(ml * 3.0, ml, works=True, rng=np.random.default_rng(0))
-    assert worse.verdict == "direction only" and worse.reproduced == pytest.approx(3.0)
-    failed = verdict_vs_ml(close, ml, works=False, rng=np.random.default_rng(0))
-    assert failed.verdict == "not reproduced"
-    broken = verdict_vs_ml(np.full(300, np.nan), ml, works=False, rng=np.random.default_rng(0))
-    assert broken.verdict == "not reproduced" and np.isnan(broken.reproduced)
-
-
-def test_verdict_vs_ml_rejects_bad_input():
-    rng = np.random.default_rng(0)
-    with pytest.raises(CalibrationError, match="shape"):
-        verdict_vs_ml([1.0, 2.0], [1.0, 2.0, 3.0], works=True, rng=rng)
-    with pytest.raises(CalibrationError, match="non-finite"):
-        verdict_vs_ml([1.0, np.nan], [1.0, 2.0], works=True, rng=rng)
-    with pytest.raises(CalibrationError, match="RMS error is 0"):
-        verdict_vs_ml([1.0, 2.0], [0.0, 0.0], works=True, rng=rng)
-    with pytest.raises(TypeError):
-        verdict_vs_ml([1.0, 2.0], [1.0, 2.0], works=True)  # rng is required
+def test_a_null_control_that_passes_is_refused(tmp_path):
+    method, base = paired(0.84, 0.05)
+    claim, null, oracle = judge_controls(
+        method, base, base * 0.5, baseline=base, kind="ratio", direction="lower"
+    )
+    # a "null control" that is the method itself: the test would be broken
+    with pytest.raises(CalibrationError, match="the test is broken"):
+        control_rows("binocular.coc", claim, oracle)
+    rows = [{**r, "verdict": "reproduced"} if r["control"] == "null" else r
+            for r in control_rows("binocular.coc", null, oracle)]
+    with pytest.raises(CalibrationError, match="null control of 'binocular.coc' came out"):
+        write_controls(tmp_path, rows)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -424,20 +330,6 @@ def test_register_holds_every_claim():
     assert (reg[["where", "statement", "unit", "comparison"]] != "").all().all()
 
 
-def test_write_claims_round_trip(tmp_path):
-    v = verdict_vs_published(0.8, [0.7, 0.75, 0.8, 0.78], kind="ratio", direction="lower")
-    rows = [row(), v.row("binocular.field", "0.86", "ratio", "03_binocular")]
-    rows.append(
-        ClaimRow("dualarm.vs_circular", "", np.nan, np.nan, np.nan, "mm", "not testable", "04_x")
-    )
-    path = write_claims(tmp_path, rows)
-    first = path.read_bytes()
-    assert write_claims(tmp_path, rows).read_bytes() == first
-    df = read_claims(path)
-    assert list(df.columns) == list(CLAIM_COLUMNS)
-    assert df["published"].tolist() == ["0.041/0.049", "0.86", ""]
-    assert np.isnan(df["reproduced"].iloc[2])
-    assert df["verdict"].tolist() == ["reproduced", "reproduced", "not testable"]
 
 
 def test_write_claims_rejects_bad_verdict(tmp_path):
@@ -485,10 +377,3 @@ def test_aggregate_claims_empty(tmp_path):
     assert (tmp_path / "claims.csv").read_text() == ",".join(CLAIM_COLUMNS) + "\n"
 
 
-def test_verdict_direction():
-    lower = verdict_direction(np.full(10, 1.0) + np.arange(10) * 0.01, np.full(10, 3.0))
-    assert lower.verdict == "reproduced" and lower.reproduced < 1
-    same = verdict_direction(np.linspace(1, 3, 10), np.full(10, 2.0))
-    assert same.verdict == "not reproduced"
-    with pytest.raises(CalibrationError, match="must be equal"):
-        verdict_direction(np.ones(3), np.ones(4))

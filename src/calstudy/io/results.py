@@ -5,9 +5,9 @@ with :func:`os.replace`, so an interrupted run leaves either the old file or the
 half a table. Outputs are byte-deterministic: the same inputs give the same bytes (fixed float
 format, PNG without a software stamp, ``run.json`` without commit hash or time stamps).
 
-Verdicts follow the rule of the claims register (reproduced / direction only / not reproduced /
-not testable) and are computed from Monte Carlo samples by :func:`verdict_vs_published` and
-:func:`verdict_vs_ml`; notebooks never type a verdict in.
+A whole notebook run is published at once (:class:`ResultFolder`): its files go to a staging
+folder that replaces the result folder in one step, so a folder never mixes two runs. The claim
+rows (:mod:`calstudy.claims`) are checked against the register before they are written.
 """
 
 from __future__ import annotations
