@@ -118,20 +118,13 @@ def claim_row(
     interval; ``null``/``oracle`` are the controls judged on the same trials (their verdicts go
     in the row, their figures in ``controls.csv``, see :func:`control_rows`).
     """
+    controls = {
+        "null_control": "" if null is None else null.verdict,
+        "oracle_control": "" if oracle is None else oracle.verdict,
+    }
     return ClaimRow(
-        id=claim_id,
-        published=published,
-        reproduced=verdict.median,
-        ci_low=verdict.ci_low,
-        ci_high=verdict.ci_high,
-        unit=unit,
-        verdict=verdict.verdict,
-        notebook=notebook,
-        note=verdict.note,
-        n=verdict.n,
-        replication_rate=verdict.replication_rate,
-        null_control="" if null is None else null.verdict,
-        oracle_control="" if oracle is None else oracle.verdict,
+        claim_id, published, verdict.median, verdict.ci_low, verdict.ci_high, unit,
+        verdict.verdict, notebook, verdict.note, verdict.n, verdict.replication_rate, **controls,
     )
 
 

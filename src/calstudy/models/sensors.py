@@ -194,10 +194,10 @@ class PinholeCamera:
             outside = ~self.in_image(uv)
             if outside.any():
                 i = int(np.argmax(outside))
+                where = f"points {_indices(outside)}; point {i} at u = {uv[i, 0]:.1f}, v = "
                 raise CalibrationError(
-                    f"{int(outside.sum())} of {len(uv)} points fall outside the "
-                    f"{self.width} x {self.height} image (points {_indices(outside)}; point {i} "
-                    f"at u = {uv[i, 0]:.1f}, v = {uv[i, 1]:.1f} px)"
+                    f"{int(outside.sum())} of {len(uv)} points fall outside the {self.width} x "
+                    f"{self.height} image ({where}{uv[i, 1]:.1f} px)"
                 )
         return uv + rng.normal(0.0, sigma_px, uv.shape)
 

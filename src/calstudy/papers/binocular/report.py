@@ -448,18 +448,14 @@ def robot_sweep_figure(sweep: pd.DataFrame, scenario: Scenario):
     """Fig. 13 RMSEs against the robot error scale."""
     model = scenario.config["station"]["robot"]["model"]
     fig13 = published("station", "fig13_rmse")
-    return sweep_figure(
-        sweep,
-        "robot_scale",
-        (
-            ("fig13_preliminary", "preliminary"),
-            ("fig13_updated", "updated"),
-            ("fig13_true", "true hand-eye (oracle)"),
-        ),
-        ((fig13[0], "paper, preliminary"), (fig13[1], "paper, updated")),
-        f"robot error scale (x tolerances of {model}.toml)",
-        "Fig. 13 RMSE (mm, median)",
+    curves = (
+        ("fig13_preliminary", "preliminary"),
+        ("fig13_updated", "updated"),
+        ("fig13_true", "true hand-eye (oracle)"),
     )
+    paper = ((fig13[0], "paper, preliminary"), (fig13[1], "paper, updated"))
+    xlabel = f"robot error scale (x tolerances of {model}.toml)"
+    return sweep_figure(sweep, "robot_scale", curves, paper, xlabel, "Fig. 13 RMSE (mm, median)")
 
 
 def calibration_sweep_figure(sweep: pd.DataFrame):

@@ -216,7 +216,7 @@ def _robot_from(table: dict, folder: Path, source) -> Robot:
         path = (folder / name).resolve()
         if not path.is_file():
             raise CalibrationError(f"{source}: robot file {path} does not exist")
-        return load_robot(str(path.with_suffix("")))  # an absolute stem: read in place
+        return load_robot(path)  # the cell's own table, read in place
     return load_robot(name)
 
 

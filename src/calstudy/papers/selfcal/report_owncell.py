@@ -100,12 +100,7 @@ def residuals_figure(residuals: pd.DataFrame, sigma_mm: float, threshold: float,
     ax.axhline(sigma_mm * np.sqrt(threshold), ls="--", color="k", label="rejection threshold")
     ax.set_yscale("log")
     ax.set_xticks(x, residuals["pose"].astype(str), fontsize=6, rotation=90)
-    ax.set_xlabel("pose")
-    ax.set_ylabel("|P - P_ref| (mm)")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    return fig
+    return _finish(fig, ax, "pose", "|P - P_ref| (mm)", title)
 
 
 def validation_figure(table: pd.DataFrame, requirement_mm: float, title: str):
@@ -116,8 +111,12 @@ def validation_figure(table: pd.DataFrame, requirement_mm: float, title: str):
     ax.bar(x + 0.2, table["after_mm"], 0.4, label="after (identified)")
     ax.axhline(requirement_mm, ls="--", color="k", label=f"requirement {requirement_mm:g} mm")
     ax.set_yscale("log")
-    ax.set_xlabel("held-out measurement")
-    ax.set_ylabel("position error (mm)")
+    return _finish(fig, ax, "held-out measurement", "position error (mm)", title)
+
+
+def _finish(fig, ax, xlabel: str, ylabel: str, title: str):
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.legend(fontsize=8)
     fig.tight_layout()
