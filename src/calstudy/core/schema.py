@@ -39,7 +39,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Annotated, Any, TypeVar, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from calstudy.core.errors import CalibrationError
 
@@ -64,6 +65,35 @@ class Schema(BaseModel):
     that ``"12"`` is not silently a number in a TOML file but numbers may be ints or floats."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
+
+
+#: three finite numbers (a position, a direction, a rotation vector)
+Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+#: two finite numbers
+Vec2 = Annotated[list[Finite], Field(min_length=2, max_length=2)]
+#: an angle in degrees, within one turn either way (a value within +-pi everywhere is not refused
+#: here: a scenario file declares degrees in its key names)
+Degrees = Annotated[float, Field(ge=-360, le=360, allow_inf_nan=False)]
+
+_DOC_KEY = re.compile(r"^(source|assumption|note|reason)s?$|_(source|assumption|note|reason)s?$")
+
+
+class Documented(Schema):
+    """A table of a scenario file: numbers with their ``source`` / ``assumption`` / ``*_note``
+    texts beside them. The texts (string values under such names) are dropped before the
+    numbers are checked, so they need not be declared, while a misspelt number key is still
+    refused."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _drop_documentation(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        return {
+            k: v
+            for k, v in data.items()
+            if not (isinstance(v, str) and _DOC_KEY.search(k) and k not in cls.model_fields)
+        }
 
 
 _BOUNDS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
@@ -182,6 +212,28 @@ def read_toml(path: str | Path, what: str) -> dict:
         raise CalibrationError(f"{path}: not valid TOML ({exc})") from exc
     except UnicodeDecodeError as exc:
         raise CalibrationError(f"{path}: not a UTF-8 text file ({exc.reason})") from exc
+
+
+def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
+    """The TOML table of ``path`` (the ``what``, for messages), unchanged, after validating it
+    against ``model``: for loaders that go on reading the dict (the numbers stay the bytes of
+    the file)."""
+    table = read_toml(path, what)
+    validate(model, table, path)
+    return table
+
+
+def rotation_problem(matrix, tol: float = 1e-4) -> str:
+    """Why the upper-left 3 x 3 block of ``matrix`` is not a rotation (``R^T R = I`` within
+    ``tol`` per entry, ``det R = +1``), in words; ``""`` if it is one."""
+    rot = np.asarray(matrix, dtype=float)[:3, :3]
+    err = float(np.abs(rot.T @ rot - np.eye(3)).max())
+    if not np.isfinite(err) or err > tol:
+        return f"its rotation is not orthonormal (max |R^T R - I| = {err:.3g}, allowed {tol:g})"
+    det = float(np.linalg.det(rot))
+    if det < 0:
+        return f"its rotation is a reflection (det R = {det:.6g})"
+    return ""
 
 
 def load_toml(path: str | Path, model: type[M], what: str) -> M:
@@ -311,6 +363,8 @@ def validate_rows(
 
 
 __all__ = [
+    "Degrees",
+    "Documented",
     "Finite",
     "Fraction",
     "NonNegativeFinite",
@@ -318,6 +372,9 @@ __all__ = [
     "PositiveFinite",
     "PositiveInt",
     "Schema",
+    "Vec2",
+    "Vec3",
+    "check_toml",
     "format_errors",
     "load_toml",
     "number_problem",
@@ -325,6 +382,7 @@ __all__ = [
     "read_csv_table",
     "read_toml",
     "require_columns",
+    "rotation_problem",
     "validate",
     "validate_rows",
 ]

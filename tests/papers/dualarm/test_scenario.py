@@ -30,7 +30,9 @@ def test_scenario_missing_key_names_file_and_key(tmp_path):
     good = data_path("dualarm", "scenario.toml").read_text()
     bad = tmp_path / "scenario.toml"
     bad.write_text(good.replace("loss_rate = 0.1\n", ""))
-    with pytest.raises(CalibrationError, match=r"scenario.toml: missing key 'detection.loss_rate'"):
+    with pytest.raises(
+        CalibrationError, match=r"scenario\.toml: detection\.loss_rate: missing \(required\)"
+    ):
         load_scenario(bad)
     with pytest.raises(FileNotFoundError, match="no such file"):
         load_scenario(tmp_path / "absent.toml")

@@ -70,9 +70,9 @@ def test_missing_file_and_missing_key_raise(tmp_path):
         scenario.load_scenario(tmp_path / "none.toml")
     path = tmp_path / "production.toml"
     path.write_text("[protocol]\nn_before = 10\n")
-    with pytest.raises(CalibrationError, match=r"missing key 'variation'"):
+    with pytest.raises(CalibrationError, match=r"variation: missing \(required\)"):
         scenario.load_scenario(path)
     bad = tmp_path / "station.toml"
     bad.write_text("[robot]\nrepeatability_mm = 0.06\n")
-    with pytest.raises(CalibrationError, match=r"missing key 'handeye'"):
+    with pytest.raises(CalibrationError, match=r"station\.toml: handeye: missing \(required\)"):
         scenario.load_station(bad)

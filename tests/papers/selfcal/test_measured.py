@@ -110,7 +110,7 @@ def _break(folder, name, old, new):
         ),
         (measured.SPHERES_FILE, "2,3684.406", "1,3684.406", "sphere 1 appears more than once"),
         (measured.SPHERES_FILE, "x_mm", "x_in", "sphere centres need columns"),
-        (measured.CELL_FILE, "zyx_deg = [30", "zyx = [30", "missing key 'base.zyx_deg'"),
+        (measured.CELL_FILE, "zyx_deg = [30", "zyx = [30", "base.zyx_deg: missing"),
     ],
 )
 def test_bad_files_name_file_row_and_column(tmp_path, scenario, name, old, new, message):

@@ -26,7 +26,7 @@ def test_missing_key_names_file_and_key(tmp_path: Path):
     broken = tmp_path / "cell.toml"
     broken.write_text(text.replace("max_fit_condition = 15.0\n", ""))
     with pytest.raises(
-        CalibrationError, match=r"cell\.toml: missing key 'scanner\.max_fit_condition'"
+        CalibrationError, match=r"cell\.toml: scanner\.max_fit_condition: missing \(required\)"
     ):
         load_scenario(broken)
 

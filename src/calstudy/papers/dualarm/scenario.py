@@ -4,7 +4,8 @@
 transforms of Table A2, noise and the experiments' geometry, each entry naming its source or
 assumption); :func:`load_published` reads ``data/dualarm/published.toml`` (the results of
 Section 4 and Tables 1-3). Both go through :mod:`calstudy.core.config`, so a missing file or key
-is reported as in every paper.
+is reported as in every paper; the scenario is checked on load against
+:mod:`calstudy.papers.dualarm.schema` (types, ranges, required keys, cross-field rules).
 
 Frames follow the study's naming: ``cam2flange`` maps left-camera points to the flange,
 ``world2base`` the marker (world) frame to a robot base, ``base2_to_base1`` base 2 to base 1.
@@ -21,8 +22,10 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.config import read_toml, require, scenario_file
+from calstudy.core.schema import check_toml
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig, stereo_rig
+from calstudy.papers.dualarm.schema import ScenarioFile
 
 PAPER = "dualarm"
 #: the two arms, numbered as in the paper
@@ -220,10 +223,13 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
     FileNotFoundError
         If the file does not exist.
     CalibrationError
-        If it is not valid TOML or a key is missing (the message names the file and key).
+        If it is not valid TOML or breaks :class:`~calstudy.papers.dualarm.schema.ScenarioFile`:
+        a missing or unknown key, a value out of range (``loss_rate = 1.5``, ``points_per_scan
+        = -500``), markers without a group; the message names the file, the key, the value and
+        the allowed range.
     """
     src = scenario_file(PAPER, "scenario.toml", path)
-    d = read_toml(src, "dualarm scenario")
+    d = check_toml(src, ScenarioFile, "dualarm scenario")
     scalars = {}
     for field, (key, degrees) in _SCALARS.items():
         value = require(d, key, src)

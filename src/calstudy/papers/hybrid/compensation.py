@@ -25,13 +25,18 @@ bins; only the Lilliefors test is general (:func:`calstudy.core.stats.lilliefors
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.core.schema import read_csv_table, require_columns, validate_rows
 from calstudy.core.stats import lilliefors_tests
-from calstudy.papers.hybrid.scenario import PHASES, load_published
+from calstudy.papers.hybrid.scenario import AXES, PHASES, load_published
+from calstudy.papers.hybrid.schema import MeasurementRow
 
 MEASUREMENT_COLUMNS = ("product", "phase", "point_id", "x_mm", "y_mm", "z_mm")
 
@@ -148,9 +153,88 @@ def measurements_from_frames(hybrid: pd.DataFrame, cmm: pd.DataFrame):
     return ids_h, run
 
 
+#: factor to mm of the coordinate columns ``x_<unit>, y_<unit>, z_<unit>``
+LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
+#: coordinates all below this (in magnitude) look like metres ...
+METRE_SUSPECT = 10.0
+#: ... when the other table's reach this
+MM_TYPICAL = 100.0
+_UNITS_COMMENT = re.compile(r"^\s*#\s*units\s*[:=]\s*mm\s*$", re.IGNORECASE | re.MULTILINE)
+
+
+def read_table(path, name: str) -> tuple[pd.DataFrame, bool]:
+    """One hybrid or CMM table (``name``, for messages) read from CSV and checked row by row.
+
+    The columns are those of :data:`MEASUREMENT_COLUMNS`; the coordinates may instead be
+    declared in metres (``x_m, y_m, z_m``: converted to mm). Spreadsheet files are accepted
+    (byte-order mark, ``;`` separator, ``#`` comments). Returns the table (mm) and whether its
+    unit is declared: columns in metres, or a comment line ``# units: mm``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a file.
+    CalibrationError
+        On a missing or repeated column, no rows, or a bad cell, named by row and column (a
+        decimal comma ``12,5`` as such; a phase that is not ``compensation`` or ``follow-up``;
+        a product that is not an integer).
+    """
+    header, rows = read_csv_table(path, f"{name} table")
+    repeated = sorted({h for h in header if header.count(h) > 1})
+    if repeated:
+        raise CalibrationError(f"{path}: column(s) {repeated} given more than once")
+    units = [u for u in LENGTH_UNITS if any(f"{a}_{u}" in header for a in AXES)]
+    if len(units) > 1:
+        raise CalibrationError(
+            f"{path}: coordinates in both mm and m columns; use x_mm, y_mm, z_mm or x_m, y_m, z_m"
+        )
+    unit = units[0] if units else "mm"
+    coords = [f"{a}_{unit}" for a in AXES]
+    require_columns(path, header, [*MEASUREMENT_COLUMNS[:3], *coords])
+    if not rows:
+        raise CalibrationError(f"{path}: no data rows (the {name} table is empty)")
+    renamed = [f"{h[: -len(unit)]}mm" if h in coords else h for h in header]
+    records = validate_rows(MeasurementRow, renamed, rows, path)
+    df = pd.DataFrame([r.model_dump() for r in records], columns=list(MEASUREMENT_COLUMNS))
+    if unit != "mm":
+        df[list(MEASUREMENT_COLUMNS[3:])] *= LENGTH_UNITS[unit]
+    declared = unit != "mm" or bool(_UNITS_COMMENT.search(Path(path).read_text("utf-8-sig")))
+    return df, declared
+
+
+def _check_units(tables: dict) -> None:
+    """Refuse undeclared coordinates that look like metres: all below :data:`METRE_SUSPECT`
+    while the other table's reach :data:`MM_TYPICAL` (both tables in metres are not caught:
+    coordinates of a small part near its frame's origin are rightly below 10 mm)."""
+    big = {
+        k: float(np.abs(df[list(MEASUREMENT_COLUMNS[3:])].to_numpy()).max())
+        for k, (df, _, _) in tables.items()
+    }
+    for name, (_, declared, path) in tables.items():
+        other = next(k for k in tables if k != name)
+        if declared or big[name] >= METRE_SUSPECT:
+            continue
+        if big[other] < MM_TYPICAL:
+            continue
+        why = f"while those of the {other} table reach {big[other]:.4g}"
+        raise CalibrationError(
+            f"{path}: the coordinates of the {name} table are all below {METRE_SUSPECT:g} "
+            f"(largest |value| {big[name]:.4g}) {why}: they look like metres, but x_mm, y_mm, "
+            "z_mm hold mm (an offset would absorb the scale and give a plausible Table 1); "
+            "convert them, name the columns x_m, y_m, z_m, or, if they are millimetres, add "
+            "the line '# units: mm'"
+        )
+
+
 def read_measurements(hybrid_csv: str, cmm_csv: str):
-    """:func:`measurements_from_frames` on two CSV files."""
-    return measurements_from_frames(pd.read_csv(hybrid_csv), pd.read_csv(cmm_csv))
+    """:func:`measurements_from_frames` on two CSV files read by :func:`read_table`, after
+    checking that neither holds metres in its mm columns (unless its unit is declared)."""
+    tables = {}
+    for name, path in (("hybrid", hybrid_csv), ("CMM", cmm_csv)):
+        df, declared = read_table(path, name)
+        tables[name] = (df, declared, path)
+    _check_units(tables)
+    return measurements_from_frames(tables["hybrid"][0], tables["CMM"][0])
 
 
 def station_data(hybrid_csv: str, cmm_csv: str, ids, simulated_run: dict):

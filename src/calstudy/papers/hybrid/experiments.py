@@ -417,12 +417,30 @@ def robot_accuracy_experiment(n_robots: int = 20, n_configs: int = 200) -> Exper
     return Experiment("robot_accuracy", robot_accuracy_run, setup, n_robots)
 
 
-def calibrate_handeye(measurements_csv: str, seed: int, sensor_sigma_mm=None):
+def calibrate_handeye(
+    measurements_csv: str, seed: int, sensor_sigma_mm=None, misfit: str = "raise"
+):
     """The fixed-sphere hand-eye from a user's CSV if given, else from one simulated run.
+
+    ``sensor_sigma_mm`` is the standard deviation (mm, one or one per sensor axis) of a measured
+    centre, everything included: the sensor's repeatability and the robot's pose error, which
+    the nominal model the flange poses come from does not know. ``misfit`` (``"raise"`` or
+    ``"flag"``) says what a user's data whose ML fit is far outside it does: refused, or kept
+    with the message in ``ml_estimate.flags`` and a :class:`calstudy.CalibrationWarning`. The
+    simulated run always flags (its robot errors are not in the sensor noise).
 
     Returns ``(source, measurements, paper_estimate, ml_estimate, table)`` where ``table`` lists
     ``sensor2flange`` (translation mm, rotation vector deg) by the paper's method and by the ML
     refinement with its standard deviations, and, for simulated data, the truth.
+
+    Raises
+    ------
+    CalibrationError
+        For a user's CSV, on any check of
+        :func:`calstudy.estimators.handeye.read_sphere_measurements`, and if the ML fit is far
+        outside ``sensor_sigma_mm`` (goodness of fit, ``misfit="flag"``): the message names the
+        measurement ids that disagree most (a sphere that moved between the two series);
+        ``misfit="flag"`` turns this into a warning.
     """
     rng = trial_rng(seed, "handeye_calibration", {}, 0)
     truth = None
@@ -438,7 +456,14 @@ def calibrate_handeye(measurements_csv: str, seed: int, sensor_sigma_mm=None):
         sigma = station.laser.centre_covariance(meas.centres, station.sphere.radius_mm)
         truth = station.sensor2flange_true
     paper = sphere_handeye(*meas.select("translation"), *meas.select("rotation"))
-    ml = sphere_handeye_ml(meas.flange2base, meas.centres, sigma, paper.value)
+    if measurements_csv:
+        # measured data: a fit far outside the stated noise (a sphere that moved between the
+        # series, mixed units) is refused (or flagged), naming the ids that disagree most
+        ml = sphere_handeye_ml(
+            meas.flange2base, meas.centres, sigma, paper.value, ids=meas.ids, misfit=misfit
+        )
+    else:
+        ml = sphere_handeye_ml(meas.flange2base, meas.centres, sigma, paper.value)
     names = ["tx_mm", "ty_mm", "tz_mm", "rx_deg", "ry_deg", "rz_deg"]
     scale = np.array([1, 1, 1, 180 / np.pi, 180 / np.pi, 180 / np.pi])
     table = pd.DataFrame(

@@ -14,7 +14,9 @@ Three files of ``data/hybrid/`` describe the paper's setup, each number a fact f
   with, read by :func:`load_published`.
 
 Every file is read through :mod:`calstudy.core.config`, so a missing file, a malformed one or a
-missing key raise the same errors as in the other papers.
+missing key raise the same errors as in the other papers; ``station.toml`` and
+``production.toml`` are checked on load against the schemas of
+:mod:`calstudy.papers.hybrid.schema` (types, ranges, required keys, cross-field rules).
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ import numpy as np
 
 from calstudy.core.config import read_toml, require, scenario_file
 from calstudy.core.errors import CalibrationError
+from calstudy.core.schema import check_toml
 from calstudy.estimators.workpiece import RPS_EQUATIONS
+from calstudy.papers.hybrid.schema import ProductionFile, StationFile
 
 PAPER = "hybrid"
 STATION_FILE = "station.toml"
@@ -46,50 +50,10 @@ SWEEP_LABELS = {
     "drift_sigma_mm": "drift before follow-up, sigma (mm)",
 }
 
-#: keys of ``station.toml`` the simulation reads (checked when the file is loaded)
-_STATION_KEYS = (
-    "handeye.matrix",
-    "robot.repeatability_mm",
-    "sensor.standoff_mm",
-    "sensor.stripe_offset_fraction",
-    "sphere.centre_mm",
-    "calibration_moves.n_translations",
-    "calibration_moves.n_rotations",
-    "calibration_moves.translation_range_mm",
-    "calibration_moves.across_plane_range_mm",
-    "calibration_moves.rotation_range_deg",
-    "calibration_moves.rotation_min_deg",
-    "cameras.fx",
-    "cameras.fy",
-    "cameras.cx",
-    "cameras.cy",
-    "cameras.width",
-    "cameras.height",
-    "cameras.pixel_sigma",
-    "target.cmm_sigma_mm",
-    "target.cmm_sigma_deg",
-    "stationary.positions_mm",
-    "stationary.tilts_deg",
-    "workpiece.size_mm",
-    "workpiece.nominal_origin_mm",
-    "workpiece.nominal_rotz_deg",
-    "workpiece.datum_A_slot_mm",
-    "workpiece.datum_B_hole_mm",
-    "workpiece.datum_C_plane_mm",
-    "workpiece.placement_sigma_mm",
-    "workpiece.placement_sigma_deg",
-    "workpiece.datum_sigma_mm",
-    "workpiece.free_direction_mm",
-)
-
-
-def _load(name: str, what: str, path: str | Path | None, keys=()) -> dict:
-    """The TOML file ``path`` (default ``data/hybrid/<name>``) after checking ``keys``."""
-    source = scenario_file(PAPER, name, path)
-    table = read_toml(source, what)
-    for key in keys:
-        require(table, key, source)
-    return table
+def _load(name: str, what: str, path: str | Path | None, model) -> dict:
+    """The TOML file ``path`` (default ``data/hybrid/<name>``) after checking it against
+    ``model`` (:mod:`calstudy.papers.hybrid.schema`)."""
+    return check_toml(scenario_file(PAPER, name, path), model, what)
 
 
 def load_station(path: str | Path | None = None) -> dict:
@@ -97,15 +61,21 @@ def load_station(path: str | Path | None = None) -> dict:
 
     Raises
     ------
-    FileNotFoundError, CalibrationError
-        If the file is missing or not TOML, or lacks a key the simulation reads.
+    FileNotFoundError
+        If the file is missing (the message names it).
+    CalibrationError
+        If it is not TOML or breaks :class:`~calstudy.papers.hybrid.schema.StationFile`: a
+        missing or unknown key, a value out of range (the message names file, key, value and
+        range), a hand-eye matrix that is not rigid, collinear datums.
     """
-    return _load(STATION_FILE, "hybrid station description", path, _STATION_KEYS)
+    return _load(STATION_FILE, "hybrid station description", path, StationFile)
 
 
 def load_production(path: str | Path | None = None) -> dict:
-    """The production description (default ``data/hybrid/production.toml``) as a dict."""
-    return _load(PRODUCTION_FILE, "hybrid production description", path)
+    """The production description (default ``data/hybrid/production.toml``) as a dict, checked
+    against :class:`~calstudy.papers.hybrid.schema.ProductionFile` (errors as
+    :func:`load_station`)."""
+    return _load(PRODUCTION_FILE, "hybrid production description", path, ProductionFile)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -235,7 +205,7 @@ def load_scenario(
     """The production scenario of ``path`` (default ``data/hybrid/production.toml``) with the
     robot repeatability of ``station_path`` (default ``data/hybrid/station.toml``)."""
     source = scenario_file(PAPER, PRODUCTION_FILE, path)
-    cfg = read_toml(source, "hybrid production description")
+    cfg = load_production(source)
     values = {name: require(cfg, key, source) for name, key in _SCENARIO_KEYS.items()}
     repeatability = load_station(station_path)["robot"]["repeatability_mm"]
     return Scenario(repeatability_mm=repeatability, **values)

@@ -39,9 +39,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calstudy.core.config import check_ids, parse_number, read_toml, require
+from calstudy.core.config import check_ids, parse_number, require
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform, matrix_to_euler_zyx
+from calstudy.core.schema import check_toml
 from calstudy.models.kinematics import Robot, load_robot
 from calstudy.papers.selfcal.identify import Identification, Measurements, identify
 from calstudy.papers.selfcal.model import (
@@ -53,6 +54,7 @@ from calstudy.papers.selfcal.model import (
     default_model,
     parameters_from_robot,
 )
+from calstudy.papers.selfcal.schema import CellFile
 
 CELL_FILE, SPHERES_FILE, MEASUREMENTS_FILE = "cell.toml", "spheres.csv", "measurements.csv"
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
@@ -265,7 +267,7 @@ def read_cell(folder) -> MeasuredCell:
     cell_path = folder / CELL_FILE
     if not cell_path.is_file():
         raise CalibrationError(f"{cell_path}: no such file (the cell description)")
-    table = read_toml(cell_path, "cell description")
+    table = check_toml(cell_path, CellFile, "cell description")
     robot = _robot_from(table, folder, cell_path)
     part2base = _pose_from(table, "base", cell_path)
     sensor2flange = _pose_from(table, "sensor", cell_path)

@@ -13,9 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calstudy.core.config import read_toml, require, scenario_file
+from calstudy.core.config import require, scenario_file
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
+from calstudy.core.schema import check_toml
 from calstudy.models.kinematics import Robot, load_robot
+from calstudy.papers.selfcal.schema import ScenarioFile
 
 
 @dataclass(frozen=True)
@@ -87,10 +89,13 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
     FileNotFoundError
         If the file (or the robot table it names) does not exist.
     CalibrationError
-        If the file is not valid TOML or a key is missing (the message names file and key).
+        If the file is not valid TOML or breaks :class:`~calstudy.papers.selfcal.schema.
+        ScenarioFile`: a missing or unknown key, a value out of range (a negative radius,
+        ``views_per_sphere = 0``), an envelope that is not a box; the message names the file,
+        the key, the value and the allowed range.
     """
     path = scenario_file("selfcal", "scenario.toml", path)
-    t = read_toml(path, "selfcal scenario")
+    t = check_toml(path, ScenarioFile, "selfcal scenario")
 
     def get(key: str):
         return require(t, key, path)

@@ -1,0 +1,202 @@
+"""Schema of the dualarm paper's ``scenario.toml`` (the station of notebook 05, or a copy
+describing yours).
+
+Checked on load (:func:`calstudy.core.schema.check_toml`): every key read must be there with its
+type and range (lengths mm, angles degrees where the key says ``_deg``, rotation vectors rad),
+unknown keys are refused, and the cross-field rules below hold (one position per marker name,
+every marker in a declared group, a principal point inside the image, an outlier range that is
+a range). A message names the file, the key, the value and the allowed range.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import Field, model_validator
+
+from calstudy.core.schema import (
+    Documented,
+    Finite,
+    Fraction,
+    NonNegativeFinite,
+    PositiveFinite,
+    PositiveInt,
+    Vec3,
+)
+
+#: an angle from a direction (a tilt, an incidence, a viewing angle), degrees
+Tilt = Annotated[float, Field(ge=0, le=90, allow_inf_nan=False)]
+#: a rotation vector (rad), at most half a turn beyond pi
+RotVec = Annotated[
+    list[Annotated[float, Field(ge=-7, le=7, allow_inf_nan=False)]],
+    Field(min_length=3, max_length=3),
+]
+
+
+class Camera(Documented):
+    width: PositiveInt
+    height: PositiveInt
+    fx_px: PositiveFinite
+    fy_px: PositiveFinite
+    cx_px: Finite
+    cy_px: Finite
+
+    @model_validator(mode="after")
+    def _centre_in_image(self) -> Camera:
+        if not (0 <= self.cx_px < self.width and 0 <= self.cy_px < self.height):
+            raise ValueError(
+                f"principal point ({self.cx_px}, {self.cy_px}) lies outside the {self.width} x "
+                f"{self.height} px image"
+            )
+        return self
+
+
+class Stereo(Documented):
+    baseline_mm: PositiveFinite
+    convergence_distance_mm: PositiveFinite
+
+
+class Sensor(Documented):
+    point_sigma_mm: NonNegativeFinite
+    #: a sphere fit needs at least 4 points
+    points_per_scan: Annotated[int, Field(ge=4)]
+    max_incidence_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
+    working_distance_mm: PositiveFinite
+
+
+class Detection(Documented):
+    sigma_px: NonNegativeFinite
+    marker_sigma_mm: NonNegativeFinite
+    #: the probability that a visible marker is lost in an image
+    loss_rate: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
+    max_view_angle_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
+
+
+class Markers(Documented):
+    names: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=3)]
+    xyz_mm: Annotated[list[Vec3], Field(min_length=3)]
+    groups: Annotated[list[str], Field(min_length=2, max_length=2)]
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Markers:
+        if len(self.names) != len(self.xyz_mm):
+            raise ValueError(f"{len(self.names)} names but {len(self.xyz_mm)} xyz_mm; one each")
+        if len(set(self.names)) != len(self.names):
+            dup = sorted({n for n in self.names if self.names.count(n) > 1})
+            raise ValueError(f"marker names repeated: {dup}")
+        strays = [n for n in self.names if n.split("-")[0] not in self.groups]
+        if strays:
+            raise ValueError(
+                f"markers {strays} belong to no group of {self.groups} (a name is <group>-<code>)"
+            )
+        return self
+
+
+class Calibration(Documented):
+    cam2flange_1_rotvec: RotVec
+    cam2flange_1_mm: Vec3
+    cam2flange_2_rotvec: RotVec
+    cam2flange_2_mm: Vec3
+    base2_to_base1_rotvec: RotVec
+    base2_to_base1_mm: Vec3
+
+
+class Layout(Documented):
+    world2base1_rotvec: RotVec
+    world2base1_mm: Vec3
+
+
+class Robot(Documented):
+    repeat_sigma_mm: NonNegativeFinite
+    repeat_sigma_deg: NonNegativeFinite
+    drift_step_sigma_mm: NonNegativeFinite
+    drift_step_sigma_deg: NonNegativeFinite
+
+
+class Spheres(Documented):
+    diameter_a_mm: PositiveFinite
+    diameter_b_mm: PositiveFinite
+
+
+class HandEye(Documented):
+    grid_rows: Annotated[int, Field(ge=2)]
+    grid_cols: Annotated[int, Field(ge=2)]
+    pitch_mm: PositiveFinite
+    #: Tsai-Lenz needs at least 3 poses (2 motions about different axes)
+    n_poses: Annotated[int, Field(ge=3)]
+    tilt_deg: Tilt
+
+
+class Survey(Documented):
+    views_per_group: PositiveInt
+    bridge_views: PositiveInt
+    bridge_distance_mm: PositiveFinite
+    bridge_tilt_deg: Tilt
+    tilt_deg: Tilt
+    #: PnP needs at least 3 shared markers
+    min_shared_markers: Annotated[int, Field(ge=3)]
+
+
+class GlobalTest(Documented):
+    n_groups: PositiveInt
+    n_poses: PositiveInt
+    calibration_poses: PositiveInt
+    placement_offsets_mm: Annotated[list[Finite], Field(min_length=1)]
+    stand_height_mm: Finite
+
+    @model_validator(mode="after")
+    def _one_offset_per_group(self) -> GlobalTest:
+        if len(self.placement_offsets_mm) != self.n_groups:
+            raise ValueError(
+                f"{len(self.placement_offsets_mm)} placement_offsets_mm for n_groups = "
+                f"{self.n_groups}; one per group"
+            )
+        return self
+
+
+class CircularPlate(Documented):
+    tilt_deg: Tilt
+    jitter_deg: Tilt
+    outlier_rate: Fraction
+    outlier_px: Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
+    ransac_threshold_px: PositiveFinite
+
+    @model_validator(mode="after")
+    def _range(self) -> CircularPlate:
+        lo, hi = self.outlier_px
+        if lo > hi:
+            raise ValueError(f"outlier_px = {self.outlier_px} is not [low, high]")
+        return self
+
+
+class Icp(Documented):
+    z_weight: PositiveFinite
+    z_threshold_mm: PositiveFinite
+    max_iterations: PositiveInt
+    max_pair_distance_mm: PositiveFinite
+    n_views: Annotated[int, Field(ge=2)]
+    tilt_deg: Tilt
+    sphere_offset_mm: Finite
+
+
+class ScenarioFile(Documented):
+    """``data/dualarm/scenario.toml``."""
+
+    name: str = ""
+    camera: Camera
+    stereo: Stereo
+    sensor: Sensor
+    detection: Detection
+    markers: Markers
+    calibration: Calibration
+    layout: Layout
+    robot: Robot
+    spheres: Spheres
+    handeye: HandEye
+    survey: Survey
+    global_test: GlobalTest
+    circular_plate: CircularPlate
+    icp: Icp
+
+
+__all__ = ["ScenarioFile"]

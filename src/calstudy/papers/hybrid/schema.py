@@ -1,0 +1,267 @@
+"""Schemas of the hybrid paper's files: ``station.toml``, ``production.toml`` and the rows of the
+hybrid and CMM tables of notebook 02.
+
+Each TOML file is checked on load (:func:`calstudy.core.schema.check_toml`): every key the
+simulation reads must be there, with its type and range (lengths in mm, angles in degrees where
+the key says ``_deg``), unknown keys are refused (a misspelt key is not silently a default), and
+the cross-field rules below hold. A message names the file, the key, the value and the allowed
+range, e.g. ``station.toml: handeye.matrix: its rotation is not orthonormal (...)``.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field, field_validator, model_validator
+
+from calstudy.core.schema import (
+    Degrees,
+    Documented,
+    Finite,
+    NonNegativeFinite,
+    PositiveFinite,
+    PositiveInt,
+    Schema,
+    Vec3,
+    rotation_problem,
+)
+
+#: at least three products: a mean, a standard deviation and a correlation need them
+Products = Annotated[int, Field(ge=3)]
+Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+
+
+class Source(Documented):
+    paper: str = ""
+    robot: str = ""
+    station: str = ""
+
+
+class HandEye(Documented):
+    #: sensor2flange, a rigid 4 x 4 transform (mm); printed to 6 decimals in the paper
+    matrix: Annotated[list[Row4], Field(min_length=4, max_length=4)]
+
+    @field_validator("matrix")
+    @classmethod
+    def _rigid(cls, matrix: list) -> list:
+        m = np.array(matrix, dtype=float)
+        if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+            raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
+        problem = rotation_problem(m)
+        if problem:
+            raise ValueError(f"not a rigid transform: {problem}")
+        return matrix
+
+
+class Robot(Documented):
+    repeatability_mm: NonNegativeFinite
+
+
+class Sensor(Documented):
+    standoff_mm: PositiveFinite
+    #: the stripe must fall on the sphere: |y| = fraction * R with 0 <= fraction < 1
+    stripe_offset_fraction: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
+
+
+class SphereTable(Documented):
+    centre_mm: Vec3
+
+
+class Moves(Documented):
+    n_translations: Annotated[int, Field(ge=3)]
+    n_rotations: Annotated[int, Field(ge=2)]
+    translation_range_mm: PositiveFinite
+    across_plane_range_mm: NonNegativeFinite
+    rotation_range_deg: Annotated[float, Field(gt=0, le=180, allow_inf_nan=False)]
+    rotation_min_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
+
+    @model_validator(mode="after")
+    def _range(self) -> Moves:
+        if self.rotation_min_deg > self.rotation_range_deg:
+            raise ValueError(
+                f"rotation_min_deg = {self.rotation_min_deg} exceeds rotation_range_deg = "
+                f"{self.rotation_range_deg}"
+            )
+        return self
+
+
+class Cameras(Documented):
+    fx: PositiveFinite
+    fy: PositiveFinite
+    cx: Finite
+    cy: Finite
+    width: PositiveInt
+    height: PositiveInt
+    pixel_sigma: NonNegativeFinite
+
+    @model_validator(mode="after")
+    def _centre_in_image(self) -> Cameras:
+        if not (0 <= self.cx < self.width and 0 <= self.cy < self.height):
+            raise ValueError(
+                f"principal point ({self.cx}, {self.cy}) lies outside the {self.width} x "
+                f"{self.height} px image"
+            )
+        return self
+
+
+class Target(Documented):
+    cmm_sigma_mm: NonNegativeFinite
+    cmm_sigma_deg: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)]
+
+
+class Stationary(Documented):
+    positions_mm: Annotated[list[Vec3], Field(min_length=3)]
+    tilts_deg: list[Annotated[list[Degrees], Field(min_length=2, max_length=2)]]
+
+    @model_validator(mode="after")
+    def _same_count(self) -> Stationary:
+        if len(self.tilts_deg) != len(self.positions_mm):
+            raise ValueError(
+                f"{len(self.positions_mm)} positions_mm but {len(self.tilts_deg)} tilts_deg; "
+                "one tilt per sensor"
+            )
+        return self
+
+
+class Workpiece(Documented):
+    size_mm: Annotated[list[PositiveFinite], Field(min_length=2, max_length=2)]
+    nominal_origin_mm: Vec3
+    nominal_rotz_deg: Degrees
+    datum_A_slot_mm: Vec3
+    datum_B_hole_mm: Vec3
+    datum_C_plane_mm: Vec3
+    placement_sigma_mm: NonNegativeFinite
+    placement_sigma_deg: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)]
+    datum_sigma_mm: NonNegativeFinite
+    free_direction_mm: NonNegativeFinite
+
+    @model_validator(mode="after")
+    def _datums_not_collinear(self) -> Workpiece:
+        datums = (self.datum_A_slot_mm, self.datum_B_hole_mm, self.datum_C_plane_mm)
+        a, b, c = (np.array(v, float) for v in datums)
+        area = float(np.linalg.norm(np.cross(b - a, c - a)))
+        if area <= 1e-6 * max(1.0, float(np.linalg.norm(b - a) * np.linalg.norm(c - a))):
+            raise ValueError("datums A, B and C are collinear; the 3-2-1 frame needs a triangle")
+        return self
+
+
+class StationFile(Documented):
+    """``data/hybrid/station.toml``."""
+
+    source: Source = Source()
+    handeye: HandEye
+    robot: Robot
+    sensor: Sensor
+    sphere: SphereTable
+    calibration_moves: Moves
+    cameras: Cameras
+    target: Target
+    stationary: Stationary
+    workpiece: Workpiece
+
+
+# ---------------------------------------------------------------------------------------------
+# production.toml
+
+
+class Protocol(Documented):
+    n_before: Products
+    n_compensation: Products
+    n_compensation_max: Products
+    n_follow_up: Products
+
+    @model_validator(mode="after")
+    def _max(self) -> Protocol:
+        if self.n_compensation_max < max(self.n_before, self.n_compensation):
+            raise ValueError(
+                f"n_compensation_max = {self.n_compensation_max} is below n_before = "
+                f"{self.n_before} or n_compensation = {self.n_compensation}"
+            )
+        return self
+
+
+class Variation(Documented):
+    part_sigma_mm: NonNegativeFinite
+
+
+class FeatureNoise(Documented):
+    feature_sigma_mm: NonNegativeFinite
+
+
+class Sigma(Documented):
+    sigma_mm: NonNegativeFinite
+
+
+Sweep = Annotated[list[NonNegativeFinite], Field(min_length=1)]
+
+
+class SweepTable(Documented):
+    part_sigma_mm: Sweep
+    feature_sigma_mm: Sweep
+    repeatability_mm: Sweep
+    drift_sigma_mm: Sweep
+
+
+class StationaryFeatures(Documented):
+    ids: Annotated[list[str], Field(min_length=3)]
+    kinds: Annotated[list[str], Field(min_length=3)]
+    #: the points of sensors 4.. (sensors 1-3 measure the datums of station.toml)
+    others_xyz_mm: list[Vec3]
+
+    @model_validator(mode="after")
+    def _counts(self) -> StationaryFeatures:
+        n = 3 + len(self.others_xyz_mm)
+        if len(self.ids) != n or len(self.kinds) != n:
+            raise ValueError(
+                f"{len(self.ids)} ids, {len(self.kinds)} kinds and {n} points (3 datums + "
+                f"{len(self.others_xyz_mm)} others_xyz_mm); they must match"
+            )
+        return self
+
+
+class Feature(Schema):
+    id: Annotated[str, Field(min_length=1)]
+    kind: str
+    xyz_mm: Vec3
+    view: Vec3
+    yaw_deg: Degrees
+
+    @model_validator(mode="after")
+    def _view(self) -> Feature:
+        if float(np.linalg.norm(self.view)) < 1e-9:
+            raise ValueError(f"view of {self.id} is the zero vector; it is a direction")
+        return self
+
+
+class Flexible(Documented):
+    features: Annotated[list[Feature], Field(min_length=1)]
+
+
+class ProductionFile(Documented):
+    """``data/hybrid/production.toml``."""
+
+    source: Source = Source()
+    protocol: Protocol
+    variation: Variation
+    sensors: FeatureNoise
+    cmm: Sigma
+    drift: Sigma
+    sweep: SweepTable
+    stationary_features: StationaryFeatures
+    flexible: Flexible
+
+
+# ---------------------------------------------------------------------------------------------
+# the rows of the hybrid and CMM tables (notebook 02)
+
+
+class MeasurementRow(Schema):
+    """One row of a hybrid or CMM table: a feature point of one product, mm."""
+
+    product: Annotated[int, Field(ge=0)]
+    phase: Literal["compensation", "follow-up"]
+    point_id: Annotated[str, Field(min_length=1)]
+    x_mm: Finite
+    y_mm: Finite
+    z_mm: Finite

@@ -1,0 +1,157 @@
+"""Schemas of the selfcal paper's files: ``scenario.toml`` (the simulated cell, or a copy
+describing yours) and the ``cell.toml`` of a measurement folder.
+
+Both are checked on load (:func:`calstudy.core.schema.check_toml`): every key read must be there
+with its type and range (lengths mm, angles degrees where the key says ``_deg``), unknown keys
+are refused, and the cross-field rules below hold (the sphere envelope is a box, its spheres fit
+in it at their minimum separation). The robot table a file names is checked by
+:func:`calstudy.models.kinematics.load_robot` (a missing one: ``FileNotFoundError`` with the
+tables available).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+from pydantic import Field, model_validator
+
+from calstudy.core.schema import (
+    Degrees,
+    Documented,
+    NonNegativeFinite,
+    PositiveFinite,
+    PositiveInt,
+    Schema,
+    Vec3,
+)
+
+RobotName = Annotated[str, Field(min_length=1)]
+#: a half-angle of a cone, degrees
+HalfAngle = Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
+AngleSigma = Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
+
+
+class Pose(Schema):
+    xyz_mm: Vec3
+    zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
+
+
+class Repeatability(Documented):
+    sigma_mm: NonNegativeFinite
+
+
+class Base(Documented):
+    rough_xyz_mm: Vec3
+    rough_zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
+    sigma_mm: NonNegativeFinite
+    sigma_deg: AngleSigma
+
+
+class SensorMount(Documented):
+    design_xyz_mm: Vec3
+    design_zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
+    sigma_mm: NonNegativeFinite
+    sigma_deg: AngleSigma
+
+
+class PoorStart(Documented):
+    base_mm: NonNegativeFinite
+    base_deg: AngleSigma
+    sensor_mm: NonNegativeFinite
+    sensor_deg: AngleSigma
+    robot_length_mm: NonNegativeFinite
+    robot_angle_deg: AngleSigma
+    basin_scales: Annotated[list[NonNegativeFinite], Field(min_length=1)]
+
+
+class Spheres(Documented):
+    count: Annotated[int, Field(ge=3)]
+    radius_mm: PositiveFinite
+    min_separation_mm: NonNegativeFinite
+    envelope_min_mm: Vec3
+    envelope_max_mm: Vec3
+
+    @model_validator(mode="after")
+    def _envelope(self) -> Spheres:
+        lo, hi = self.envelope_min_mm, self.envelope_max_mm
+        if any(a >= b for a, b in zip(lo, hi, strict=True)):
+            raise ValueError(f"envelope_min_mm {lo} is not below envelope_max_mm {hi} everywhere")
+        diagonal = math.dist(lo, hi)
+        if self.min_separation_mm >= diagonal:
+            raise ValueError(
+                f"min_separation_mm = {self.min_separation_mm} is not below the envelope's "
+                f"diagonal {diagonal:.1f} mm: no two spheres fit"
+            )
+        return self
+
+
+class Scanner(Documented):
+    standoff_mm: PositiveFinite
+    field_mm: PositiveFinite
+    depth_mm: PositiveFinite
+    view_cone_deg: HalfAngle
+    roll_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
+    cap_half_angle_deg: HalfAngle
+    #: a sphere fit (centre and radius) needs at least 4 points
+    points_per_cap: Annotated[int, Field(ge=4)]
+    sigma_point_mm: NonNegativeFinite
+    max_fit_condition: Annotated[float, Field(ge=1, allow_inf_nan=False)]
+
+
+class Tracker(Documented):
+    u0_mm: NonNegativeFinite
+    u1_mm_per_m: NonNegativeFinite
+    coverage: PositiveFinite
+
+
+class Protocol(Documented):
+    views_per_sphere: PositiveInt
+    validation_placements: PositiveInt
+    requirement_mm: PositiveFinite
+    crb_multiple: Annotated[float, Field(ge=1, allow_inf_nan=False)]
+
+
+class Compliance(Documented):
+    payload_kg: NonNegativeFinite
+    stiffness_nm_per_rad: Annotated[list[PositiveFinite], Field(min_length=6, max_length=6)]
+    scale: NonNegativeFinite
+    sweep_scales: Annotated[list[NonNegativeFinite], Field(min_length=1)]
+
+
+class Published(Documented):
+    convergence_iterations: PositiveInt
+
+
+class ScenarioFile(Documented):
+    """``data/selfcal/scenario.toml``."""
+
+    robot: RobotName
+    repeatability: Repeatability
+    base: Base
+    sensor: SensorMount
+    poor_start: PoorStart
+    spheres: Spheres
+    scanner: Scanner
+    tracker: Tracker
+    protocol: Protocol
+    compliance: Compliance
+    published: Published
+
+
+class Noise(Schema):
+    sensor_mm: NonNegativeFinite
+    repeatability_mm: NonNegativeFinite
+    tracker_mm: NonNegativeFinite
+
+
+class CellFile(Documented):
+    """``cell.toml`` of a measurement folder (:mod:`calstudy.papers.selfcal.measured`)."""
+
+    robot: RobotName
+    base: Pose
+    sensor: Pose
+    noise: Noise | None = None
+
+
+__all__ = ["CellFile", "ScenarioFile"]
