@@ -25,11 +25,12 @@ from calstudy.core import geometry as geo
 from calstudy.core.circles import fit_circle_2d
 from calstudy.estimators import fitting as ft
 from calstudy.estimators import handeye as he
+from calstudy.estimators import sphere_csv as spc
 from calstudy.estimators import workpiece as wp
 from calstudy.estimators.handeye_poses import calibrate_handeye
 from calstudy.estimators.posefile import read_pose_list, write_pose_list
 from calstudy.io.results import aggregate_claims
-from calstudy.models.kinematics import load_robot
+from calstudy.models.robots import load_robot
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.targets import Sphere
 
@@ -110,7 +111,7 @@ HEADER = "id,group,x,y,z,a,b,c,sx,sy,sz"
 
 
 def _sphere_rows(header=HEADER, angle=1.0, length=1.0, sensor=1.0):
-    meas = he.SphereMeasurements(
+    meas = spc.SphereMeasurements(
         ids=np.arange(1, len(ALL) + 1),
         group=np.array(["translation"] * len(TRANS) + ["rotation"] * len(ROT)),
         flange2base=ALL,
@@ -420,7 +421,7 @@ CASES = [
 
 @pytest.mark.parametrize(("make", "error", "match"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_bad_input_is_refused(tmp_path, make, error, match):
-    from calstudy.estimators.handeye import read_sphere_measurements
+    from calstudy.estimators.sphere_csv import read_sphere_measurements
 
     with pytest.raises(error, match=match):
         out = make(tmp_path)
@@ -442,14 +443,14 @@ def test_catalogue_size():
 
 
 def test_spreadsheet_exports_and_declared_units_read(tmp_path):
-    ref = he.read_sphere_measurements(_csv(tmp_path, _sphere_rows(), "ref.csv"))
-    bom = he.read_sphere_measurements(_csv(tmp_path, _sphere_rows(), "bom.csv", "utf-8-sig"))
+    ref = spc.read_sphere_measurements(_csv(tmp_path, _sphere_rows(), "ref.csv"))
+    bom = spc.read_sphere_measurements(_csv(tmp_path, _sphere_rows(), "bom.csv", "utf-8-sig"))
     np.testing.assert_allclose(bom.flange2base, ref.flange2base)
     semi = _csv(tmp_path, [ln.replace(",", ";") for ln in _sphere_rows()], "semi.csv")
-    np.testing.assert_allclose(he.read_sphere_measurements(semi).centres, ref.centres)
+    np.testing.assert_allclose(spc.read_sphere_measurements(semi).centres, ref.centres)
     header = "id,group,x_m,y_m,z_m,a_rad,b_rad,c_rad,sx_mm,sy_mm,sz_mm"
     lines = _sphere_rows(header, angle=np.pi / 180, length=1e-3)
-    declared = he.read_sphere_measurements(_csv(tmp_path, lines, "declared.csv"))
+    declared = spc.read_sphere_measurements(_csv(tmp_path, lines, "declared.csv"))
     np.testing.assert_allclose(declared.flange2base, ref.flange2base, atol=1e-5)
 
 

@@ -12,7 +12,7 @@ import pytest
 from support import NOTEBOOK_DIR, REPRODUCIBLE_ENV, ci_parameters
 
 from calstudy.core.paths import data_path
-from calstudy.estimators import handeye as he
+from calstudy.estimators import sphere_csv
 from calstudy.papers.hybrid import simulate
 
 
@@ -56,7 +56,7 @@ def test_notebook01_stops_at_the_measurements_cell(tmp_path):
     for i in np.flatnonzero(meas.group == "rotation"):
         centres[i] += rot.T @ meas.flange2base[i, :3, :3].T @ np.array([5.0, 0.0, 0.0])
     csv = tmp_path / "mine.csv"
-    he.write_sphere_measurements(dataclasses.replace(meas, centres=centres), csv)
+    sphere_csv.write_sphere_measurements(dataclasses.replace(meas, centres=centres), csv)
     err = _run_broken(tmp_path, "01_hybrid_global_calibration", {"measurements_csv": str(csv)})
     assert "ML sphere hand-eye: whitened residual chi2/dof" in err.evalue
     assert "disagree most: id" in err.evalue

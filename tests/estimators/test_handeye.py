@@ -6,6 +6,7 @@ import pytest
 from calstudy import CalibrationError
 from calstudy.core import geometry as geo
 from calstudy.estimators import handeye as he
+from calstudy.estimators import sphere_csv
 
 SENSOR2FLANGE = geo.make_transform(
     geo.euler_zyx_to_matrix(10.0, 50.0, -5.0), np.array([-46.0, -4.5, 413.0])
@@ -225,7 +226,7 @@ def test_stationary_chain_noise_free_exact():
 def _measurements(rng):
     trans, rot = _poses(rng)
     poses = np.concatenate([trans, rot])
-    return he.SphereMeasurements(
+    return sphere_csv.SphereMeasurements(
         ids=np.arange(len(poses)),
         group=np.array(["translation"] * len(trans) + ["rotation"] * len(rot)),
         flange2base=poses,
@@ -236,8 +237,8 @@ def _measurements(rng):
 def test_csv_round_trip_calibrates(tmp_path):
     meas = _measurements(np.random.default_rng(14))
     path = tmp_path / "m.csv"
-    he.write_sphere_measurements(meas, path)
-    back = he.read_sphere_measurements(path)
+    sphere_csv.write_sphere_measurements(meas, path)
+    back = sphere_csv.read_sphere_measurements(path)
     np.testing.assert_allclose(back.flange2base, meas.flange2base, atol=1e-9)
     est = he.sphere_handeye(*back.select("translation"), *back.select("rotation"))
     assert geo.translation_error(est.value, SENSOR2FLANGE) < 1e-6
@@ -257,10 +258,10 @@ def test_csv_round_trip_calibrates(tmp_path):
 def test_malformed_csv_names_row_and_column(tmp_path, edit, message):
     meas = _measurements(np.random.default_rng(15))
     path = tmp_path / "m.csv"
-    he.write_sphere_measurements(meas, path)
+    sphere_csv.write_sphere_measurements(meas, path)
     path.write_text(edit(path.read_text()))
     with pytest.raises(CalibrationError, match=message):
-        he.read_sphere_measurements(path)
+        sphere_csv.read_sphere_measurements(path)
 
 
 def _cell(text: str, row: int, col: int, value: str) -> str:

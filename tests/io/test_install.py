@@ -31,7 +31,7 @@ def test_installed_package_loads_a_scenario_outside_the_checkout(tmp_path):
     script = (
         "import calstudy, pathlib\n"
         "from calstudy.core.paths import DATA_DIR, IN_CHECKOUT\n"
-        "from calstudy.models.kinematics import load_robot\n"
+        "from calstudy.models.robots import load_robot\n"
         "from calstudy.claims import claim_ids\n"
         "print(calstudy.__file__); print(DATA_DIR); print(IN_CHECKOUT)\n"
         "print(len(load_robot('kuka_kr16_2').links)); print(len(claim_ids()))\n"

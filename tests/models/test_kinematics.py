@@ -10,7 +10,8 @@ import pytest
 
 from calstudy import CalibrationError
 from calstudy.core import paths
-from calstudy.models.kinematics import Link, Robot, load_robot, perturb_robot, pose_errors
+from calstudy.models.kinematics import Link, Robot
+from calstudy.models.robots import load_robot, perturb_robot, pose_errors
 
 # ----------------------------------------------------------------------------------------------
 # an independent reference: elementary matrices written out by hand

@@ -12,7 +12,7 @@ import pytest
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
-from calstudy.estimators import handeye as he
+from calstudy.estimators import sphere_csv
 from calstudy.papers.hybrid import compensation, experiments, scenario, simulate
 
 STATION = data_path("hybrid", "station.toml").read_text()
@@ -259,12 +259,12 @@ def sphere_files(tmp_path_factory):
     station = simulate.make_station(rng)
     meas, _ = simulate.simulate_sphere_measurements(station, 4, 6, rng)
     good, moved = folder / "good.csv", folder / "moved.csv"
-    he.write_sphere_measurements(meas, good)
+    sphere_csv.write_sphere_measurements(meas, good)
     rot = station.sensor2flange_true[:3, :3]
     centres = meas.centres.copy()
     for i in np.flatnonzero(meas.group == "rotation"):
         centres[i] += rot.T @ meas.flange2base[i, :3, :3].T @ np.array([5.0, 0.0, 0.0])
-    he.write_sphere_measurements(dataclasses.replace(meas, centres=centres), moved)
+    sphere_csv.write_sphere_measurements(dataclasses.replace(meas, centres=centres), moved)
     return good, moved
 
 

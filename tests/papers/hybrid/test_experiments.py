@@ -10,6 +10,7 @@ from calstudy import CalibrationError
 from calstudy.core import geometry as geo
 from calstudy.core import montecarlo
 from calstudy.estimators import handeye as he
+from calstudy.estimators import sphere_csv
 from calstudy.papers.hybrid import experiments, scenario, simulate
 
 
@@ -61,7 +62,7 @@ def test_calibrate_from_user_csv(tmp_path):
     s, rng = ideal_station(seed=4)
     meas, _ = simulate.simulate_sphere_measurements(s, 4, 6, rng)
     path = tmp_path / "mine.csv"
-    he.write_sphere_measurements(meas, path)
+    sphere_csv.write_sphere_measurements(meas, path)
     source, _, paper, ml, table = experiments.calibrate_handeye(str(path), 0, [0.01, 0.02, 0.01])
     assert source.startswith(f"user measurements from {path}")
     assert "truth" not in table

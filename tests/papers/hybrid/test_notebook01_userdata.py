@@ -9,6 +9,7 @@ import pytest
 from support import NOTEBOOK_DIR, ci_parameters
 
 from calstudy.estimators import handeye as he
+from calstudy.estimators import sphere_csv
 from calstudy.papers.hybrid import simulate
 
 NOTEBOOK = NOTEBOOK_DIR / "01_hybrid_global_calibration.ipynb"
@@ -20,7 +21,7 @@ def test_notebook01_runs_on_user_csv(tmp_path):
     station = simulate.make_station(rng)
     meas, _ = simulate.simulate_sphere_measurements(station, 4, 6, rng)
     csv = tmp_path / "my_cell.csv"
-    he.write_sphere_measurements(meas, csv)
+    sphere_csv.write_sphere_measurements(meas, csv)
     params = ci_parameters(NOTEBOOK.stem)
     # the simulated robot's pose error (a few tenths of a mm) is part of a centre's scatter
     params |= {

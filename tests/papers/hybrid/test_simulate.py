@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from calstudy import CalibrationError
-from calstudy.models import kinematics as kin
+from calstudy.models import robots
 from calstudy.papers.hybrid import simulate
 
 
@@ -21,7 +21,7 @@ def test_robot_error_scale_multiplies_the_drawn_link_errors():
     assert np.abs(errors[1.0]).max() > 0.1
     np.testing.assert_allclose(errors[2.0], 2.0 * errors[1.0], atol=1e-12)
     # the default is the robot of the tolerances file, draw for draw (notebook 01 unchanged)
-    default = kin.perturb_robot(kin.load_robot("kuka_kr16_2"), np.random.default_rng(14))
+    default = robots.perturb_robot(robots.load_robot("kuka_kr16_2"), np.random.default_rng(14))
     assert (errors[1.0] + nominal).tobytes() == default.parameters().tobytes()
     with pytest.raises(CalibrationError, match="robot_error_scale is -1.0"):
         simulate.make_station(np.random.default_rng(14), robot_error_scale=-1.0)

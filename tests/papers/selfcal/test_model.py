@@ -9,7 +9,8 @@ import pytest
 
 from calstudy import CalibrationError
 from calstudy.core.geometry import make_transform, random_rotation
-from calstudy.models.kinematics import Link, perturb_robot
+from calstudy.models.kinematics import Link
+from calstudy.models.robots import perturb_robot
 from calstudy.papers.selfcal.model import (
     GlobalModel,
     parameters_from_robot,

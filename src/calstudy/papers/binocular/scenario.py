@@ -21,7 +21,8 @@ from calstudy.core import geometry as geo
 from calstudy.core.config import read_toml, require, scenario_file
 from calstudy.estimators.binocular import solve_calibrator_layout
 from calstudy.models import optics
-from calstudy.models.kinematics import Robot, load_robot
+from calstudy.models.kinematics import Robot
+from calstudy.models.robots import load_robot
 from calstudy.models.stereo import StereoRig
 
 PAPER = "binocular"

@@ -20,7 +20,8 @@ from calstudy.core.errors import CalibrationError
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import detect_centre, rectify_coc
 from calstudy.models import optics
-from calstudy.models.kinematics import Robot, perturb_robot
+from calstudy.models.kinematics import Robot
+from calstudy.models.robots import perturb_robot
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig
 from calstudy.papers.binocular.scenario import Scenario, plate_frame

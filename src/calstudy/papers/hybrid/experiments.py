@@ -32,14 +32,14 @@ from calstudy.estimators.fitting import fit_homography, homography_to_pose, solv
 from calstudy.estimators.handeye import (
     OPENCV_METHODS,
     opencv_handeye,
-    read_sphere_measurements,
     sphere_handeye,
     sphere_handeye_crb,
     sphere_handeye_ml,
     stationary_sensor_to_base,
 )
+from calstudy.estimators.sphere_csv import read_sphere_measurements
 from calstudy.estimators.workpiece import rps_frame_penalty, rps_frame_so3
-from calstudy.models.kinematics import load_robot, perturb_robot, pose_errors
+from calstudy.models.robots import load_robot, perturb_robot, pose_errors
 from calstudy.papers.hybrid.compensation import analyse_run, before_compensation
 from calstudy.papers.hybrid.scenario import (
     SWEEP_LABELS,
@@ -437,7 +437,7 @@ def calibrate_handeye(
     ------
     CalibrationError
         For a user's CSV, on any check of
-        :func:`calstudy.estimators.handeye.read_sphere_measurements`, and if the ML fit is far
+        :func:`calstudy.estimators.sphere_csv.read_sphere_measurements`, and if the ML fit is far
         outside ``sensor_sigma_mm`` (goodness of fit, ``misfit="flag"``): the message names the
         measurement ids that disagree most (a sphere that moved between the two series);
         ``misfit="flag"`` turns this into a warning.

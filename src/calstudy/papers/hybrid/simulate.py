@@ -22,8 +22,9 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.fitting import solve_pnp
-from calstudy.estimators.handeye import SphereMeasurements
-from calstudy.models.kinematics import Robot, load_robot, perturb_robot
+from calstudy.estimators.sphere_csv import SphereMeasurements
+from calstudy.models.kinematics import Robot
+from calstudy.models.robots import load_robot, perturb_robot
 from calstudy.models.sensors import LineLaserSensor, PinholeCamera
 from calstudy.models.targets import HoleTarget, ManufacturedHoleTarget, Sphere
 from calstudy.papers.hybrid.scenario import load_station

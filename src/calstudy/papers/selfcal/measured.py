@@ -43,7 +43,8 @@ from calstudy.core.config import check_ids, parse_number, require
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform, matrix_to_euler_zyx
 from calstudy.core.schema import check_toml
-from calstudy.models.kinematics import Robot, load_robot
+from calstudy.models.kinematics import Robot
+from calstudy.models.robots import load_robot
 from calstudy.papers.selfcal.identify import Identification, Measurements, identify
 from calstudy.papers.selfcal.model import (
     IS_LENGTH,

@@ -16,7 +16,8 @@ import numpy as np
 from calstudy.core.config import require, scenario_file
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
 from calstudy.core.schema import check_toml
-from calstudy.models.kinematics import Robot, load_robot
+from calstudy.models.kinematics import Robot
+from calstudy.models.robots import load_robot
 from calstudy.papers.selfcal.schema import ScenarioFile
 
 

@@ -5,7 +5,7 @@ Both are checked on load (:func:`calstudy.core.schema.check_toml`): every key re
 with its type and range (lengths mm, angles degrees where the key says ``_deg``), unknown keys
 are refused, and the cross-field rules below hold (the sphere envelope is a box, its spheres fit
 in it at their minimum separation). The robot table a file names is checked by
-:func:`calstudy.models.kinematics.load_robot` (a missing one: ``FileNotFoundError`` with the
+:func:`calstudy.models.robots.load_robot` (a missing one: ``FileNotFoundError`` with the
 tables available).
 """
 

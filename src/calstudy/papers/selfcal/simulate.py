@@ -19,7 +19,8 @@ import numpy as np
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import euler_zyx_to_matrix, look_at, make_transform, rotvec_to_matrix
-from calstudy.models.kinematics import Robot, perturb_robot
+from calstudy.models.kinematics import Robot
+from calstudy.models.robots import perturb_robot
 from calstudy.papers.selfcal.identify import Measurements, check_sphere_layout, fit_sphere_cap
 from calstudy.papers.selfcal.model import (
     BASE,
@@ -143,7 +144,7 @@ def draw_placements(scenario: Scenario, n: int, rng: np.random.Generator, tries:
 def draw_station(scenario: Scenario, rng: np.random.Generator) -> Station:
     """Draw a true system: manufacturing errors, base and sensor poses, four sphere placements.
 
-    :func:`calstudy.models.kinematics.perturb_robot` perturbs every link parameter; the offset
+    :func:`calstudy.models.robots.perturb_robot` perturbs every link parameter; the offset
     ``d2``
     along the axis of joint 2 is then set back to 0 because Eq. 2 has no such parameter (for
     parallel axes 2 and 3 it is carried by ``d3``), so the true system lies in the model class.
