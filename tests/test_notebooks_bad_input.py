@@ -104,3 +104,20 @@ def test_notebook05_stops_at_the_scenario_cell(tmp_path):
     err = _run_broken(tmp_path, "05_dualarm_global_calibration", {"scenario_toml": str(path)})
     assert "my_station.toml: detection.loss_rate = 1.5: must be >= 0 and < 1" in err.evalue
     assert "scenario.load_scenario(scenario_toml" in err.source
+
+
+def test_notebook06_stops_at_the_pose_list_cell(tmp_path):
+    """A pose list with a position that is not a number: refused with the row and column, in
+    the cell that reads the pose list."""
+    lines = data_path("handeye", "example_poses.csv").read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    header = lines[first].split(",")
+    row = lines[first + 2].split(",")
+    col = header.index("flange2base_x_mm")
+    row[col] = row[col].replace(".", ";")  # not a number
+    lines[first + 2] = ",".join(row)
+    csv = tmp_path / "poses.csv"
+    csv.write_text("\n".join(lines) + "\n")
+    err = _run_broken(tmp_path, "06_handeye_your_cell", {"poses_csv": str(csv)})
+    assert "poses.csv" in err.evalue and "flange2base_x_mm" in err.evalue
+    assert "hc.calibrate_cell(" in err.source
