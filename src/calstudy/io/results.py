@@ -221,13 +221,13 @@ class ResultFolder:
         self.path = _begin_staging(self.final)
         self.published = False
 
-    def publish(self) -> Path:
-        """Swap the staging folder in as the final one; returns the final folder."""
+    def publish(self) -> None:
+        """Swap the staging folder in as the final one (``self.final``). Returns None, so a
+        notebook cell ending with it shows no path of the machine."""
         if self.published:
             raise CalibrationError(f"{self.final} is already published")
         _publish_staging(self.final, self.path)
         self.published = True
-        return self.final
 
 
 def _begin_staging(final: Path) -> Path:
