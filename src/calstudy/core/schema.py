@@ -236,6 +236,15 @@ def rotation_problem(matrix, tol: float = 1e-4) -> str:
     return ""
 
 
+def check_principal_point(cx: float, cy: float, width: int, height: int) -> None:
+    """For a camera schema's validator: raise ValueError unless the principal point ``(cx, cy)``
+    lies inside the ``width`` x ``height`` px image."""
+    if not (0 <= cx < width and 0 <= cy < height):
+        raise ValueError(
+            f"principal point ({cx}, {cy}) lies outside the {width} x {height} px image"
+        )
+
+
 def load_toml(path: str | Path, model: type[M], what: str) -> M:
     """Read the TOML file ``path`` (the ``what``, for messages) and validate it against
     ``model``."""

@@ -22,6 +22,7 @@ from calstudy.core.schema import (
     PositiveFinite,
     PositiveInt,
     Vec3,
+    check_principal_point,
 )
 
 #: an angle from a direction (a tilt, an incidence, a viewing angle), degrees
@@ -43,11 +44,7 @@ class Camera(Documented):
 
     @model_validator(mode="after")
     def _centre_in_image(self) -> Camera:
-        if not (0 <= self.cx_px < self.width and 0 <= self.cy_px < self.height):
-            raise ValueError(
-                f"principal point ({self.cx_px}, {self.cy_px}) lies outside the {self.width} x "
-                f"{self.height} px image"
-            )
+        check_principal_point(self.cx_px, self.cy_px, self.width, self.height)
         return self
 
 

@@ -24,6 +24,7 @@ from calstudy.core.schema import (
     PositiveInt,
     Schema,
     Vec3,
+    check_principal_point,
     rotation_problem,
 )
 
@@ -97,11 +98,7 @@ class Cameras(Documented):
 
     @model_validator(mode="after")
     def _centre_in_image(self) -> Cameras:
-        if not (0 <= self.cx < self.width and 0 <= self.cy < self.height):
-            raise ValueError(
-                f"principal point ({self.cx}, {self.cy}) lies outside the {self.width} x "
-                f"{self.height} px image"
-            )
+        check_principal_point(self.cx, self.cy, self.width, self.height)
         return self
 
 
