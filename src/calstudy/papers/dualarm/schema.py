@@ -35,6 +35,7 @@ RotVec = Annotated[
 
 
 class Camera(Documented):
+    """The ``[camera]`` table of data/dualarm/scenario.toml."""
     width: PositiveInt
     height: PositiveInt
     fx_px: PositiveFinite
@@ -49,11 +50,13 @@ class Camera(Documented):
 
 
 class Stereo(Documented):
+    """The ``[stereo]`` table of data/dualarm/scenario.toml."""
     baseline_mm: PositiveFinite
     convergence_distance_mm: PositiveFinite
 
 
 class Sensor(Documented):
+    """The ``[sensor]`` table of data/dualarm/scenario.toml."""
     point_sigma_mm: NonNegativeFinite
     #: a sphere fit needs at least 4 points
     points_per_scan: Annotated[int, Field(ge=4)]
@@ -62,6 +65,7 @@ class Sensor(Documented):
 
 
 class Detection(Documented):
+    """The ``[detection]`` table of data/dualarm/scenario.toml."""
     sigma_px: NonNegativeFinite
     marker_sigma_mm: NonNegativeFinite
     #: the probability that a visible marker is lost in an image
@@ -70,6 +74,7 @@ class Detection(Documented):
 
 
 class Markers(Documented):
+    """The ``[markers]`` table of data/dualarm/scenario.toml."""
     names: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=3)]
     xyz_mm: Annotated[list[Vec3], Field(min_length=3)]
     groups: Annotated[list[str], Field(min_length=2, max_length=2)]
@@ -90,6 +95,7 @@ class Markers(Documented):
 
 
 class Calibration(Documented):
+    """The ``[calibration]`` table of data/dualarm/scenario.toml."""
     cam2flange_1_rotvec: RotVec
     cam2flange_1_mm: Vec3
     cam2flange_2_rotvec: RotVec
@@ -99,11 +105,13 @@ class Calibration(Documented):
 
 
 class Layout(Documented):
+    """The ``[layout]`` table of data/dualarm/scenario.toml."""
     world2base1_rotvec: RotVec
     world2base1_mm: Vec3
 
 
 class Robot(Documented):
+    """The ``[robot]`` table of data/dualarm/scenario.toml."""
     repeat_sigma_mm: NonNegativeFinite
     repeat_sigma_deg: NonNegativeFinite
     drift_step_sigma_mm: NonNegativeFinite
@@ -111,11 +119,13 @@ class Robot(Documented):
 
 
 class Spheres(Documented):
+    """The ``[spheres]`` table of data/dualarm/scenario.toml."""
     diameter_a_mm: PositiveFinite
     diameter_b_mm: PositiveFinite
 
 
 class HandEye(Documented):
+    """The ``[handeye]`` table of data/dualarm/scenario.toml."""
     grid_rows: Annotated[int, Field(ge=2)]
     grid_cols: Annotated[int, Field(ge=2)]
     pitch_mm: PositiveFinite
@@ -125,6 +135,7 @@ class HandEye(Documented):
 
 
 class Survey(Documented):
+    """The ``[survey]`` table of data/dualarm/scenario.toml."""
     views_per_group: PositiveInt
     bridge_views: PositiveInt
     bridge_distance_mm: PositiveFinite
@@ -135,6 +146,7 @@ class Survey(Documented):
 
 
 class GlobalTest(Documented):
+    """The ``[global_test]`` table of data/dualarm/scenario.toml."""
     n_groups: PositiveInt
     n_poses: PositiveInt
     calibration_poses: PositiveInt
@@ -152,6 +164,7 @@ class GlobalTest(Documented):
 
 
 class CircularPlate(Documented):
+    """The ``[circular_plate]`` table of data/dualarm/scenario.toml."""
     tilt_deg: Tilt
     jitter_deg: Tilt
     outlier_rate: Fraction
@@ -167,6 +180,7 @@ class CircularPlate(Documented):
 
 
 class Icp(Documented):
+    """The ``[icp]`` table of data/dualarm/scenario.toml."""
     z_weight: PositiveFinite
     z_threshold_mm: PositiveFinite
     max_iterations: PositiveInt

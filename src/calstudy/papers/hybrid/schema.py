@@ -34,12 +34,14 @@ Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
 
 
 class Source(Documented):
+    """The ``[source]`` table of data/hybrid/station.toml and production.toml."""
     paper: str = ""
     robot: str = ""
     station: str = ""
 
 
 class HandEye(Documented):
+    """The ``[handeye]`` table of data/hybrid/station.toml."""
     #: sensor2flange, a rigid 4 x 4 transform (mm); printed to 6 decimals in the paper
     matrix: Annotated[list[Row4], Field(min_length=4, max_length=4)]
 
@@ -56,20 +58,24 @@ class HandEye(Documented):
 
 
 class Robot(Documented):
+    """The ``[robot]`` table of data/hybrid/station.toml."""
     repeatability_mm: NonNegativeFinite
 
 
 class Sensor(Documented):
+    """The ``[sensor]`` table of data/hybrid/station.toml."""
     standoff_mm: PositiveFinite
     #: the stripe must fall on the sphere: |y| = fraction * R with 0 <= fraction < 1
     stripe_offset_fraction: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
 
 
 class SphereTable(Documented):
+    """The ``[sphere]`` table of data/hybrid/station.toml."""
     centre_mm: Vec3
 
 
 class Moves(Documented):
+    """The ``[calibration_moves]`` table of data/hybrid/station.toml."""
     n_translations: Annotated[int, Field(ge=3)]
     n_rotations: Annotated[int, Field(ge=2)]
     translation_range_mm: PositiveFinite
@@ -88,6 +94,7 @@ class Moves(Documented):
 
 
 class Cameras(Documented):
+    """The ``[cameras]`` table of data/hybrid/station.toml."""
     fx: PositiveFinite
     fy: PositiveFinite
     cx: Finite
@@ -103,11 +110,13 @@ class Cameras(Documented):
 
 
 class Target(Documented):
+    """The ``[target]`` table of data/hybrid/station.toml."""
     cmm_sigma_mm: NonNegativeFinite
     cmm_sigma_deg: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)]
 
 
 class Stationary(Documented):
+    """The ``[stationary]`` table of data/hybrid/station.toml."""
     positions_mm: Annotated[list[Vec3], Field(min_length=3)]
     tilts_deg: list[Annotated[list[Degrees], Field(min_length=2, max_length=2)]]
 
@@ -122,6 +131,7 @@ class Stationary(Documented):
 
 
 class Workpiece(Documented):
+    """The ``[workpiece]`` table of data/hybrid/station.toml."""
     size_mm: Annotated[list[PositiveFinite], Field(min_length=2, max_length=2)]
     nominal_origin_mm: Vec3
     nominal_rotz_deg: Degrees
@@ -163,6 +173,7 @@ class StationFile(Documented):
 
 
 class Protocol(Documented):
+    """The ``[protocol]`` table of data/hybrid/production.toml."""
     n_before: Products
     n_compensation: Products
     n_compensation_max: Products
@@ -179,14 +190,17 @@ class Protocol(Documented):
 
 
 class Variation(Documented):
+    """The ``[variation]`` table of data/hybrid/production.toml."""
     part_sigma_mm: NonNegativeFinite
 
 
 class FeatureNoise(Documented):
+    """The ``[sensors]`` table of data/hybrid/production.toml."""
     feature_sigma_mm: NonNegativeFinite
 
 
 class Sigma(Documented):
+    """The ``[cmm]`` table of data/hybrid/production.toml."""
     sigma_mm: NonNegativeFinite
 
 
@@ -194,6 +208,7 @@ Sweep = Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
 
 class SweepTable(Documented):
+    """The ``[sweep]`` table of data/hybrid/production.toml."""
     part_sigma_mm: Sweep
     feature_sigma_mm: Sweep
     repeatability_mm: Sweep
@@ -201,6 +216,7 @@ class SweepTable(Documented):
 
 
 class StationaryFeatures(Documented):
+    """The ``[stationary_features]`` table of data/hybrid/production.toml."""
     ids: Annotated[list[str], Field(min_length=3)]
     kinds: Annotated[list[str], Field(min_length=3)]
     #: the points of sensors 4.. (sensors 1-3 measure the datums of station.toml)
@@ -218,6 +234,7 @@ class StationaryFeatures(Documented):
 
 
 class Feature(Schema):
+    """The ``[[flexible.features]]`` table of data/hybrid/production.toml."""
     id: Annotated[str, Field(min_length=1)]
     kind: str
     xyz_mm: Vec3
@@ -232,6 +249,7 @@ class Feature(Schema):
 
 
 class Flexible(Documented):
+    """The ``[flexible]`` table of data/hybrid/production.toml."""
     features: Annotated[list[Feature], Field(min_length=1)]
 
 

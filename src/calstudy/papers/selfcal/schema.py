@@ -33,15 +33,18 @@ AngleSigma = Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
 
 
 class Pose(Schema):
+    """The ``[base]`` table of a cell's cell.toml."""
     xyz_mm: Vec3
     zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
 
 
 class Repeatability(Documented):
+    """The ``[repeatability]`` table of data/selfcal/scenario.toml."""
     sigma_mm: NonNegativeFinite
 
 
 class Base(Documented):
+    """The ``[base]`` table of data/selfcal/scenario.toml."""
     rough_xyz_mm: Vec3
     rough_zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
     sigma_mm: NonNegativeFinite
@@ -49,6 +52,7 @@ class Base(Documented):
 
 
 class SensorMount(Documented):
+    """The ``[sensor]`` table of data/selfcal/scenario.toml."""
     design_xyz_mm: Vec3
     design_zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
     sigma_mm: NonNegativeFinite
@@ -56,6 +60,7 @@ class SensorMount(Documented):
 
 
 class PoorStart(Documented):
+    """The ``[poor_start]`` table of data/selfcal/scenario.toml."""
     base_mm: NonNegativeFinite
     base_deg: AngleSigma
     sensor_mm: NonNegativeFinite
@@ -66,6 +71,7 @@ class PoorStart(Documented):
 
 
 class Spheres(Documented):
+    """The ``[spheres]`` table of data/selfcal/scenario.toml."""
     count: Annotated[int, Field(ge=3)]
     radius_mm: PositiveFinite
     min_separation_mm: NonNegativeFinite
@@ -87,6 +93,7 @@ class Spheres(Documented):
 
 
 class Scanner(Documented):
+    """The ``[scanner]`` table of data/selfcal/scenario.toml."""
     standoff_mm: PositiveFinite
     field_mm: PositiveFinite
     depth_mm: PositiveFinite
@@ -100,12 +107,14 @@ class Scanner(Documented):
 
 
 class Tracker(Documented):
+    """The ``[tracker]`` table of data/selfcal/scenario.toml."""
     u0_mm: NonNegativeFinite
     u1_mm_per_m: NonNegativeFinite
     coverage: PositiveFinite
 
 
 class Protocol(Documented):
+    """The ``[protocol]`` table of data/selfcal/scenario.toml."""
     views_per_sphere: PositiveInt
     validation_placements: PositiveInt
     requirement_mm: PositiveFinite
@@ -113,6 +122,7 @@ class Protocol(Documented):
 
 
 class Compliance(Documented):
+    """The ``[compliance]`` table of data/selfcal/scenario.toml."""
     payload_kg: NonNegativeFinite
     stiffness_nm_per_rad: Annotated[list[PositiveFinite], Field(min_length=6, max_length=6)]
     scale: NonNegativeFinite
@@ -120,6 +130,7 @@ class Compliance(Documented):
 
 
 class Published(Documented):
+    """The ``[published]`` table of data/selfcal/scenario.toml."""
     convergence_iterations: PositiveInt
 
 
@@ -140,6 +151,7 @@ class ScenarioFile(Documented):
 
 
 class Noise(Schema):
+    """The ``[noise]`` table of a cell's cell.toml."""
     sensor_mm: NonNegativeFinite
     repeatability_mm: NonNegativeFinite
     tracker_mm: NonNegativeFinite
