@@ -19,11 +19,9 @@ import json
 from pathlib import Path
 
 import nbformat
-import numpy as np
-import pandas as pd
 import pytest
 import yaml
-from support import REPRODUCIBLE_ENV, ci_parameters, run
+from support import REPRODUCIBLE_ENV, assert_same_table, ci_parameters, run
 
 from calstudy.claims import VERDICTS, claim_ids
 from calstudy.core.paths import REPO_ROOT, RESULTS_DIR
@@ -180,25 +178,7 @@ def test_runs_with_ci_parameters(path, ci_runs):
 
 
 def compare_tables(committed: Path, fresh: Path) -> None:
-    old = pd.read_csv(committed, keep_default_na=False, na_values=[""])
-    new = pd.read_csv(fresh, keep_default_na=False, na_values=[""])
-    name = committed.relative_to(REPO_ROOT)
-    assert list(new.columns) == list(old.columns), f"{name}: columns differ"
-    assert len(new) == len(old), f"{name}: {len(new)} rows now, {len(old)} committed"
-    for col in old.columns:
-        a, b = old[col], new[col]
-        if pd.api.types.is_numeric_dtype(a) and pd.api.types.is_numeric_dtype(b):
-            np.testing.assert_allclose(
-                b.to_numpy(float),
-                a.to_numpy(float),
-                rtol=RTOL,
-                atol=ATOL,
-                equal_nan=True,
-                err_msg=f"{name}: column {col!r}",
-            )
-        else:
-            assert b.astype(str).tolist() == a.astype(str).tolist(), f"{name}: column {col!r}"
-
+    assert_same_table(fresh, committed, rtol=RTOL, atol=ATOL)
 
 @pytest.mark.verify
 @pytest.mark.parametrize("path", ALL)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pandas as pd
 import pytest
+from support import assert_same_table
 
 from calstudy.core.paths import RESULTS_DIR
 from calstudy.io.results import read_claims
@@ -22,15 +23,7 @@ def frames():
 
 
 def _same(got: pd.DataFrame, name: str) -> None:
-    want = pd.read_csv(OUT / f"{name}.csv")
-    got = pd.read_csv(pd.io.common.StringIO(got.to_csv(index=False)))
-    assert list(got.columns) == list(want.columns), name
-    for col in want:
-        if pd.api.types.is_numeric_dtype(want[col]):
-            pd.testing.assert_series_equal(got[col], want[col], rtol=2e-5, check_dtype=False)
-        else:
-            assert got[col].fillna("").tolist() == want[col].fillna("").tolist(), (name, col)
-
+    assert_same_table(got, OUT / f"{name}.csv", atol=1e-8)  # pandas' default, as before
 
 def test_tables(frames):
     trials, field = frames

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 import pandas as pd
 import pytest
+from support import assert_same_table
 
 from calstudy.core.paths import RESULTS_DIR
 from calstudy.io.results import CLAIM_COLUMNS
@@ -27,23 +27,7 @@ def _trials(name: str) -> pd.DataFrame:
 
 
 def _compare(fresh: pd.DataFrame, name: str) -> None:
-    stored = pd.read_csv(FOLDER / f"{name}.csv")
-    fresh = pd.read_csv(pd.io.common.StringIO(fresh.to_csv(index=False)))
-    assert list(fresh.columns) == list(stored.columns), name
-    assert len(fresh) == len(stored), name
-    for col in stored.columns:
-        if pd.api.types.is_numeric_dtype(stored[col]) and pd.api.types.is_numeric_dtype(fresh[col]):
-            np.testing.assert_allclose(
-                fresh[col].to_numpy(float),
-                stored[col].to_numpy(float),
-                rtol=RTOL,
-                atol=1e-12,
-                equal_nan=True,
-                err_msg=f"{name}: {col}",
-            )
-        else:
-            assert fresh[col].astype(str).tolist() == stored[col].astype(str).tolist(), name
-
+    assert_same_table(fresh, FOLDER / f"{name}.csv", rtol=RTOL)
 
 def test_tables_recompute_from_the_trials():
     published = load_published()

@@ -8,9 +8,9 @@ trial rows: ``tests/test_trials.py`` recomputes trials, this file only the repor
 
 from dataclasses import asdict
 
-import numpy as np
 import pandas as pd
 import pytest
+from support import assert_same_table
 
 from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS
 from calstudy.core.paths import RESULTS_DIR
@@ -27,26 +27,7 @@ def _trials(folder, name):
 
 
 def _compare(fresh: pd.DataFrame, path) -> None:
-    committed = pd.read_csv(path, keep_default_na=False, na_values=[""])
-    fresh = pd.read_csv(
-        pd.io.common.StringIO(fresh.to_csv(index=False)), keep_default_na=False, na_values=[""]
-    )
-    assert list(fresh.columns) == list(committed.columns), path.name
-    assert len(fresh) == len(committed), path.name
-    for col in committed.columns:
-        a, b = fresh[col], committed[col]
-        if pd.api.types.is_numeric_dtype(b) and pd.api.types.is_numeric_dtype(a):
-            np.testing.assert_allclose(
-                a.to_numpy(float),
-                b.to_numpy(float),
-                rtol=RTOL,
-                atol=1e-12,
-                equal_nan=True,
-                err_msg=f"{path.name}:{col}",
-            )
-        else:
-            assert a.astype(str).tolist() == b.astype(str).tolist(), f"{path.name}:{col}"
-
+    assert_same_table(fresh, path, rtol=RTOL)
 
 def _claims_frame(rows):
     return pd.DataFrame([asdict(r) for r in rows])[list(CLAIM_COLUMNS)]

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 import pandas as pd
 import pytest
+from support import assert_same_table
 
 from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS
 from calstudy.core.paths import RESULTS_DIR
@@ -30,26 +30,7 @@ def _trials(name: str) -> pd.DataFrame:
 
 
 def _compare(fresh: pd.DataFrame, name: str) -> None:
-    stored = pd.read_csv(OUT / f"{name}.csv", keep_default_na=False, na_values=[""])
-    fresh = pd.read_csv(
-        __import__("io").StringIO(fresh.to_csv(index=False)), keep_default_na=False, na_values=[""]
-    )
-    assert list(fresh.columns) == list(stored.columns), name
-    assert len(fresh) == len(stored), name
-    for col in fresh.columns:
-        a, b = fresh[col], stored[col]
-        if pd.api.types.is_numeric_dtype(a) and pd.api.types.is_numeric_dtype(b):
-            np.testing.assert_allclose(
-                a.to_numpy(float),
-                b.to_numpy(float),
-                rtol=2e-5,
-                atol=1e-12,
-                equal_nan=True,
-                err_msg=f"{name}: {col}",
-            )
-        else:
-            assert a.astype(str).tolist() == b.astype(str).tolist(), f"{name}: {col}"
-
+    assert_same_table(fresh, OUT / f"{name}.csv")
 
 @pytest.fixture(scope="module")
 def calib():
