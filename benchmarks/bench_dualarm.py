@@ -38,14 +38,7 @@ def icp_timings(scn) -> dict[str, tuple[float, float]]:
     tree = cKDTree(clouds[0])
     out = {}
     for label, noise in (("below the noise", True), ("to the tolerance", False)):
-        kw = dict(
-            z_weight=scn.icp_z_weight,
-            z_threshold_mm=scn.icp_z_threshold_mm,
-            max_iterations=scn.icp_max_iterations,
-            max_pair_mm=scn.icp_max_pair_mm,
-            stop_below_noise=noise,
-            tree=tree,
-        )
+        kw = dict(ex.icp_options(scn), stop_below_noise=noise, tree=tree)
         ms = [
             best_ms(lambda p=p, kw=kw: weighted_icp(p, clouds[0], **kw), REPEATS)
             for p in clouds[1:]

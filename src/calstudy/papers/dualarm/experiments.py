@@ -167,22 +167,24 @@ def scans_in_base(scn, arm, centre_world, radius, n_views, rng, cam2flange_est, 
     )
 
 
+def icp_options(scn: Scenario) -> dict:
+    """The scenario's weighted-ICP settings (Eq. 4), as keywords of
+    :func:`calstudy.estimators.icp.weighted_icp`."""
+    return {
+        "z_weight": scn.icp_z_weight,
+        "z_threshold_mm": scn.icp_z_threshold_mm,
+        "max_iterations": scn.icp_max_iterations,
+        "max_pair_mm": scn.icp_max_pair_mm,
+    }
+
+
 def icp_correct(scn: Scenario, clouds: list[np.ndarray]) -> list[np.ndarray]:
     """M3DHE-ICP: every cloud after the first moved onto the first by weighted ICP (Eq. 4),
     each alignment ended once its update is below the noise."""
     tree = cKDTree(clouds[0])
     out = [clouds[0]]
     for p in clouds[1:]:
-        res = weighted_icp(
-            p,
-            clouds[0],
-            z_weight=scn.icp_z_weight,
-            z_threshold_mm=scn.icp_z_threshold_mm,
-            max_iterations=scn.icp_max_iterations,
-            max_pair_mm=scn.icp_max_pair_mm,
-            stop_below_noise=True,
-            tree=tree,
-        )
+        res = weighted_icp(p, clouds[0], **icp_options(scn), stop_below_noise=True, tree=tree)
         out.append(geo.apply(res.transform, p))
     return out
 
