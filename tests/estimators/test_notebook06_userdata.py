@@ -5,9 +5,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import papermill as pm
 import pytest
-from support import ci_parameters
+from support import ci_parameters, run
 
 from calstudy.core import geometry as geo
 from calstudy.estimators.handeye_sim import simulate_cell
@@ -31,10 +30,8 @@ def test_notebook06_runs_on_user_pose_list(tmp_path):
         "poses_csv": str(csv),
         "results_dir": str(tmp_path / "out"),
     }
-    out_nb = tmp_path / "out.ipynb"
-    pm.execute_notebook(
-        str(NOTEBOOK), str(out_nb), parameters=params, cwd=str(NOTEBOOK.parent), progress_bar=False
-    )
+    run(NOTEBOOK, params, tmp_path)
+    out_nb = tmp_path / NOTEBOOK.name
     text = json.dumps(json.loads(out_nb.read_text()))
     assert f"calibrated from: user pose list {csv} (12 poses)" in text
     out = tmp_path / "out" / NOTEBOOK.stem

@@ -4,9 +4,8 @@ import json
 
 import numpy as np
 import pandas as pd
-import papermill as pm
 import pytest
-from support import NOTEBOOK_DIR, ci_parameters
+from support import NOTEBOOK_DIR, ci_parameters, run
 
 from calstudy.estimators import handeye as he
 from calstudy.estimators import sphere_csv
@@ -29,10 +28,8 @@ def test_notebook01_runs_on_user_csv(tmp_path):
         "sensor_sigma_mm": 0.3,
         "results_dir": str(tmp_path / "out"),
     }
-    out_nb = tmp_path / "out.ipynb"
-    pm.execute_notebook(
-        str(NOTEBOOK), str(out_nb), parameters=params, cwd=str(NOTEBOOK.parent), progress_bar=False
-    )
+    run(NOTEBOOK, params, tmp_path)
+    out_nb = tmp_path / NOTEBOOK.name
     text = json.dumps(json.loads(out_nb.read_text()))
     assert f"calibrated from: user measurements from {csv} (10 rows)" in text
     table = pd.read_csv(

@@ -4,9 +4,9 @@ import json
 
 import numpy as np
 import pandas as pd
-import papermill as pm
 import pytest
 from support import NOTEBOOK_DIR, ci_parameters
+from support import run as run_notebook
 
 from calstudy.papers.hybrid import compensation, experiments, report, scenario, simulate_production
 
@@ -31,10 +31,8 @@ def test_notebook02_runs_on_user_csvs(tmp_path):
         "cmm_csv": str(paths["cmm"]),
         "results_dir": str(tmp_path / "out"),
     }
-    out_nb = tmp_path / "out.ipynb"
-    pm.execute_notebook(
-        str(notebook), str(out_nb), parameters=params, cwd=str(notebook.parent), progress_bar=False
-    )
+    run_notebook(notebook, params, tmp_path)
+    out_nb = tmp_path / notebook.name
     assert f"measurements: measured tables {paths['hybrid']}" in json.dumps(
         json.loads(out_nb.read_text())
     )

@@ -4,9 +4,8 @@ import json
 import shutil
 
 import pandas as pd
-import papermill as pm
 import pytest
-from support import NOTEBOOK_DIR, REPRODUCIBLE_ENV, ci_parameters
+from support import NOTEBOOK_DIR, REPRODUCIBLE_ENV, ci_parameters, run
 
 from calstudy.core.paths import data_path
 from calstudy.papers.selfcal.experiments import EXAMPLE_OUTLIERS
@@ -22,10 +21,8 @@ def test_notebook03_runs_on_the_example_measurements(tmp_path, monkeypatch):
     shutil.copytree(data_path("selfcal", "example_measurements"), folder)
     params = ci_parameters(NOTEBOOK.stem)
     params |= {"measurements_dir": str(folder), "results_dir": str(tmp_path / "out")}
-    out_nb = tmp_path / "out.ipynb"
-    pm.execute_notebook(
-        str(NOTEBOOK), str(out_nb), parameters=params, cwd=str(NOTEBOOK.parent), progress_bar=False
-    )
+    run(NOTEBOOK, params, tmp_path)
+    out_nb = tmp_path / NOTEBOOK.name
     text = json.dumps(json.loads(out_nb.read_text()))
     assert f"calibrated from: {folder} (24 calibration, 10 validation measurements)" in text
     assert "covariance from the residual chi-square (no noise declared" in text
