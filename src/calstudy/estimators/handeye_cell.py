@@ -264,8 +264,10 @@ def calibrate_cell(
 ) -> dict:
     """The notebook's calibration, as one recipe: the pose list (the user's file, or the
     synthetic cell written to a pose list and read back), the plain and robust ML hand-eye and
-    the robot-world-hand-eye fit. Returns a dict with ``poses``, ``source``, ``truth`` (the
-    synthetic cell's camera2flange, or None) and ``fits``."""
+    the robot-world-hand-eye fit. Returns a dict with ``poses``, ``source``, ``cell`` (the
+    synthetic :class:`SimulatedCell`, or None for a user's list), ``truth`` (its camera2flange,
+    or None) and ``fits``."""
+    cell = None
     if poses_csv:
         poses, source, truth = read_pose_list(poses_csv), f"user pose list {poses_csv}", None
     else:
@@ -285,7 +287,10 @@ def calibrate_cell(
         **poses.arguments(), setup=setup, robust=robust, rng=np.random.default_rng(seed), **sigmas
     )
     fits = {"ML": plain, f"ML, {robust}": robust_fit, f"AX = ZB ML, {robust}": rwhe}
-    return {"poses": poses, "source": source, "truth": truth, "fits": fits, "robust": robust_fit}
+    return {
+        "poses": poses, "source": source, "cell": cell, "truth": truth, "fits": fits,
+        "robust": robust_fit,
+    }
 
 
 def tool_point_experiment(

@@ -405,6 +405,35 @@ def candidate_views(scenario: Scenario, spheres_base, per_sphere: int, rng) -> t
     return np.vstack(views), np.repeat(np.arange(len(views)), per_sphere)
 
 
+def suggest_poses(
+    scenario: Scenario, cell: MeasuredCell, per_sphere: int, rng: np.random.Generator
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Poses to measure next time on a user's cell: D-optimal from ``per_sphere`` reachable
+    candidate views of each sphere the calibration used, as many as the calibration has.
+
+    Returns the suggested joint angles (deg, with the sphere id) and the observability of the
+    user's own poses beside that of the selection.
+    """
+    plan = scenario.with_(robot=cell.robot, sensor_design=cell.sensor2flange)
+    used = np.unique(cell.calibration.sphere)
+    base2part = np.linalg.inv(cell.part2base)
+    spheres_base = cell.spheres[used] @ base2part[:3, :3].T + base2part[:3, 3]
+    cand_q, cand_s = candidate_views(plan, spheres_base, per_sphere, rng)
+    blocks, _ = candidate_jacobians(cell.start, cand_q, cell.spheres[used], cand_s)
+    chosen = select_poses(blocks, min(len(cell.calibration), len(cand_q)))
+    _, own = default_model().points_and_jacobian(cell.start, cell.calibration.Q, cell.calibration.C)
+    suggested = pd.DataFrame(np.degrees(cand_q[chosen]), columns=[f"q{i}_deg" for i in range(1, 7)])
+    suggested.insert(0, "sphere", cell.sphere_ids[used][cand_s[chosen]])
+    own_blocks = scaled_jacobian(own).reshape(len(cell.calibration), 3, -1)
+    compare = pd.DataFrame(
+        [
+            {"poses": "yours", **observability(own_blocks)},
+            {"poses": "selected", **observability(blocks[chosen])},
+        ]
+    )
+    return suggested, compare
+
+
 def _measure_selection(scenario, st, Q, sphere, chosen, rng) -> Measurements:
     k = len(st.spheres_base)
     views = [Q[chosen][sphere[chosen] == s] for s in range(k)]
