@@ -42,6 +42,20 @@ def test_rectification_does_not_depend_on_the_strip_height():
     np.testing.assert_array_equal(coc.rectify_coc(img, 2.0, 5), coc.rectify_coc(img, 2.0, 1000))
 
 
+def test_rectification_does_not_depend_on_the_number_of_threads():
+    img = disk_image(size=41, blur=2.0)
+    serial = coc.rectify_coc(img, 2.0, 3, workers=1)
+    np.testing.assert_array_equal(coc.rectify_coc(img, 2.0, 3, workers=3), serial)
+    np.testing.assert_array_equal(coc.rectify_coc(img, 2.0, 3), serial)
+
+
+def test_rectification_rejects_bad_strip_and_worker_counts():
+    with pytest.raises(CalibrationError, match="strip_rows must be at least 1, got 0"):
+        coc.rectify_coc(disk_image(), 2.0, 0)
+    with pytest.raises(CalibrationError, match="workers must be at least 1, got 0"):
+        coc.rectify_coc(disk_image(), 2.0, workers=0)
+
+
 def test_rectification_rejects_a_tiny_radius_and_nan_pixels():
     with pytest.raises(CalibrationError, match="below 1/3 px"):
         coc.rectify_coc(disk_image(), 0.2)

@@ -16,6 +16,8 @@ its top-left pixel, ``origin = (u0, v0)``.
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -48,7 +50,9 @@ def _check_rectify(image, delta_px: float) -> np.ndarray:
     return img
 
 
-def rectify_coc(image, delta_px: float, strip_rows: int = 128) -> np.ndarray:
+def rectify_coc(
+    image, delta_px: float, strip_rows: int = 128, workers: int | None = None
+) -> np.ndarray:
     """Circle-of-confusion rectification of a whole image (Eq. 8-11, Fig. 5), vectorised.
 
     At pixel ``u``: ``E_u0`` is the mean over the disc of radius ``3 delta`` (``t`` pixels) and
@@ -66,8 +70,9 @@ def rectify_coc(image, delta_px: float, strip_rows: int = 128) -> np.ndarray:
     positions to 1/32 px), in float32.
 
     The image is processed in horizontal strips of ``strip_rows`` rows (with a halo of the
-    ``3 delta`` window) so that the working arrays stay in cache; the result does not depend on
-    the strip height.
+    ``3 delta`` window) so that the working arrays stay in cache; strips are independent and run
+    on ``workers`` threads (numpy and OpenCV release the interpreter lock). Each strip writes its
+    own rows, so the result depends neither on the strip height nor on the number of workers.
 
     Parameters
     ----------
@@ -76,14 +81,25 @@ def rectify_coc(image, delta_px: float, strip_rows: int = 128) -> np.ndarray:
     delta_px : float
         Circle-of-confusion radius in px (Eq. 4), >= 1/3.
     strip_rows : int, default 128
-        Rows per strip.
+        Rows per strip, >= 1.
+    workers : int, optional
+        Threads; by default the number of CPUs for an image of more than four strips, one
+        otherwise (a small region is not worth a thread).
 
     Returns
     -------
     float32 array, same shape
     """
     img = _check_rectify(image, delta_px)
+    if int(strip_rows) < 1:
+        raise CalibrationError(f"strip_rows must be at least 1, got {strip_rows}")
+    strip_rows = int(strip_rows)
     rows, cols = img.shape
+    starts = range(0, rows, strip_rows)
+    if workers is None:
+        workers = (os.cpu_count() or 1) if len(starts) > 4 else 1
+    if int(workers) < 1:
+        raise CalibrationError(f"workers must be at least 1, got {workers}")
     kernel = _disk(3.0 * delta_px)
     halo = kernel.shape[0] // 2 + 1
     t = float(kernel.sum())
@@ -91,7 +107,8 @@ def rectify_coc(image, delta_px: float, strip_rows: int = 128) -> np.ndarray:
     coef = np.float32(2.0 * math.pi * delta_px**4 / t)
     out = np.empty_like(img)
     u = np.arange(cols, dtype=np.float32)[None, :]
-    for y0 in range(0, rows, strip_rows):
+
+    def strip(y0: int) -> None:
         y1 = min(rows, y0 + strip_rows)
         a, b = max(0, y0 - halo), min(rows, y1 + halo)
         src = img[a:b]
@@ -117,6 +134,14 @@ def rectify_coc(image, delta_px: float, strip_rows: int = 128) -> np.ndarray:
         np.subtract(u, gx, out=gx)
         np.subtract(np.arange(y0, y1, dtype=np.float32)[:, None], gy, out=gy)
         out[y0:y1] = cv2.remap(img, gx, gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+    if workers == 1:
+        for y0 in starts:
+            strip(y0)
+    else:
+        with ThreadPoolExecutor(int(workers)) as pool:
+            for done in pool.map(strip, starts):  # re-raises a strip's error here
+                del done
     return out
 
 
