@@ -2,10 +2,11 @@
 
 Times ``calstudy.estimators.coc.rectify_coc`` (vectorised, float32, OpenCV filters, strips on
 all cores) on a synthetic full frame of blurred dots, best of several repeats, and the per-pixel
-loop of the paper's flowchart (``rectify_coc_reference``) on a crop, scaled to the full frame. The circle-of-confusion radius is
-that of Eq. 4 for a dot at 900 mm with the optics of ``data/binocular/sensor.toml``. Then one
-Monte Carlo trial of the notebook (``experiments.binocular_trial``, default sweeps; budget: 200
-trials plus 30 field trials in 2 minutes on 2 workers, about 1.1 s per trial).
+loop of the paper's flowchart (``rectify_coc_reference``) on a crop, scaled to the full frame.
+The circle-of-confusion radius is that of Eq. 4 for a dot at 900 mm with the optics of
+``data/binocular/sensor.toml``. Then one Monte Carlo trial of the notebook
+(``experiments.binocular_trial``, default sweeps; budget: 200 trials plus 30 field trials in 2
+minutes on 2 workers, about 1.1 s per trial).
 """
 
 from __future__ import annotations
