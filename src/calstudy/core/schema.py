@@ -160,6 +160,13 @@ def _describe(err: dict, model: type[BaseModel] | None = None) -> str:
         return "is not a number" if kind.startswith("float") else "is not an integer"
     if kind == "int_from_float":
         return "is not an integer"
+    if kind in ("too_short", "too_long"):
+        have = ctx.get("actual_length")
+        if kind == "too_short":
+            return f"must have at least {ctx.get('min_length')} entries, not {have}"
+        return f"must have at most {ctx.get('max_length')} entries, not {have}"
+    if kind == "string_type":
+        return "is not a text (write it in quotes)"
     if kind == "literal_error":
         return f"is not one of {ctx.get('expected', '')}"
     return str(err.get("msg", kind)).replace("Value error, ", "")
@@ -184,6 +191,9 @@ def format_errors(
     (the whole declared range of the key when ``model`` is given)."""
     parts = []
     for err in exc.errors(include_url=False):
+        if not err["loc"] and not prefix:
+            parts.append(_describe(err, model))  # a rule across tables names its own keys
+            continue
         key = _key(err["loc"])
         key = f"{prefix}{key}" if prefix else key
         parts.append(f"{key}{_value(err)}: {_describe(err, model)}")
