@@ -120,6 +120,51 @@ def distances_to_p7(points8) -> np.ndarray:
     return np.linalg.norm(p[..., rows, :] - p[..., 6:7, :], axis=-1)
 
 
+#: relative slack of :func:`layout_problem`: a triangle of distances that closes within it is
+#: a layout (a flat one)
+LAYOUT_TOL = 1e-9
+#: the standard distances to P7, in the order of Table 2
+DISTANCE_NAMES = ("P1P7", "P2P7", "P3P7", "P4P7", "P5P7", "P6P7", "P8P7")
+
+
+def _listing(lengths, names) -> str:
+    """``"P2P7 = 58.853, P3P7 = 55.181, ..."``: named distances for a message."""
+    return ", ".join(f"{n} = {v:g}" for n, v in zip(names, lengths, strict=True))
+
+
+def layout_problem(distances_mm, names=None) -> str:
+    """Why the seven standard distances to P7 admit no planar layout, in words (``""`` if they
+    admit one).
+
+    P7 is the centroid of P2, P3, P5, so the three vectors from P7 sum to zero: each of their
+    lengths must be at most the sum of the other two (a triangle). P8 is the centroid of P1, P4,
+    P6, so ``3 |P8P7|`` is the length of the sum of three vectors of lengths P1P7, P4P7, P6P7:
+    between ``max(0, 2 max - sum)`` and ``sum``. ``names`` (7 texts) name the distances in
+    the message, default :data:`DISTANCE_NAMES`.
+    """
+    d = np.asarray(distances_mm, dtype=float)
+    names = DISTANCE_NAMES if names is None else names
+    problems = []
+    tri = d[list(P7_FROM)]
+    slack = LAYOUT_TOL * float(tri.sum())
+    k = int(np.argmax(tri))
+    if tri[k] > tri.sum() - tri[k] + slack:
+        problems.append(
+            f"{_listing(tri, [names[i] for i in P7_FROM])} admit no layout: P7 is the centroid of "
+            f"P2, P3, P5 only if each is at most the sum of the other two "
+            f"({names[P7_FROM[k]]} = {tri[k]:g} > {tri.sum() - tri[k]:g})"
+        )
+    arms = d[list(P8_FROM)]
+    lo, hi = max(0.0, 2 * float(arms.max()) - float(arms.sum())) / 3, float(arms.sum()) / 3
+    slack = LAYOUT_TOL * float(arms.sum())
+    if not lo - slack <= d[6] <= hi + slack:
+        problems.append(
+            f"{names[6]} = {d[6]:g} with {_listing(arms, [names[i] for i in P8_FROM])} admit no "
+            f"layout: P8, the centroid of P1, P4, P6, lies between {lo:.6g} and {hi:.6g} from P7"
+        )
+    return "; ".join(problems)
+
+
 def solve_calibrator_layout(distances_mm, start_angle_deg) -> tuple[np.ndarray, np.ndarray]:
     """A planar layout of P1-P6 consistent with Table 2's standard distances to P7.
 
@@ -139,11 +184,24 @@ def solve_calibrator_layout(distances_mm, start_angle_deg) -> tuple[np.ndarray, 
     points : (8, 3) array
         P1-P8 in the calibrator frame (P7 at the origin, plate normal +z).
     residual : (7,) array
-        Distances of the layout minus the standard ones, mm.
+        Distances of the layout minus the standard ones, mm (not all ~0 if the solver stopped
+        in a local minimum from ``start_angle_deg``).
+
+    Raises
+    ------
+    CalibrationError
+        If the distances are not 7 positive numbers, the start angles not 6 finite ones, or the
+        distances admit no layout (:func:`layout_problem`, naming the distances that disagree).
     """
     d = np.asarray(distances_mm, dtype=float)
     if d.shape != (7,) or not np.all(np.isfinite(d)) or np.any(d <= 0):
         raise CalibrationError(f"need 7 positive distances to P7, got {d}")
+    start = np.asarray(start_angle_deg, dtype=float)
+    if start.shape != (6,) or not np.all(np.isfinite(start)):
+        raise CalibrationError(f"need 6 finite start angles of P1-P6 (deg), got {start}")
+    problem = layout_problem(d)
+    if problem:
+        raise CalibrationError(problem)
     radii = d[:6]
 
     def layout(angles: np.ndarray) -> np.ndarray:
@@ -155,7 +213,7 @@ def solve_calibrator_layout(distances_mm, start_angle_deg) -> tuple[np.ndarray, 
         p8 = p[list(P8_FROM)].mean(axis=0)
         return np.concatenate([p7[:2], [np.linalg.norm(p8 - p7) - d[6]]])
 
-    sol = least_squares(residuals, np.radians(start_angle_deg), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    sol = least_squares(residuals, np.radians(start), xtol=1e-15, ftol=1e-15, gtol=1e-15)
     p = layout(sol.x)
     p -= p[list(P7_FROM)].mean(axis=0)
     points = with_virtual(p)

@@ -13,9 +13,9 @@ import pytest
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
 from calstudy.core.schema import validate
-from calstudy.estimators.binocular import solve_calibrator_layout
+from calstudy.estimators.binocular import layout_problem, solve_calibrator_layout
 from calstudy.papers.binocular import scenario as scn
-from calstudy.papers.binocular.schema import CalibratorFile, StationFile, layout_problem
+from calstudy.papers.binocular.schema import CalibratorFile, StationFile
 
 TEXT = {name: data_path("binocular", f"{name}.toml").read_text() for name in scn.TABLES}
 NAMES = ["P1P7", "P2P7", "P3P7", "P4P7", "P5P7", "P6P7", "P8P7"]
@@ -157,18 +157,21 @@ def test_a_robot_that_does_not_exist(tmp_path):
 
 def test_the_layout_rule_is_exact():
     """The closed-form rule agrees with the solver: distances on the boundary of what admits a
-    layout are accepted and solved to ~0 residual; just beyond it they are refused, where the
-    solver would leave a residual."""
+    layout are accepted and solved to ~0 residual; just beyond it they are refused (the solver
+    alone would leave a residual of the size of the excess)."""
     d = np.array(DISTANCES)
+    start = [0.0, 60.0, 180.0, 120.0, 300.0, 240.0]
     # P5P7 exactly the sum of P2P7 and P3P7: a degenerate (flat) triangle, still a layout
     flat = d.copy()
     flat[4] = d[1] + d[2]
     assert layout_problem(flat, NAMES) == ""
+    _, residual = solve_calibrator_layout(flat, start)
+    assert np.abs(residual).max() < 1e-6
     beyond = flat.copy()
     beyond[4] += 1.0
     assert "P5P7 = 115.034 > 114.034" in layout_problem(beyond, NAMES)
-    _, residual = solve_calibrator_layout(beyond, [0.0, 60.0, 180.0, 120.0, 300.0, 240.0])
-    assert np.abs(residual).max() > 0.1
+    with pytest.raises(CalibrationError, match=r"P5P7 = 115\.034 admit no layout"):
+        solve_calibrator_layout(beyond, start)
     # P8P7 at its largest, (P1P7 + P4P7 + P6P7) / 3, is reachable; beyond it is not
     top = d.copy()
     top[6] = (d[0] + d[3] + d[5]) / 3

@@ -8,10 +8,11 @@ reads must be there, with its type and range (lengths in mm, angles in degrees w
 default), and the cross-field rules below hold: a principal point inside the image, Canny
 thresholds ``low < high``, proper rotations (the extrinsic and the hand-eye matrix, printed to 4
 decimals, must be rotations within :data:`ROTATION_TOL` before they are re-orthonormalised),
-standard distances that admit a calibrator layout (:func:`layout_problem`), one name, distance and
+standard distances that admit a calibrator layout, one name, distance and
 centre per field region. A message names the file, the key, the value and the allowed range, e.g.
 ``calibrator.toml: standard.distance_mm: P2P7 = 58.853, P3P7 = 55.181, P5P7 = 200.0 admit no
-layout: ...``.
+layout: ...``
+(:func:`calstudy.estimators.binocular.layout_problem`).
 """
 
 from __future__ import annotations
@@ -33,13 +34,11 @@ from calstudy.core.schema import (
     check_principal_point,
     rotation_problem,
 )
-from calstudy.estimators.binocular import P7_FROM, P8_FROM
+from calstudy.estimators.binocular import layout_problem
 
 #: largest ``|R^T R - I|`` of a rotation printed to 4 decimals (the paper's Table 1 and Table 4
 #: give about 1e-4); the loader then projects it onto SO(3)
 ROTATION_TOL = 2e-3
-#: relative slack of the layout check: a triangle of distances that closes within it is a layout
-LAYOUT_TOL = 1e-9
 
 Row3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
@@ -215,42 +214,6 @@ class SensorFile(Documented):
 
 # ----------------------------------------------------------------------------------------------
 # calibrator.toml
-
-
-def _listing(lengths, names) -> str:
-    """``"P2P7 = 58.853, P3P7 = 55.181, ..."``: named distances for a message."""
-    return ", ".join(f"{n} = {v:g}" for n, v in zip(names, lengths, strict=True))
-
-
-def layout_problem(distances_mm, names) -> str:
-    """Why the seven standard distances to P7 admit no planar layout, in words (``""`` if they
-    admit one).
-
-    P7 is the centroid of P2, P3, P5, so the three vectors from P7 sum to zero: each of their
-    lengths must be at most the sum of the other two (a triangle). P8 is the centroid of P1, P4,
-    P6, so ``3 |P8P7|`` is the length of the sum of three vectors of lengths P1P7, P4P7, P6P7:
-    between ``max(0, 2 max - sum)`` and ``sum``.
-    """
-    d = np.asarray(distances_mm, dtype=float)
-    problems = []
-    tri = d[list(P7_FROM)]
-    slack = LAYOUT_TOL * float(tri.sum())
-    k = int(np.argmax(tri))
-    if tri[k] > tri.sum() - tri[k] + slack:
-        problems.append(
-            f"{_listing(tri, [names[i] for i in P7_FROM])} admit no layout: P7 is the centroid of "
-            f"P2, P3, P5 only if each is at most the sum of the other two "
-            f"({names[P7_FROM[k]]} = {tri[k]:g} > {tri.sum() - tri[k]:g})"
-        )
-    arms = d[list(P8_FROM)]
-    lo, hi = max(0.0, 2 * float(arms.max()) - float(arms.sum())) / 3, float(arms.sum()) / 3
-    slack = LAYOUT_TOL * float(arms.sum())
-    if not lo - slack <= d[6] <= hi + slack:
-        problems.append(
-            f"{names[6]} = {d[6]:g} with {_listing(arms, [names[i] for i in P8_FROM])} admit no "
-            f"layout: P8, the centroid of P1, P4, P6, lies between {lo:.6g} and {hi:.6g} from P7"
-        )
-    return "; ".join(problems)
 
 
 class Standard(Documented):
@@ -449,10 +412,8 @@ SCHEMAS: dict[str, Any] = {
 
 __all__ = [
     "CalibratorFile",
-    "LAYOUT_TOL",
     "ROTATION_TOL",
     "SCHEMAS",
     "SensorFile",
     "StationFile",
-    "layout_problem",
 ]
