@@ -40,7 +40,14 @@ from pathlib import Path
 from typing import Annotated, Any, TypeVar, get_args
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
 
 from calstudy.core.errors import CalibrationError
 
@@ -61,11 +68,22 @@ NonNegativeInt = Annotated[int, Field(ge=0)]
 
 
 class Schema(BaseModel):
-    """Base of every file schema: unknown keys are errors, values are checked strictly enough
-    that ``"12"`` is not silently a number in a TOML file but numbers may be ints or floats."""
+    """Base of every file schema: unknown keys are errors, values are checked strictly (a
+    quoted ``"12"`` or ``true`` is not silently a number in a TOML file, ``6.0`` not a count)
+    but a float may be written as an int. CSV rows, whose cells are text, are validated with
+    the text parsed (:func:`validate_rows`). An array of fixed positions (``tuple[...]``)
+    must be declared with :data:`Row` so that a TOML array passes."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True, strict=True)
 
+
+def _as_tuple(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list) else value
+
+
+#: marks a ``tuple[...]`` type as a TOML array of fixed positions: ``Annotated[tuple[int,
+#: float], Row]`` (strict validation takes tuples only)
+Row = BeforeValidator(_as_tuple)
 
 #: three finite numbers (a position, a direction, a rotation vector)
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
@@ -368,7 +386,7 @@ def validate_rows(
     for line, cells in rows:
         record = {h: c for h, c in zip(header, cells, strict=True) if h in fields}
         try:
-            out.append(model.model_validate(record))
+            out.append(model.model_validate(record, strict=False))
         except ValidationError as exc:
             err = exc.errors(include_url=False)[0]
             column = str(err["loc"][0]) if err["loc"] else "?"
@@ -390,6 +408,7 @@ __all__ = [
     "NonNegativeInt",
     "PositiveFinite",
     "PositiveInt",
+    "Row",
     "Schema",
     "Vec2",
     "Vec3",

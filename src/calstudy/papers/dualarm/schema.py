@@ -21,6 +21,7 @@ from calstudy.core.schema import (
     NonNegativeFinite,
     PositiveFinite,
     PositiveInt,
+    Row,
     Schema,
     Vec3,
     check_principal_point,
@@ -238,7 +239,7 @@ class IcpTable(Documented):
     """The ``[icp]`` table of data/dualarm/published.toml: ``[arm, sphere, before, after]``."""
 
     rows: Annotated[
-        list[tuple[Annotated[int, Field(ge=1, le=2)], Literal["A", "B"], Mm, Mm]],
+        list[Annotated[tuple[Annotated[int, Field(ge=1, le=2)], Literal["A", "B"], Mm, Mm], Row]],
         Field(min_length=1),
     ]
 
@@ -253,7 +254,7 @@ class GroupTable(Documented):
     """The ``[table1]`` and ``[table2]`` tables of data/dualarm/published.toml: ``[group, three
     errors]`` per row (group 0: all groups), mm."""
 
-    rows: Annotated[list[tuple[Group, Mm, Mm, Mm]], Field(min_length=1)]
+    rows: Annotated[list[Annotated[tuple[Group, Mm, Mm, Mm], Row]], Field(min_length=1)]
     overall: Mm | None = None
 
     @field_validator("rows")
@@ -267,7 +268,7 @@ class MethodTable(Documented):
     method, mm."""
 
     methods: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]
-    rows: list[tuple[Mm, Mm, Mm, Mm]]
+    rows: list[Annotated[tuple[Mm, Mm, Mm, Mm], Row]]
     not_testable: str = ""
 
     @model_validator(mode="after")
