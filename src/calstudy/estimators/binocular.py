@@ -63,9 +63,11 @@ def triangulate(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.nd
     Raises
     ------
     CalibrationError
-        If the arrays differ in shape or are not finite, or a pair of rays misses by more
-        than ``tol_mm`` (a wrong match or a wrong calibration).
+        If the arrays differ in shape or are not finite, ``tol_mm`` is not > 0, or a pair of
+        rays misses by more than ``tol_mm`` (a wrong match or a wrong calibration).
     """
+    if not (math.isfinite(tol_mm) and tol_mm > 0):
+        raise CalibrationError(f"ray tolerance tol_mm = {tol_mm} must be a finite number > 0")
     a = geo.check_finite("left image points", uv_left).reshape(-1, 2)
     b = geo.check_finite("right image points", uv_right).reshape(-1, 2)
     if a.shape != b.shape or a.shape[0] == 0:
@@ -105,7 +107,7 @@ def ray_gap(x_left, x_right, rotation, translation) -> np.ndarray:
 def with_virtual(points) -> np.ndarray:
     """P1-P6 ``(..., 6, 3)`` extended by the virtual P7 (centroid of P2, P3, P5) and P8 (of P1,
     P4, P6): ``(..., 8, 3)``."""
-    p = np.asarray(points, dtype=float)
+    p = geo.check_finite("calibrator targets", points)
     if p.shape[-2:] != (6, 3):
         raise CalibrationError(f"the calibrator has 6 physical targets; got points {p.shape}")
     p7 = p[..., P7_FROM, :].mean(axis=-2, keepdims=True)
@@ -115,11 +117,18 @@ def with_virtual(points) -> np.ndarray:
 
 def distances_to_p7(points8) -> np.ndarray:
     """Distances P1P7 ... P6P7 and P8P7 (Table 2's rows) of ``(..., 8, 3)`` points."""
-    p = np.asarray(points8, dtype=float)
+    p = geo.check_finite("calibrator targets", points8)
+    if p.ndim < 2 or p.shape[-2:] != (8, 3):
+        raise CalibrationError(
+            f"need P1-P8 as (..., 8, 3) points; got {p.shape} (see with_virtual)"
+        )
     rows = [0, 1, 2, 3, 4, 5, 7]
     return np.linalg.norm(p[..., rows, :] - p[..., 6:7, :], axis=-1)
 
 
+#: smallest singular value of Eq. 21's ``U``, relative to its largest, for which all six
+#: parameters of the hand-eye update are determined (:func:`correct_transformation`)
+UPDATE_RCOND = 1e-9
 #: relative slack of :func:`layout_problem`: a triangle of distances that closes within it is
 #: a layout (a flat one)
 LAYOUT_TOL = 1e-9
@@ -268,7 +277,8 @@ def modify_observed_error(
     ------
     CalibrationError
         If fewer than 8 distances are given (the redundancy Eq. 25 needs), shapes disagree, a
-        pair repeats a target or indexes a missing one, or two targets coincide.
+        standard distance is not > 0, ``rcond`` is outside [0, 1), a pair repeats a target or
+        indexes a missing one, or two targets coincide.
     """
     p = geo.check_finite("points", points)
     pr = np.asarray(pairs, dtype=int)
@@ -281,6 +291,11 @@ def modify_observed_error(
         raise CalibrationError(
             f"{pr.shape[0]} calibrator distances given; Eq. 25 needs at least 8 for redundancy"
         )
+    if np.any(std <= 0):
+        k = int(np.argmax(std <= 0))
+        raise CalibrationError(f"standard distance #{k + 1} is {std[k]:g} mm; distances are > 0")
+    if not (math.isfinite(rcond) and 0 <= rcond < 1):
+        raise CalibrationError(f"rcond = {rcond} must lie in [0, 1)")
     if np.any(pr[:, 0] == pr[:, 1]) or pr.min() < 0 or pr.max() >= p.shape[0]:
         raise CalibrationError(f"pairs must join two different targets among {p.shape[0]}")
     diff = p[pr[:, 0]] - p[pr[:, 1]]
@@ -382,6 +397,15 @@ def correct_transformation(
         Updated ``sensor2flange``.
     d_eta : (6,) array
         ``(sigma_x, sigma_y, sigma_z, omega_x, omega_y, omega_z)``, mm and rad.
+
+    Raises
+    ------
+    CalibrationError
+        If the inputs are not finite rigid poses and matching points, or the six parameters
+        of the update are not all determined (the smallest singular value of ``U`` below
+        :data:`UPDATE_RCOND` times the largest: identical poses, rotations about one axis,
+        fewer than 3 targets off a line); the least-norm solution would then silently return
+        an update of only part of the hand-eye matrix.
     """
     g = geo.check_transform("flange poses", flange2base)
     h = geo.check_transform("sensor2flange", sensor2flange)
@@ -404,5 +428,13 @@ def correct_transformation(
         rows_u.append((rp[j] - rp[i]).reshape(-1, 6))
     u = np.concatenate(rows_u)
     v = np.concatenate(rows_v)
+    sv = np.linalg.svd(u, compute_uv=False)
+    if sv[0] == 0 or sv[-1] / sv[0] < UPDATE_RCOND:
+        raise CalibrationError(
+            f"the update of Eq. 21 is unobservable from these {g.shape[0]} poses and "
+            f"{xc.shape[1]} targets (condition number "
+            f"{sv[0] / sv[-1] if sv[-1] > 0 else math.inf:.3g}, allowed {1 / UPDATE_RCOND:.3g}): "
+            "the poses must rotate about two axes and see at least 3 targets not on a line"
+        )
     d_eta = np.linalg.pinv(u) @ v
     return h @ geo.exp6(d_eta), d_eta

@@ -122,6 +122,28 @@ CASES = [
     ("published table 5 regions differ", "station", "table5_rmse = [[0.064, 0.055], [0.063, 0.054], [0.063, 0.055]]",
      "table5_rmse = [[0.064, 0.055], [0.063, 0.054]]", r"published: table5_preliminary, table5_updated and table5_rmse list 3, 3 and 2 regions"),
     ("missing key", "station", 'model = "kuka_kr210"', "", r"robot\.model: missing \(required\)"),
+    # strict values and unit suspicions
+    ("quoted number in a matrix", "station", "[0.9734, 0.0066, 0.2289, 188.2993]", '["0.9734", 0.0066, 0.2289, 188.2993]',
+     r"handeye\.matrix #1 #1 = '0\.9734': is not a number"),
+    ("true for a count", "sensor", "bits = 8", "bits = true", r"exposure\.bits = True: is not an integer"),
+    ("6.0 for a count", "station", "n_calibration = 6", "n_calibration = 6.0", r"poses\.n_calibration = 6\.0: is not an integer"),
+    ("baseline in metres", "sensor", "translation_mm = [-343.8618, 2.0126, 86.4411]", "translation_mm = [-0.3438618, 0.0020126, 0.0864411]",
+     r"extrinsic\.translation_mm = .*the baseline's largest coordinate is 0\.343862 mm, below 10 mm: metres\?"),
+    ("hand-eye translation in metres", "station",
+     "188.2993],\n  [0.2289, 0.0062, -0.9734, 28.2481],\n  [-0.0078, 1.0, 0.0046, 78.6841]",
+     "0.1882993],\n  [0.2289, 0.0062, -0.9734, 0.0282481],\n  [-0.0078, 1.0, 0.0046, 0.0786841]",
+     r"handeye\.matrix: its translation's largest coordinate is 0\.188299 mm, below 10 mm: metres\?"),
+    ("distances in metres", "calibrator", "distance_mm = [162.085, 58.853, 55.181, 130.546, 64.765, 178.467, 43.745]",
+     "distance_mm = [0.162085, 0.058853, 0.055181, 0.130546, 0.064765, 0.178467, 0.043745]",
+     r"standard\.distance_mm: the largest distance is 0\.178467 mm, below 10 mm: metres\?"),
+    ("observation distance in metres", "station", "observation_distance_mm = 850.0", "observation_distance_mm = 0.85",
+     r"poses\.observation_distance_mm = 0\.85: must be >= 10"),
+    ("focus inside the focal length", "sensor", "focus_distance_mm = 850.0", "focus_distance_mm = 50.0",
+     r"optics\.focus_distance_mm = 50\.0 is not beyond the focal length 55\.47 mm"),
+    ("distance names repeated", "calibrator", 'names = ["P1P7", "P2P7"', 'names = ["P1P7", "P1P7"',
+     r"standard\.names = .*distance names repeated: \['P1P7'\]"),
+    ("region names repeated", "station", 'regions = ["Region 1", "Region 2", "Region 3"]', 'regions = ["Region 1", "Region 1", "Region 3"]',
+     r"field\.regions = .*region names repeated: \['Region 1'\]"),
 ]
 
 
@@ -147,6 +169,13 @@ def test_a_missing_file_names_it(tmp_path):
     (folder / "sensor.toml").unlink()
     with pytest.raises(FileNotFoundError, match=r"sensor\.toml: no such file \(the binocular sensor table\)"):
         scn.load_scenario(folder)
+
+
+def test_a_file_for_the_folder(tmp_path):
+    path = tmp_path / "sensor.toml"
+    path.write_text(TEXT["sensor"])
+    with pytest.raises(NotADirectoryError, match=r"sensor\.toml: not a folder; a scenario folder holds"):
+        scn.load_scenario(path)
 
 
 def test_a_robot_that_does_not_exist(tmp_path):

@@ -109,8 +109,12 @@ def plate_frame(centre, normal) -> np.ndarray:
 
 def scenario_files(path: str | Path | None = None) -> dict[str, Path]:
     """``{"sensor": ..., "calibrator": ..., "station": ...}``: the files of the folder ``path``,
-    default ``data/binocular``."""
+    default ``data/binocular`` (NotADirectoryError if ``path`` is a file)."""
     own = None if path in (None, "") else Path(path)
+    if own is not None and own.exists() and not own.is_dir():
+        raise NotADirectoryError(
+            f"{own}: not a folder; a scenario folder holds {', '.join(f'{n}.toml' for n in TABLES)}"
+        )
     return {n: scenario_file(PAPER, f"{n}.toml", own and own / f"{n}.toml") for n in TABLES}
 
 

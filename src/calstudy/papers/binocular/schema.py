@@ -51,6 +51,24 @@ DIST_LENGTHS = (4, 5, 8, 12, 14)
 Seven = Annotated[list[PositiveFinite], Field(min_length=7, max_length=7)]
 Pair = Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
 Name = Annotated[str, Field(min_length=1)]
+#: lengths of a station in mm that all lie below this look like metres
+METRES_SUSPECT_MM = 10.0
+
+
+def _metres(values, what: str) -> None:
+    """ValueError if the lengths ``values`` (mm) all lie below :data:`METRES_SUSPECT_MM`."""
+    size = float(np.max(np.abs(np.asarray(values, dtype=float))))
+    if size < METRES_SUSPECT_MM:
+        raise ValueError(
+            f"{what} is {size:g} mm, below {METRES_SUSPECT_MM:g} mm: metres? (write millimetres)"
+        )
+
+
+def _distinct(names: list, what: str) -> list:
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"{what} repeated: {dup}")
+    return names
 
 
 class Notes(Schema):
@@ -120,6 +138,7 @@ class Extrinsic(Documented):
     def _baseline(cls, t: list) -> list:
         if float(np.linalg.norm(t)) <= 0.0:
             raise ValueError("the cameras coincide (baseline 0); stereo needs a baseline")
+        _metres(t, "the baseline's largest coordinate")
         return t
 
 
@@ -202,6 +221,16 @@ class SensorFile(Documented):
     detection: Detection
 
     @model_validator(mode="after")
+    def _focus_beyond_focal_length(self) -> SensorFile:
+        focal = self.left.fx * self.image.pixel_pitch_mm
+        if self.optics.focus_distance_mm <= focal:
+            raise ValueError(
+                f"optics.focus_distance_mm = {self.optics.focus_distance_mm} is not beyond the "
+                f"focal length {focal:.4g} mm (left.fx x image.pixel_pitch_mm); Eq. 4 needs it"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _centres_in_image(self) -> SensorFile:
         for side in ("left", "right"):
             cam = getattr(self, side)
@@ -223,6 +252,11 @@ class Standard(Documented):
     distance_mm: Seven
     start_angle_deg: Annotated[list[Degrees], Field(min_length=6, max_length=6)]
 
+    @field_validator("names")
+    @classmethod
+    def _names(cls, names: list) -> list:
+        return _distinct(names, "distance names")
+
     @field_validator("distance_mm")
     @classmethod
     def _layout(cls, distance_mm: list, info: ValidationInfo) -> list:
@@ -230,6 +264,7 @@ class Standard(Documented):
         problem = layout_problem(distance_mm, names)
         if problem:
             raise ValueError(problem)
+        _metres(distance_mm, "the largest distance")
         return distance_mm
 
 
@@ -284,6 +319,7 @@ class HandEye(Documented):
         if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
             raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
         _rotation(m[:3, :3], "its 3 x 3 block")
+        _metres(m[:3, 3], "its translation's largest coordinate")
         return matrix
 
 
@@ -307,7 +343,8 @@ class CalibratorPlace(Documented):
 class Poses(Documented):
     """The ``[poses]`` table of data/binocular/station.toml."""
 
-    observation_distance_mm: PositiveFinite
+    #: at least 10 mm (a value in metres is refused)
+    observation_distance_mm: Annotated[float, Field(ge=METRES_SUSPECT_MM, allow_inf_nan=False)]
     #: AX = XB needs at least 3 poses (2 motions about different axes)
     n_calibration: Annotated[int, Field(ge=3)]
     n_validation: PositiveInt
@@ -351,6 +388,11 @@ class Field_(Documented):
     centres_mm: list[Vec3]
     faces_point_mm: Vec3
     n_poses: PositiveInt
+
+    @field_validator("regions")
+    @classmethod
+    def _names(cls, regions: list) -> list:
+        return _distinct(regions, "region names")
 
     @model_validator(mode="after")
     def _one_each(self) -> Field_:
