@@ -192,6 +192,8 @@ def sphere_csv(kind):
             lines = [",".join(ln.split(",")[:-1]) for ln in lines]
         elif kind == "header_only":
             lines = lines[:1]
+        elif kind == "no_rotation_rows":
+            lines = [ln for ln in lines if ",rotation," not in ln]
         elif kind == "empty":
             lines = []
         elif kind == "mixed_units":
@@ -380,6 +382,7 @@ CASES = [
     ("read_sphere_csv-empty_cell", sphere_csv("empty_cell"), E, r"row 3, column 'sy': '' is not a number"),
     ("read_sphere_csv-nan_cell", sphere_csv("nan_cell"), E, r"row 5, column 'a': 'nan'"),
     ("read_sphere_csv-bad_group", sphere_csv("bad_group"), E, r"row 6, column 'group': 'rotate' is not one of"),
+    ("read_sphere_csv-no_rotation_rows", sphere_csv("no_rotation_rows"), E, r"m\.csv: no rows of group 'rotation'"),
     ("read_sphere_csv-duplicate_id", sphere_csv("duplicate_id"), E, "id 1 appears more than once"),
     ("read_sphere_csv-fractional_id", sphere_csv("fractional_id"), E, "7.5 is not an integer"),
     ("read_sphere_csv-missing_column", sphere_csv("missing_column"), E, "missing column 'sz'"),
@@ -428,6 +431,7 @@ CASES = [
     ("levenberg_marquardt-nan_start", lambda p: estimation.levenberg_marquardt(lambda x: x, np.array([np.nan, 0.0])), E, "starting point is not finite"),
     ("levenberg_marquardt-unobservable", lambda p: estimation.levenberg_marquardt(lambda x: np.array([x[0] + x[1] - 1, x[0] + x[1] - 1]), np.zeros(2), max_condition=1e8), E, "condition number"),
     ("schema.validate-range", lambda p: schema.validate(type("S", (schema.Schema,), {"__annotations__": {"rate": schema.Fraction}}), {"rate": 1.5}, "s.toml", "station."), E, r"s.toml: station.rate = 1.5: must be >= 0 and <= 1"),
+    ("geometry.check_transform-empty", lambda p: geo.check_transform("rotation flange poses", np.zeros((0, 4, 4))), E, r"rotation flange poses holds no transforms \(shape \(0, 4, 4\)\)"),
     ("geometry.check_transform-not_rigid", lambda p: geo.check_transform("sensor2flange", np.diag([1.0, 1, 2, 1])), E, "sensor2flange"),
     ("aggregate_claims-misspelt_folder", lambda p: aggregate_claims(p / "reslts"), FileNotFoundError, "reslts"),
     # binocular calibrator, triangulation and hand-eye update

@@ -50,6 +50,10 @@ CASES = [
     ("misspelt key", "baseline_mm = 200.0", "base_line_mm = 200.0",
      r"stereo\.baseline_mm: missing \(required\); stereo\.base_line_mm = 200\.0: unknown key"),
     ("missing key", "loss_rate = 0.1\n", "", r"detection\.loss_rate: missing \(required\)"),
+    ("quoted number", "baseline_mm = 200.0", 'baseline_mm = "200.0"',
+     r"stereo\.baseline_mm = '200\.0': is not a number"),
+    ("true for a count", "n_poses = 10", "n_poses = true",
+     r"handeye\.n_poses = True: is not an integer"),
 ]
 
 
