@@ -23,6 +23,8 @@ from calstudy import CalibrationError
 from calstudy.core import estimation, schema
 from calstudy.core import geometry as geo
 from calstudy.core.circles import fit_circle_2d
+from calstudy.estimators import binocular as bino
+from calstudy.estimators import coc
 from calstudy.estimators import fitting as ft
 from calstudy.estimators import handeye as he
 from calstudy.estimators import sphere_csv as spc
@@ -30,8 +32,10 @@ from calstudy.estimators import workpiece as wp
 from calstudy.estimators.handeye_poses import calibrate_handeye
 from calstudy.estimators.posefile import read_pose_list, write_pose_list
 from calstudy.io.results import aggregate_claims
+from calstudy.models import optics
 from calstudy.models.robots import load_robot
 from calstudy.models.sensors import PinholeCamera
+from calstudy.models.stereo import stereo_rig
 from calstudy.models.targets import Sphere
 
 # hypothesis keeps a cache folder (.hypothesis/) even without an example database: put it in a
@@ -90,6 +94,16 @@ UV = SQUARE * 2.0 + 50.0
 CUBE = np.array(
     [[0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100], [100, 100, 0], [100, 0, 100.0]]
 )
+
+# the binocular calibrator (Table 2 distances), a stereo rig and a bright dot
+TABLE2 = [162.085, 58.853, 55.181, 130.546, 64.765, 178.467, 43.745]
+START = [0.0, 60.0, 180.0, 120.0, 300.0, 240.0]
+LAYOUT, _ = bino.solve_calibrator_layout(TABLE2, START)
+RIG = stereo_rig(PinholeCamera(fx=2000.0, fy=2000.0, cx=640.0, cy=512.0, width=1280, height=1024), 300.0, 850.0)
+SEEN = RIG.project(LAYOUT[:3] + [0.0, 0.0, 850.0])
+SIGMAS = {"focal_px": 0.5, "principal_point_px": 0.5, "k1": 0.0, "extrinsic_rotation_rad": 1e-5, "extrinsic_translation_mm": 0.01}
+_YY, _XX = np.mgrid[:40, :40]
+DOT = ((_YY - 20.0) ** 2 + (_XX - 20.0) ** 2 < 64).astype(float)
 
 
 def _cell(n=8, seed=3):
@@ -178,6 +192,8 @@ def sphere_csv(kind):
             lines = [",".join(ln.split(",")[:-1]) for ln in lines]
         elif kind == "header_only":
             lines = lines[:1]
+        elif kind == "no_rotation_rows":
+            lines = [ln for ln in lines if ",rotation," not in ln]
         elif kind == "empty":
             lines = []
         elif kind == "mixed_units":
@@ -366,6 +382,7 @@ CASES = [
     ("read_sphere_csv-empty_cell", sphere_csv("empty_cell"), E, r"row 3, column 'sy': '' is not a number"),
     ("read_sphere_csv-nan_cell", sphere_csv("nan_cell"), E, r"row 5, column 'a': 'nan'"),
     ("read_sphere_csv-bad_group", sphere_csv("bad_group"), E, r"row 6, column 'group': 'rotate' is not one of"),
+    ("read_sphere_csv-no_rotation_rows", sphere_csv("no_rotation_rows"), E, r"m\.csv: no rows of group 'rotation'"),
     ("read_sphere_csv-duplicate_id", sphere_csv("duplicate_id"), E, "id 1 appears more than once"),
     ("read_sphere_csv-fractional_id", sphere_csv("fractional_id"), E, "7.5 is not an integer"),
     ("read_sphere_csv-missing_column", sphere_csv("missing_column"), E, "missing column 'sz'"),
@@ -414,8 +431,31 @@ CASES = [
     ("levenberg_marquardt-nan_start", lambda p: estimation.levenberg_marquardt(lambda x: x, np.array([np.nan, 0.0])), E, "starting point is not finite"),
     ("levenberg_marquardt-unobservable", lambda p: estimation.levenberg_marquardt(lambda x: np.array([x[0] + x[1] - 1, x[0] + x[1] - 1]), np.zeros(2), max_condition=1e8), E, "condition number"),
     ("schema.validate-range", lambda p: schema.validate(type("S", (schema.Schema,), {"__annotations__": {"rate": schema.Fraction}}), {"rate": 1.5}, "s.toml", "station."), E, r"s.toml: station.rate = 1.5: must be >= 0 and <= 1"),
+    ("geometry.check_transform-empty", lambda p: geo.check_transform("rotation flange poses", np.zeros((0, 4, 4))), E, r"rotation flange poses holds no transforms \(shape \(0, 4, 4\)\)"),
     ("geometry.check_transform-not_rigid", lambda p: geo.check_transform("sensor2flange", np.diag([1.0, 1, 2, 1])), E, "sensor2flange"),
     ("aggregate_claims-misspelt_folder", lambda p: aggregate_claims(p / "reslts"), FileNotFoundError, "reslts"),
+    # binocular calibrator, triangulation and hand-eye update
+    ("solve_calibrator_layout-no_layout", lambda p: bino.solve_calibrator_layout(TABLE2[:4] + [364.765] + TABLE2[5:], START), E, r"P5P7 = 364\.765 admit no layout: .*\(P5P7 = 364\.765 > 114\.034\)"),
+    ("solve_calibrator_layout-p8_beyond", lambda p: bino.solve_calibrator_layout(TABLE2[:6] + [200.0], START), E, r"P8P7 = 200 with .* lies between 0 and 157\.033 from P7"),
+    ("solve_calibrator_layout-nan_angle", lambda p: bino.solve_calibrator_layout(TABLE2, [0, np.nan, 0, 0, 0, 0]), E, "6 finite start angles"),
+    ("solve_calibrator_layout-five_angles", lambda p: bino.solve_calibrator_layout(TABLE2, START[:5]), E, "6 finite start angles"),
+    ("distances_to_p7-six_points", lambda p: bino.distances_to_p7(LAYOUT[:6]), E, r"P1-P8 as \(\.\.\., 8, 3\) points; got \(6, 3\)"),
+    ("with_virtual-nan", lambda p: bino.with_virtual(np.full((6, 3), np.nan)), E, "calibrator targets holds a non-finite value"),
+    ("modify_observed_error-rcond", lambda p: bino.modify_observed_error(LAYOUT, bino.all_pairs(8), np.full(28, 50.0), rcond=-1), E, r"rcond = -1 must lie in \[0, 1\)"),
+    ("modify_observed_error-negative_standard", lambda p: bino.modify_observed_error(LAYOUT, bino.all_pairs(8), -np.ones(28)), E, "standard distance #1 is -1 mm"),
+    ("correct_transformation-same_pose", lambda p: bino.correct_transformation(np.stack([ROT[0]] * 3), S2F, np.stack([LAYOUT] * 3), np.stack([LAYOUT] * 3)), E, r"unobservable from these 3 poses and 8 targets \(condition number inf"),
+    ("correct_transformation-one_target", lambda p: bino.correct_transformation(ROT, S2F, np.stack([LAYOUT[:1]] * 6), np.stack([LAYOUT[:1]] * 6)), E, "unobservable from these 6 poses and 1 targets"),
+    ("triangulate-tol_nan", lambda p: bino.triangulate(RIG, *SEEN, tol_mm=float("nan")), E, "tol_mm = nan must be a finite number > 0"),
+    ("triangulate-tol_negative", lambda p: bino.triangulate(RIG, *SEEN, tol_mm=-1.0), E, "tol_mm = -1.0 must be a finite number > 0"),
+    # imaging: circle of confusion, exposures, dot centres, the stereo rig
+    ("roi_around-negative_radius", lambda p: optics.roi_around([100.0, 100.0], -10.0, 5.0, 1280, 1024), E, r"dot radius -10\.0 px must be > 0"),
+    ("defocus-nan_image", lambda p: optics.defocus(np.full((20, 20), np.nan), 1.0), E, "image to blur has NaN or inf pixels"),
+    ("fuse_exposures-sigma_zero", lambda p: optics.fuse_exposures([DOT, DOT * 0.5], 1.0, 1.0, 0.0), E, "well-exposedness sigma = 0.0"),
+    ("fuse_exposures-negative_weight", lambda p: optics.fuse_exposures([DOT, DOT * 0.5], -1.0, 1.0, 0.2), E, r"fusion weights -1\.0, 1\.0"),
+    ("detect_centre-thresholds_reversed", lambda p: coc.detect_centre(DOT, low=0.6, high=0.3), E, r"low = 0\.6, high = 0\.3: need 0 < low < high <= 1"),
+    ("stereorig.perturbed-negative_sigma", lambda p: RIG.perturbed(SIGMAS | {"focal_px": -1.0}, np.random.default_rng(0)), E, r"calibration sigma focal_px = -1\.0"),
+    ("stereorig.perturbed-missing_sigma", lambda p: RIG.perturbed({"focal_px": 1.0}, np.random.default_rng(0)), E, "calibration sigma principal_point_px = None"),
+    ("stereorig.aim_point-negative", lambda p: RIG.aim_point(-850.0), E, r"aim distance -850\.0 mm"),
 ]
 
 

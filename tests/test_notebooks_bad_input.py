@@ -97,6 +97,21 @@ def test_notebook03_stops_at_the_scenario_cell(tmp_path):
     assert "load_scenario(scenario_toml" in err.source
 
 
+def test_notebook04_stops_at_the_scenario_cell(tmp_path):
+    """A scenario folder whose calibrator distances admit no layout (a layout solved anyway
+    misses them by up to 84 mm): refused in the first cell that reads the folder, naming the
+    distances."""
+    folder = tmp_path / "my_cell"
+    folder.mkdir()
+    for name in ("sensor", "calibrator", "station"):
+        shutil.copy(data_path("binocular", f"{name}.toml"), folder / f"{name}.toml")
+    _text(folder / "calibrator.toml", "130.546, 64.765,", "130.546, 364.765,")
+    err = _run_broken(tmp_path, "04_binocular_correction", {"scenario_dir": str(folder)})
+    assert "calibrator.toml: standard.distance_mm = [" in err.evalue
+    assert "P5P7 = 364.765 admit no layout" in err.evalue
+    assert "load_scenario(scenario_dir" in err.source
+
+
 def test_notebook05_stops_at_the_scenario_cell(tmp_path):
     path = tmp_path / "my_station.toml"
     path.write_text(data_path("dualarm", "scenario.toml").read_text())

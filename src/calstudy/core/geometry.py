@@ -97,6 +97,8 @@ def check_transform(name: str, transform, tol: float = ORTHONORMAL_TOL) -> np.nd
     t = np.asarray(transform, dtype=float)
     if t.shape[-2:] != (4, 4):
         raise CalibrationError(f"{name} has shape {t.shape}; expected (4, 4) or (N, 4, 4)")
+    if t.size == 0:
+        raise CalibrationError(f"{name} holds no transforms (shape {t.shape})")
     check_finite(name, t)
     bottom = np.abs(t[..., 3, :] - np.array([0.0, 0.0, 0.0, 1.0])).max()
     if bottom > tol:

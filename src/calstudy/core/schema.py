@@ -40,7 +40,14 @@ from pathlib import Path
 from typing import Annotated, Any, TypeVar, get_args
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
 
 from calstudy.core.errors import CalibrationError
 
@@ -61,11 +68,22 @@ NonNegativeInt = Annotated[int, Field(ge=0)]
 
 
 class Schema(BaseModel):
-    """Base of every file schema: unknown keys are errors, values are checked strictly enough
-    that ``"12"`` is not silently a number in a TOML file but numbers may be ints or floats."""
+    """Base of every file schema: unknown keys are errors, values are checked strictly (a
+    quoted ``"12"`` or ``true`` is not silently a number in a TOML file, ``6.0`` not a count)
+    but a float may be written as an int. CSV rows, whose cells are text, are validated with
+    the text parsed (:func:`validate_rows`). An array of fixed positions (``tuple[...]``)
+    must be declared with :data:`Row` so that a TOML array passes."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True, strict=True)
 
+
+def _as_tuple(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list) else value
+
+
+#: marks a ``tuple[...]`` type as a TOML array of fixed positions: ``Annotated[tuple[int,
+#: float], Row]`` (strict validation takes tuples only)
+Row = BeforeValidator(_as_tuple)
 
 #: three finite numbers (a position, a direction, a rotation vector)
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
@@ -160,6 +178,13 @@ def _describe(err: dict, model: type[BaseModel] | None = None) -> str:
         return "is not a number" if kind.startswith("float") else "is not an integer"
     if kind == "int_from_float":
         return "is not an integer"
+    if kind in ("too_short", "too_long"):
+        have = ctx.get("actual_length")
+        if kind == "too_short":
+            return f"must have at least {ctx.get('min_length')} entries, not {have}"
+        return f"must have at most {ctx.get('max_length')} entries, not {have}"
+    if kind == "string_type":
+        return "is not a text (write it in quotes)"
     if kind == "literal_error":
         return f"is not one of {ctx.get('expected', '')}"
     return str(err.get("msg", kind)).replace("Value error, ", "")
@@ -184,6 +209,9 @@ def format_errors(
     (the whole declared range of the key when ``model`` is given)."""
     parts = []
     for err in exc.errors(include_url=False):
+        if not err["loc"] and not prefix:
+            parts.append(_describe(err, model))  # a rule across tables names its own keys
+            continue
         key = _key(err["loc"])
         key = f"{prefix}{key}" if prefix else key
         parts.append(f"{key}{_value(err)}: {_describe(err, model)}")
@@ -358,7 +386,7 @@ def validate_rows(
     for line, cells in rows:
         record = {h: c for h, c in zip(header, cells, strict=True) if h in fields}
         try:
-            out.append(model.model_validate(record))
+            out.append(model.model_validate(record, strict=False))
         except ValidationError as exc:
             err = exc.errors(include_url=False)[0]
             column = str(err["loc"][0]) if err["loc"] else "?"
@@ -380,6 +408,7 @@ __all__ = [
     "NonNegativeInt",
     "PositiveFinite",
     "PositiveInt",
+    "Row",
     "Schema",
     "Vec2",
     "Vec3",

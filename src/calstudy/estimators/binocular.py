@@ -63,9 +63,11 @@ def triangulate(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.nd
     Raises
     ------
     CalibrationError
-        If the arrays differ in shape or are not finite, or a pair of rays misses by more
-        than ``tol_mm`` (a wrong match or a wrong calibration).
+        If the arrays differ in shape or are not finite, ``tol_mm`` is not > 0, or a pair of
+        rays misses by more than ``tol_mm`` (a wrong match or a wrong calibration).
     """
+    if not (math.isfinite(tol_mm) and tol_mm > 0):
+        raise CalibrationError(f"ray tolerance tol_mm = {tol_mm} must be a finite number > 0")
     a = geo.check_finite("left image points", uv_left).reshape(-1, 2)
     b = geo.check_finite("right image points", uv_right).reshape(-1, 2)
     if a.shape != b.shape or a.shape[0] == 0:
@@ -105,7 +107,7 @@ def ray_gap(x_left, x_right, rotation, translation) -> np.ndarray:
 def with_virtual(points) -> np.ndarray:
     """P1-P6 ``(..., 6, 3)`` extended by the virtual P7 (centroid of P2, P3, P5) and P8 (of P1,
     P4, P6): ``(..., 8, 3)``."""
-    p = np.asarray(points, dtype=float)
+    p = geo.check_finite("calibrator targets", points)
     if p.shape[-2:] != (6, 3):
         raise CalibrationError(f"the calibrator has 6 physical targets; got points {p.shape}")
     p7 = p[..., P7_FROM, :].mean(axis=-2, keepdims=True)
@@ -115,9 +117,61 @@ def with_virtual(points) -> np.ndarray:
 
 def distances_to_p7(points8) -> np.ndarray:
     """Distances P1P7 ... P6P7 and P8P7 (Table 2's rows) of ``(..., 8, 3)`` points."""
-    p = np.asarray(points8, dtype=float)
+    p = geo.check_finite("calibrator targets", points8)
+    if p.ndim < 2 or p.shape[-2:] != (8, 3):
+        raise CalibrationError(
+            f"need P1-P8 as (..., 8, 3) points; got {p.shape} (see with_virtual)"
+        )
     rows = [0, 1, 2, 3, 4, 5, 7]
     return np.linalg.norm(p[..., rows, :] - p[..., 6:7, :], axis=-1)
+
+
+#: smallest singular value of Eq. 21's ``U``, relative to its largest, for which all six
+#: parameters of the hand-eye update are determined (:func:`correct_transformation`)
+UPDATE_RCOND = 1e-9
+#: relative slack of :func:`layout_problem`: a triangle of distances that closes within it is
+#: a layout (a flat one)
+LAYOUT_TOL = 1e-9
+#: the standard distances to P7, in the order of Table 2
+DISTANCE_NAMES = ("P1P7", "P2P7", "P3P7", "P4P7", "P5P7", "P6P7", "P8P7")
+
+
+def _listing(lengths, names) -> str:
+    """``"P2P7 = 58.853, P3P7 = 55.181, ..."``: named distances for a message."""
+    return ", ".join(f"{n} = {v:g}" for n, v in zip(names, lengths, strict=True))
+
+
+def layout_problem(distances_mm, names=None) -> str:
+    """Why the seven standard distances to P7 admit no planar layout, in words (``""`` if they
+    admit one).
+
+    P7 is the centroid of P2, P3, P5, so the three vectors from P7 sum to zero: each of their
+    lengths must be at most the sum of the other two (a triangle). P8 is the centroid of P1, P4,
+    P6, so ``3 |P8P7|`` is the length of the sum of three vectors of lengths P1P7, P4P7, P6P7:
+    between ``max(0, 2 max - sum)`` and ``sum``. ``names`` (7 texts) name the distances in
+    the message, default :data:`DISTANCE_NAMES`.
+    """
+    d = np.asarray(distances_mm, dtype=float)
+    names = DISTANCE_NAMES if names is None else names
+    problems = []
+    tri = d[list(P7_FROM)]
+    slack = LAYOUT_TOL * float(tri.sum())
+    k = int(np.argmax(tri))
+    if tri[k] > tri.sum() - tri[k] + slack:
+        problems.append(
+            f"{_listing(tri, [names[i] for i in P7_FROM])} admit no layout: P7 is the centroid of "
+            f"P2, P3, P5 only if each is at most the sum of the other two "
+            f"({names[P7_FROM[k]]} = {tri[k]:g} > {tri.sum() - tri[k]:g})"
+        )
+    arms = d[list(P8_FROM)]
+    lo, hi = max(0.0, 2 * float(arms.max()) - float(arms.sum())) / 3, float(arms.sum()) / 3
+    slack = LAYOUT_TOL * float(arms.sum())
+    if not lo - slack <= d[6] <= hi + slack:
+        problems.append(
+            f"{names[6]} = {d[6]:g} with {_listing(arms, [names[i] for i in P8_FROM])} admit no "
+            f"layout: P8, the centroid of P1, P4, P6, lies between {lo:.6g} and {hi:.6g} from P7"
+        )
+    return "; ".join(problems)
 
 
 def solve_calibrator_layout(distances_mm, start_angle_deg) -> tuple[np.ndarray, np.ndarray]:
@@ -139,11 +193,24 @@ def solve_calibrator_layout(distances_mm, start_angle_deg) -> tuple[np.ndarray, 
     points : (8, 3) array
         P1-P8 in the calibrator frame (P7 at the origin, plate normal +z).
     residual : (7,) array
-        Distances of the layout minus the standard ones, mm.
+        Distances of the layout minus the standard ones, mm (not all ~0 if the solver stopped
+        in a local minimum from ``start_angle_deg``).
+
+    Raises
+    ------
+    CalibrationError
+        If the distances are not 7 positive numbers, the start angles not 6 finite ones, or the
+        distances admit no layout (:func:`layout_problem`, naming the distances that disagree).
     """
     d = np.asarray(distances_mm, dtype=float)
     if d.shape != (7,) or not np.all(np.isfinite(d)) or np.any(d <= 0):
         raise CalibrationError(f"need 7 positive distances to P7, got {d}")
+    start = np.asarray(start_angle_deg, dtype=float)
+    if start.shape != (6,) or not np.all(np.isfinite(start)):
+        raise CalibrationError(f"need 6 finite start angles of P1-P6 (deg), got {start}")
+    problem = layout_problem(d)
+    if problem:
+        raise CalibrationError(problem)
     radii = d[:6]
 
     def layout(angles: np.ndarray) -> np.ndarray:
@@ -155,7 +222,7 @@ def solve_calibrator_layout(distances_mm, start_angle_deg) -> tuple[np.ndarray, 
         p8 = p[list(P8_FROM)].mean(axis=0)
         return np.concatenate([p7[:2], [np.linalg.norm(p8 - p7) - d[6]]])
 
-    sol = least_squares(residuals, np.radians(start_angle_deg), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    sol = least_squares(residuals, np.radians(start), xtol=1e-15, ftol=1e-15, gtol=1e-15)
     p = layout(sol.x)
     p -= p[list(P7_FROM)].mean(axis=0)
     points = with_virtual(p)
@@ -210,7 +277,8 @@ def modify_observed_error(
     ------
     CalibrationError
         If fewer than 8 distances are given (the redundancy Eq. 25 needs), shapes disagree, a
-        pair repeats a target or indexes a missing one, or two targets coincide.
+        standard distance is not > 0, ``rcond`` is outside [0, 1), a pair repeats a target or
+        indexes a missing one, or two targets coincide.
     """
     p = geo.check_finite("points", points)
     pr = np.asarray(pairs, dtype=int)
@@ -223,6 +291,11 @@ def modify_observed_error(
         raise CalibrationError(
             f"{pr.shape[0]} calibrator distances given; Eq. 25 needs at least 8 for redundancy"
         )
+    if np.any(std <= 0):
+        k = int(np.argmax(std <= 0))
+        raise CalibrationError(f"standard distance #{k + 1} is {std[k]:g} mm; distances are > 0")
+    if not (math.isfinite(rcond) and 0 <= rcond < 1):
+        raise CalibrationError(f"rcond = {rcond} must lie in [0, 1)")
     if np.any(pr[:, 0] == pr[:, 1]) or pr.min() < 0 or pr.max() >= p.shape[0]:
         raise CalibrationError(f"pairs must join two different targets among {p.shape[0]}")
     diff = p[pr[:, 0]] - p[pr[:, 1]]
@@ -324,6 +397,15 @@ def correct_transformation(
         Updated ``sensor2flange``.
     d_eta : (6,) array
         ``(sigma_x, sigma_y, sigma_z, omega_x, omega_y, omega_z)``, mm and rad.
+
+    Raises
+    ------
+    CalibrationError
+        If the inputs are not finite rigid poses and matching points, or the six parameters
+        of the update are not all determined (the smallest singular value of ``U`` below
+        :data:`UPDATE_RCOND` times the largest: identical poses, rotations about one axis,
+        fewer than 3 targets off a line); the least-norm solution would then silently return
+        an update of only part of the hand-eye matrix.
     """
     g = geo.check_transform("flange poses", flange2base)
     h = geo.check_transform("sensor2flange", sensor2flange)
@@ -346,5 +428,13 @@ def correct_transformation(
         rows_u.append((rp[j] - rp[i]).reshape(-1, 6))
     u = np.concatenate(rows_u)
     v = np.concatenate(rows_v)
+    sv = np.linalg.svd(u, compute_uv=False)
+    if sv[0] == 0 or sv[-1] / sv[0] < UPDATE_RCOND:
+        raise CalibrationError(
+            f"the update of Eq. 21 is unobservable from these {g.shape[0]} poses and "
+            f"{xc.shape[1]} targets (condition number "
+            f"{sv[0] / sv[-1] if sv[-1] > 0 else math.inf:.3g}, allowed {1 / UPDATE_RCOND:.3g}): "
+            "the poses must rotate about two axes and see at least 3 targets not on a line"
+        )
     d_eta = np.linalg.pinv(u) @ v
     return h @ geo.exp6(d_eta), d_eta

@@ -232,6 +232,10 @@ def detect_centre(
         raise CalibrationError(f"ROI must be a 2-D image of >= 5 x 5 px, got shape {img.shape}")
     if min_points < 5:
         raise CalibrationError(f"an ellipse needs >= 5 edge points; min_points is {min_points}")
+    if not 0 < low < high <= 1:
+        raise CalibrationError(
+            f"Canny thresholds low = {low}, high = {high}: need 0 < low < high <= 1"
+        )
     span = float(img.max() - img.min())
     if not np.isfinite(span) or span < 0.02:
         raise CalibrationError(

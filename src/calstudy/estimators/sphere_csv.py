@@ -171,9 +171,10 @@ def read_sphere_measurements(path) -> SphereMeasurements:
 
     Checks, each naming the file and the row and column where it applies: every column present;
     every cell a finite number (a decimal comma ``12,5`` is named as such), ``group`` one of
-    ``translation, rotation``, ids distinct integers; and, where units are not declared, their
-    plausibility: angles that all lie within +-pi look like radians, positions all below 10 while
-    the other lengths reach 100 or more look like metres (both refused with the suspicion stated).
+    ``translation, rotation`` (each with rows), ids distinct integers; and, where units are not
+    declared, their plausibility: angles that all lie within +-pi look like radians, positions
+    all below 10 while the other lengths reach 100 or more look like metres (both refused with
+    the suspicion stated).
 
     Raises
     ------
@@ -191,6 +192,12 @@ def read_sphere_measurements(path) -> SphereMeasurements:
     numeric = [c for c in SPHERE_CSV_COLUMNS if c != "group"]
     values = np.array([[getattr(r, c) for c in numeric] for r in records], dtype=float)
     groups = np.array([r.group for r in records])
+    absent = [g for g in ("translation", "rotation") if not np.any(groups == g)]
+    if absent:
+        raise CalibrationError(
+            f"{path}: no rows of group {absent[0]!r}; the calibration needs translation rows "
+            "(one orientation) and rotation rows"
+        )
     _check_units(path, values, factors)
     values[:, 1:4] *= np.nan_to_num(factors["xyz"], nan=1.0)
     values[:, 4:7] *= np.nan_to_num(factors["abc"], nan=1.0)

@@ -111,6 +111,10 @@ def roi_around(uv, radius_px: float, margin_px: float, width: int, height: int):
     uv = np.asarray(uv, dtype=float)
     if uv.shape != (2,) or not np.all(np.isfinite(uv)):
         raise CalibrationError(f"dot centre {uv} is not a finite image point")
+    if not (np.isfinite(radius_px) and radius_px > 0 and np.isfinite(margin_px) and margin_px >= 0):
+        raise CalibrationError(
+            f"dot radius {radius_px} px must be > 0 and margin {margin_px} px >= 0 (finite)"
+        )
     half = int(math.ceil(radius_px + margin_px))
     u0, v0 = int(round(uv[0])) - half, int(round(uv[1])) - half
     if u0 < 0 or v0 < 0 or u0 + 2 * half >= width or v0 + 2 * half >= height:
@@ -257,6 +261,8 @@ def defocus(image, delta_px: float) -> np.ndarray:
     img = np.asarray(image, dtype=np.float32)
     if not np.isfinite(delta_px) or delta_px < 0:
         raise CalibrationError(f"circle-of-confusion radius {delta_px} px must be finite, >= 0")
+    if not np.all(np.isfinite(img)):
+        raise CalibrationError(f"the {img.shape} image to blur has NaN or inf pixels")
     if delta_px < 0.05:
         return img.copy()
     return cv2.GaussianBlur(img, (0, 0), sigmaX=float(delta_px), borderType=cv2.BORDER_REPLICATE)
@@ -336,6 +342,12 @@ def fuse_exposures(
         stack.append(a.astype(np.float32) / full)
     if len(stack) < 1 or any(s.shape != stack[0].shape for s in stack):
         raise CalibrationError(f"fusion needs >= 1 images of one shape, got {len(stack)}")
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise CalibrationError(f"well-exposedness sigma = {sigma} must be a finite number > 0")
+    if not all(np.isfinite(w) and w >= 0 for w in (weight_contrast, weight_exposure)):
+        raise CalibrationError(
+            f"fusion weights {weight_contrast}, {weight_exposure} must be finite numbers >= 0"
+        )
     num = np.zeros_like(stack[0])
     den = np.zeros_like(stack[0])
     for img in stack:

@@ -25,6 +25,16 @@ from calstudy.models.sensors import PinholeCamera
 INVERSE_TOL = 1e-9
 
 
+#: the standard deviations :meth:`StereoRig.perturbed` draws with
+SIGMA_KEYS = (
+    "focal_px",
+    "principal_point_px",
+    "k1",
+    "extrinsic_rotation_rad",
+    "extrinsic_translation_mm",
+)
+
+
 @dataclass(frozen=True)
 class StereoRig:
     """A calibrated binocular sensor.
@@ -136,7 +146,19 @@ class StereoRig:
         (both cameras), ``extrinsic_rotation_rad`` and ``extrinsic_translation_mm`` (of
         ``left2right``). Draws, in order: the extrinsic rotation, each camera's focal lengths,
         principal point and ``k1`` (left, then right), the extrinsic translation.
+
+        Raises
+        ------
+        CalibrationError
+            If a standard deviation is missing, not finite or negative.
         """
+        for key in SIGMA_KEYS:
+            value = sigmas.get(key)
+            if value is None or not (np.isfinite(value) and value >= 0):
+                raise CalibrationError(
+                    f"calibration sigma {key} = {value!r}: must be given, finite and >= 0 "
+                    f"(keys {', '.join(SIGMA_KEYS)})"
+                )
         rot = geo.rotvec_to_matrix(rng.normal(0.0, sigmas["extrinsic_rotation_rad"], 3))
         left = _perturbed_camera(self.left, sigmas, rng)
         right = _perturbed_camera(self.right, sigmas, rng)
@@ -147,6 +169,8 @@ class StereoRig:
     def aim_point(self, distance_mm: float) -> np.ndarray:
         """Sensor-frame point ``distance_mm`` from the baseline midpoint, where both optical axes
         point best (along the line from the midpoint to the axes' closest approach)."""
+        if not (np.isfinite(distance_mm) and distance_mm > 0):
+            raise CalibrationError(f"aim distance {distance_mm} mm must be a finite number > 0")
         c_left, d_left = np.zeros(3), np.array([0.0, 0.0, 1.0])
         c_right = -self.rotation.T @ self.translation
         d_right = self.rotation.T @ np.array([0.0, 0.0, 1.0])

@@ -33,7 +33,8 @@ def test_missing_key_names_the_file_and_the_key(tmp_path):
     copy_scenario(tmp_path)
     station = tmp_path / "station.toml"
     station.write_text(station.read_text().replace('model = "kuka_kr210"', ""))
-    with pytest.raises(CalibrationError, match=r"station\.toml: missing key 'robot.model'"):
+    message = r"station\.toml: robot\.model: missing \(required\)"
+    with pytest.raises(CalibrationError, match=message):
         scn.load_scenario(tmp_path)
 
 

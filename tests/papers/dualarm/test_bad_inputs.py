@@ -7,7 +7,7 @@ import pytest
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
-from calstudy.papers.dualarm.scenario import load_scenario
+from calstudy.papers.dualarm.scenario import load_published, load_scenario
 
 SCENARIO = data_path("dualarm", "scenario.toml").read_text()
 
@@ -50,6 +50,10 @@ CASES = [
     ("misspelt key", "baseline_mm = 200.0", "base_line_mm = 200.0",
      r"stereo\.baseline_mm: missing \(required\); stereo\.base_line_mm = 200\.0: unknown key"),
     ("missing key", "loss_rate = 0.1\n", "", r"detection\.loss_rate: missing \(required\)"),
+    ("quoted number", "baseline_mm = 200.0", 'baseline_mm = "200.0"',
+     r"stereo\.baseline_mm = '200\.0': is not a number"),
+    ("true for a count", "n_poses = 10", "n_poses = true",
+     r"handeye\.n_poses = True: is not an integer"),
 ]
 
 
@@ -65,3 +69,38 @@ def test_scenario_file(tmp_path, old, new, message):
 def test_missing_file_names_the_path(tmp_path):
     with pytest.raises(FileNotFoundError, match=r"absent\.toml: no such file"):
         load_scenario(tmp_path / "absent.toml")
+
+
+PUBLISHED = data_path("dualarm", "published.toml").read_text()
+
+PUBLISHED_CASES = [
+    ("arm 3", '[1, "A", 0.471, 0.076]', '[3, "A", 0.471, 0.076]',
+     r"icp\.rows #1 #1 = 3: must be <= 2"),
+    ("sphere C", '[1, "A", 0.471, 0.076]', '[1, "C", 0.471, 0.076]',
+     r"icp\.rows #1 #2 = 'C': is not one of 'A' or 'B'"),
+    ("arm-sphere pair twice", '[1, "B", 0.352, 0.088]', '[1, "A", 0.352, 0.088]',
+     r"icp\.rows: arm-sphere pairs repeated: \[\(1, 'A'\)\]"),
+    ("negative error", "[1, 0.022, 0.036, 0.040]", "[1, -0.022, 0.036, 0.040]",
+     r"table1\.rows #1 #2 = -0\.022: must be >= 0"),
+    ("group twice", "[2, 0.073, 0.029, 0.062]", "[1, 0.073, 0.029, 0.062]",
+     r"table1\.rows: groups repeated: \[1\]"),
+    ("short row", "[2, 0.097, 0.147, 0.092]", "[2, 0.097, 0.147]", r"table2\.rows #2 #4: missing"),
+    ("missing overall", "overall = 0.100\n", "", r"table2\.overall: missing \(required\)"),
+    ("methods and rows differ", '"coded markers"]', '"coded markers", "ICP"]',
+     r"table3: 5 methods but 4 rows; one each"),
+    ("nan error", "[0.044, 0.028, 0.069, 0.100]", "[0.044, 0.028, 0.069, nan]",
+     r"table3\.rows #4 #4 = nan: must be a finite number"),
+    ("target not a text", "drift_target =", "drift_target = 0.492\nx =",
+     r"nuisance_targets\.drift_target = 0\.492: is not a text"),
+]
+
+
+@pytest.mark.parametrize(
+    "old, new, message", [c[1:] for c in PUBLISHED_CASES], ids=[c[0] for c in PUBLISHED_CASES]
+)
+def test_published_file(tmp_path, old, new, message):
+    assert old in PUBLISHED, old
+    path = tmp_path / "published.toml"
+    path.write_text(PUBLISHED.replace(old, new, 1))
+    with pytest.raises(CalibrationError, match=r"published\.toml: .*" + message):
+        load_published(path)

@@ -283,3 +283,41 @@ def test_sphere_that_moved_may_be_flagged(sphere_files):
     with pytest.warns(UserWarning, match=r"disagree most: id \d+"):
         *_, ml, _ = experiments.calibrate_handeye(str(moved), 0, 0.3, misfit="flag")
     assert any("disagree most" in f for f in ml.flags)
+
+
+PUBLISHED = data_path("hybrid", "published.toml").read_text()
+
+PUBLISHED_CASES = [
+    ("counts of the halves differ", "deviation_counts = [37, 82, 49, 6, 0]",
+     "deviation_counts = [37, 82, 49, 6, 10]",
+     r"table1: deviation_counts sum to 184, correlation_counts to 174"),
+    ("share against its count", "deviation_percent = [21.26,", "deviation_percent = [12.26,",
+     r"deviation_percent #1 = 12\.26 disagrees with its count: 37 of 174 is 21\.26 %"),
+    ("headline share as a fraction", "within_0p3_percent = 96.55", "within_0p3_percent = 0.9655",
+     r"within_0p3_percent = 0\.9655 disagrees with its count: 168 of 174"),
+    ("edges not ascending", "deviation_edges_mm = [0.1, 0.2, 0.3, 0.5]",
+     "deviation_edges_mm = [0.1, 0.3, 0.2, 0.5]",
+     r"table1\.deviation_edges_mm = \[0\.1, 0\.3, 0\.2, 0\.5\]: the edges are not ascending"),
+    ("correlation edges in percent", "correlation_edges = [0.6, 0.7, 0.8, 0.9]",
+     "correlation_edges = [60, 70, 80, 90]", r"table1\.correlation_edges #1 = 60: must be <= 1"),
+    ("range reversed", "range_mm = [2.0, 4.0]", "range_mm = [4.0, 2.0]",
+     r"systematic\.range_mm = \[4\.0, 2\.0\]: \[4\.0, 2\.0\] is not \[low, high\]"),
+    ("four counts", "deviation_counts = [37, 82, 49, 6, 0]", "deviation_counts = [37, 82, 49, 6]",
+     r"table1\.deviation_counts = \[37, 82, 49, 6\]: must have at least 5 entries, not 4"),
+    ("fractional count", "deviation_counts = [37, 82, 49, 6, 0]",
+     "deviation_counts = [37, 82, 49.5, 6, 0]",
+     r"table1\.deviation_counts #3 = 49\.5: is not an integer"),
+    ("missing headline", "r_above_0p7_percent = 85.64\n", "",
+     r"table1\.r_above_0p7_percent: missing \(required\)"),
+    ("misspelt table", "[table1]", "[table_1]",
+     r"table1: missing \(required\); table_1: unknown key"),
+]
+
+
+@pytest.mark.parametrize(
+    "old, new, message", [c[1:] for c in PUBLISHED_CASES], ids=[c[0] for c in PUBLISHED_CASES]
+)
+def test_published_file(tmp_path, old, new, message):
+    path = _broken(tmp_path, PUBLISHED, old, new, "published.toml")
+    with pytest.raises(CalibrationError, match=r"published\.toml: .*" + message):
+        scenario.load_published(path)

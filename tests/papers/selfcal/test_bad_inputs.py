@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import shutil
 
+import numpy as np
 import pytest
 
 from calstudy.core.errors import CalibrationError
@@ -114,6 +115,41 @@ def test_cell_robot_file_that_does_not_exist(folder):
     path = folder / measured.CELL_FILE
     path.write_text(path.read_text().replace("fanuc_m710ic_50.toml", "my_robot.toml"))
     with pytest.raises(CalibrationError, match=r"robot file .*my_robot\.toml does not exist"):
+        measured.read_cell(folder)
+
+
+def _rewrite_columns(path, first, count, convert):
+    """Apply ``convert`` to ``count`` columns of every data row of a CSV, from column ``first``."""
+    lines = path.read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    k = lines[head].split(",").index(first)
+    for i in range(head + 1, len(lines)):
+        cells = lines[i].split(",")
+        cells[k : k + count] = [convert(float(c)) for c in cells[k : k + count]]
+        lines[i] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
+UNIT_CASES = [
+    ("joints in radians", measured.MEASUREMENTS_FILE, "q1_deg", 6, np.radians,
+     r"measurements\.csv: every joint angle of the 34 poses lies within \+-pi .*"
+     r"q1_deg \.\.\. q6_deg: radians\?"),
+    ("sphere readings in metres", measured.SPHERES_FILE, "x_mm", 3, lambda v: v / 1000,
+     r"spheres\.csv: the 14 sphere placements lie within 1\.617 mm of each other .*metres"),
+    ("sensor centres in metres", measured.MEASUREMENTS_FILE, "cx_mm", 3, lambda v: v / 1000,
+     r"measurements\.csv: every sensor centre lies within 0\.3\d+ mm of the sensor origin"),
+]
+
+
+@pytest.mark.parametrize(
+    "name, first, count, convert, message",
+    [c[1:] for c in UNIT_CASES],
+    ids=[c[0] for c in UNIT_CASES],
+)
+def test_units_the_values_contradict(folder, name, first, count, convert, message):
+    """Declared units that the values contradict (a plausible cell otherwise)."""
+    _rewrite_columns(folder / name, first, count, lambda v: f"{convert(v):.6f}")
+    with pytest.raises(CalibrationError, match=message):
         measured.read_cell(folder)
 
 

@@ -18,16 +18,21 @@ from pathlib import Path
 import numpy as np
 
 from calstudy.core import geometry as geo
-from calstudy.core.config import read_toml, require, scenario_file
+from calstudy.core.config import require, scenario_file
+from calstudy.core.errors import CalibrationError
+from calstudy.core.schema import check_toml
 from calstudy.estimators.binocular import solve_calibrator_layout
 from calstudy.models import optics
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import load_robot
 from calstudy.models.stereo import StereoRig
+from calstudy.papers.binocular.schema import SCHEMAS
 
 PAPER = "binocular"
 #: The files of a scenario folder (``data/binocular`` or your own).
 TABLES = ("sensor", "calibrator", "station")
+#: largest miss of a solved calibrator layout on a standard distance, mm
+LAYOUT_RESIDUAL_MM = 1e-6
 
 
 @dataclass
@@ -104,23 +109,33 @@ def plate_frame(centre, normal) -> np.ndarray:
 
 def scenario_files(path: str | Path | None = None) -> dict[str, Path]:
     """``{"sensor": ..., "calibrator": ..., "station": ...}``: the files of the folder ``path``,
-    default ``data/binocular``."""
+    default ``data/binocular`` (NotADirectoryError if ``path`` is a file)."""
     own = None if path in (None, "") else Path(path)
+    if own is not None and own.exists() and not own.is_dir():
+        raise NotADirectoryError(
+            f"{own}: not a folder; a scenario folder holds {', '.join(f'{n}.toml' for n in TABLES)}"
+        )
     return {n: scenario_file(PAPER, f"{n}.toml", own and own / f"{n}.toml") for n in TABLES}
 
 
 def read_tables(path: str | Path | None = None) -> dict:
-    """The three tables of the folder ``path`` (default ``data/binocular``), by name.
+    """The three tables of the folder ``path`` (default ``data/binocular``), by name, each
+    checked against its schema (:mod:`calstudy.papers.binocular.schema`) and returned as read.
 
     Raises
     ------
     FileNotFoundError
         If one of the three files is missing (the message names it).
     CalibrationError
-        If a file is not valid TOML.
+        If a file is not valid TOML or breaks its schema: a missing or unknown key, a value out
+        of range, a matrix that is not a rotation, standard distances that admit no calibrator
+        layout (the message names the file, the key, the value and the allowed range).
     """
     files = scenario_files(path)
-    return {name: read_toml(file, f"binocular {name} table") for name, file in files.items()}
+    return {
+        name: check_toml(file, SCHEMAS[name], f"binocular {name} table")
+        for name, file in files.items()
+    }
 
 
 def _calibrator2base(station: dict, source: str) -> np.ndarray:
@@ -145,15 +160,23 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
     FileNotFoundError
         If a file is missing.
     CalibrationError
-        If a file is not valid TOML or misses a key (naming the file and the key).
+        If a file is not valid TOML or breaks its schema (:func:`read_tables`), or if the
+        layout solved from ``start_angle_deg`` misses a standard distance by more than
+        :data:`LAYOUT_RESIDUAL_MM`.
     """
     files = scenario_files(path)
     tables = read_tables(path)
     sensor_t, cal_t, station_t = (tables[n] for n in TABLES)
-    layout, residual = solve_calibrator_layout(
-        require(cal_t, "standard.distance_mm", files["calibrator"]),
-        require(cal_t, "standard.start_angle_deg", files["calibrator"]),
-    )
+    standard = require(cal_t, "standard", files["calibrator"])
+    layout, residual = solve_calibrator_layout(standard["distance_mm"], standard["start_angle_deg"])
+    worst = int(np.argmax(np.abs(residual)))
+    if abs(residual[worst]) > LAYOUT_RESIDUAL_MM:
+        raise CalibrationError(
+            f"{files['calibrator']}: standard.start_angle_deg = {standard['start_angle_deg']}: "
+            f"the layout solved from these angles misses {standard['names'][worst]} by "
+            f"{residual[worst]:.3g} mm (allowed {LAYOUT_RESIDUAL_MM:g}); the distances admit a "
+            "layout: start from other angles"
+        )
     h = np.array(require(station_t, "handeye.matrix", files["station"]), dtype=float)
     h[:3, :3] = geo.project_to_so3(h[:3, :3])
     return Scenario(
@@ -168,8 +191,12 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
 
 
 def paper_table(name: str) -> dict:
-    """``data/binocular/<name>.toml`` as the paper gives it (never a scenario folder of yours)."""
-    return read_toml(scenario_file(PAPER, f"{name}.toml"), f"binocular {name} table")
+    """``data/binocular/<name>.toml`` as the paper gives it (never a scenario folder of yours),
+    checked against its schema (its ``[published]`` table too)."""
+    if name not in SCHEMAS:
+        raise CalibrationError(f"no binocular table {name!r}; the tables are {', '.join(TABLES)}")
+    path = scenario_file(PAPER, f"{name}.toml")
+    return check_toml(path, SCHEMAS[name], f"binocular {name} table")
 
 
 def published(name: str, key: str):

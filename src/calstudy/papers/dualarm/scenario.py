@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from calstudy.core import geometry as geo
-from calstudy.core.config import read_toml, require, scenario_file
+from calstudy.core.config import require, scenario_file
 from calstudy.core.schema import check_toml
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig, stereo_rig
-from calstudy.papers.dualarm.schema import ScenarioFile
+from calstudy.papers.dualarm.schema import PublishedFile, ScenarioFile
 
 PAPER = "dualarm"
 #: the two arms, numbered as in the paper
@@ -300,8 +300,10 @@ def load_published(path: str | Path | None = None) -> Published:
     FileNotFoundError
         If the file does not exist.
     CalibrationError
-        If it is not valid TOML or a key is missing.
+        If it is not valid TOML or breaks :class:`~calstudy.papers.dualarm.schema.PublishedFile`
+        (a missing or unknown key, a negative error, a group or an arm-sphere pair given twice,
+        methods and rows that differ in number).
     """
     src = scenario_file(PAPER, "published.toml", path)
-    d = read_toml(src, "dualarm published results")
+    d = check_toml(src, PublishedFile, "dualarm published results")
     return Published(**{field: require(d, key, src) for field, key in _PUBLISHED.items()})

@@ -10,9 +10,9 @@ a range). A message names the file, the key, the value and the allowed range.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from calstudy.core.schema import (
     Documented,
@@ -21,6 +21,8 @@ from calstudy.core.schema import (
     NonNegativeFinite,
     PositiveFinite,
     PositiveInt,
+    Row,
+    Schema,
     Vec3,
     check_principal_point,
 )
@@ -210,4 +212,86 @@ class ScenarioFile(Documented):
     icp: Icp
 
 
-__all__ = ["ScenarioFile"]
+# ----------------------------------------------------------------------------------------------
+# published.toml (the paper's numbers, not an input of the simulation)
+
+Mm = NonNegativeFinite
+#: a pose group, 0 for the row over all groups
+Group = Annotated[int, Field(ge=0)]
+
+
+class Texts(Schema):
+    """A table of texts only (``[nuisance_targets]``): any key, every value a string."""
+
+    model_config = ConfigDict(extra="allow", frozen=True, str_strip_whitespace=True)
+    __pydantic_extra__: dict[str, str]
+
+
+def _one_row_each(rows: list, what: str) -> list:
+    groups = [r[0] for r in rows]
+    dup = sorted({g for g in groups if groups.count(g) > 1})
+    if dup:
+        raise ValueError(f"{what} repeated: {dup}; one row each")
+    return rows
+
+
+class IcpTable(Documented):
+    """The ``[icp]`` table of data/dualarm/published.toml: ``[arm, sphere, before, after]``."""
+
+    rows: Annotated[
+        list[Annotated[tuple[Annotated[int, Field(ge=1, le=2)], Literal["A", "B"], Mm, Mm], Row]],
+        Field(min_length=1),
+    ]
+
+    @field_validator("rows")
+    @classmethod
+    def _pairs(cls, rows: list) -> list:
+        _one_row_each([((arm, sphere), *rest) for arm, sphere, *rest in rows], "arm-sphere pairs")
+        return rows
+
+
+class GroupTable(Documented):
+    """The ``[table1]`` and ``[table2]`` tables of data/dualarm/published.toml: ``[group, three
+    errors]`` per row (group 0: all groups), mm."""
+
+    rows: Annotated[list[Annotated[tuple[Group, Mm, Mm, Mm], Row]], Field(min_length=1)]
+    overall: Mm | None = None
+
+    @field_validator("rows")
+    @classmethod
+    def _groups(cls, rows: list) -> list:
+        return _one_row_each(rows, "groups")
+
+
+class MethodTable(Documented):
+    """The ``[table3]`` table of data/dualarm/published.toml: ``[dx, dy, dz, euclid]`` per
+    method, mm."""
+
+    methods: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]
+    rows: list[Annotated[tuple[Mm, Mm, Mm, Mm], Row]]
+    not_testable: str = ""
+
+    @model_validator(mode="after")
+    def _one_row_per_method(self) -> MethodTable:
+        if len(self.rows) != len(self.methods):
+            raise ValueError(f"{len(self.methods)} methods but {len(self.rows)} rows; one each")
+        return self
+
+
+class PublishedFile(Documented):
+    """``data/dualarm/published.toml``."""
+
+    icp: IcpTable
+    table1: GroupTable
+    table2: GroupTable
+    table3: MethodTable
+    nuisance_targets: Texts = Texts()
+
+    @model_validator(mode="after")
+    def _overall(self) -> PublishedFile:
+        if self.table2.overall is None:
+            raise ValueError("table2.overall: missing (required)")
+        return self
+
+
+__all__ = ["PublishedFile", "ScenarioFile"]

@@ -15,7 +15,7 @@ Three files of ``data/hybrid/`` describe the paper's setup, each number a fact f
 
 Every file is read through :mod:`calstudy.core.config`, so a missing file, a malformed one or a
 missing key raise the same errors as in the other papers; ``station.toml`` and
-``production.toml`` are checked on load against the schemas of
+``production.toml`` (and ``published.toml``) are checked on load against the schemas of
 :mod:`calstudy.papers.hybrid.schema` (types, ranges, required keys, cross-field rules).
 """
 
@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calstudy.core.config import read_toml, require, scenario_file
+from calstudy.core.config import require, scenario_file
 from calstudy.core.errors import CalibrationError
 from calstudy.core.schema import check_toml
 from calstudy.estimators.workpiece import RPS_EQUATIONS
-from calstudy.papers.hybrid.schema import ProductionFile, StationFile
+from calstudy.papers.hybrid.schema import ProductionFile, PublishedFile, StationFile
 
 PAPER = "hybrid"
 STATION_FILE = "station.toml"
@@ -49,6 +49,7 @@ SWEEP_LABELS = {
     "repeatability_mm": "robot repeatability (+-mm, 3 sigma)",
     "drift_sigma_mm": "drift before follow-up, sigma (mm)",
 }
+
 
 def _load(name: str, what: str, path: str | Path | None, model) -> dict:
     """The TOML file ``path`` (default ``data/hybrid/<name>``) after checking it against
@@ -133,13 +134,15 @@ _PUBLISHED_KEYS = {
 
 
 def load_published(path: str | Path | None = None) -> Published:
-    """The published numbers (default ``data/hybrid/published.toml``; read once per path)."""
+    """The published numbers (default ``data/hybrid/published.toml``; read once per path),
+    checked against :class:`~calstudy.papers.hybrid.schema.PublishedFile` (shares that agree
+    with their counts, ascending bin edges; errors as :func:`load_station`)."""
     return _published(str(scenario_file(PAPER, PUBLISHED_FILE, path)))
 
 
 @functools.cache
 def _published(path: str) -> Published:
-    table = read_toml(path, "published numbers of the hybrid paper")
+    table = check_toml(path, PublishedFile, "published numbers of the hybrid paper")
 
     values = {name: require(table, key, path) for name, key in _PUBLISHED_KEYS.items()}
     return Published(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})

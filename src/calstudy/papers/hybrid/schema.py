@@ -280,3 +280,94 @@ class MeasurementRow(Schema):
     x_mm: Finite
     y_mm: Finite
     z_mm: Finite
+
+
+# ---------------------------------------------------------------------------------------------
+# published.toml (the paper's numbers, not an input of the simulation)
+
+#: largest gap (percentage points) between a printed share and its count: the paper prints to
+#: two decimals and sometimes truncates (10 / 174 = 5.747 % printed 5.74)
+PERCENT_TOL = 0.01
+Percent = Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)]
+FiveLabels = Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=5, max_length=5)]
+FiveCounts = Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=5, max_length=5)]
+FivePercent = Annotated[list[Percent], Field(min_length=5, max_length=5)]
+
+
+def _ascending(values: list) -> list:
+    if any(b <= a for a, b in zip(values, values[1:], strict=False)):
+        raise ValueError("the edges are not ascending")
+    return values
+
+
+class Systematic(Documented):
+    """The ``[systematic]`` table of data/hybrid/published.toml."""
+
+    range_mm: Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
+
+    @field_validator("range_mm")
+    @classmethod
+    def _range(cls, value: list) -> list:
+        if value[0] > value[1]:
+            raise ValueError(f"{value} is not [low, high]")
+        return value
+
+
+class Table1(Documented):
+    """The ``[table1]`` table of data/hybrid/published.toml: counts and shares of the 174
+    vectors per bin, which must agree with each other within :data:`PERCENT_TOL`."""
+
+    deviation_bins: FiveLabels
+    deviation_edges_mm: Annotated[list[PositiveFinite], Field(min_length=4, max_length=4)]
+    deviation_counts: FiveCounts
+    deviation_percent: FivePercent
+    correlation_bins: FiveLabels
+    correlation_edges: Annotated[
+        list[Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]],
+        Field(min_length=4, max_length=4),
+    ]
+    correlation_counts: FiveCounts
+    correlation_percent: FivePercent
+    within_0p3_percent: Percent
+    r_above_0p7_percent: Percent
+
+    @field_validator("deviation_edges_mm", "correlation_edges")
+    @classmethod
+    def _edges(cls, value: list) -> list:
+        return _ascending(value)
+
+    @model_validator(mode="after")
+    def _shares(self) -> Table1:
+        total = sum(self.deviation_counts)
+        if total == 0 or sum(self.correlation_counts) != total:
+            raise ValueError(
+                f"deviation_counts sum to {total}, correlation_counts to "
+                f"{sum(self.correlation_counts)}; both count the same vectors (> 0)"
+            )
+        checks = [
+            (f"{half}_percent #{i + 1}", pct[i], counts[i])
+            for half, counts, pct in (
+                ("deviation", self.deviation_counts, self.deviation_percent),
+                ("correlation", self.correlation_counts, self.correlation_percent),
+            )
+            for i in range(5)
+        ]
+        checks += [
+            ("within_0p3_percent", self.within_0p3_percent, sum(self.deviation_counts[:3])),
+            ("r_above_0p7_percent", self.r_above_0p7_percent, sum(self.correlation_counts[:3])),
+        ]
+        for name, pct, count in checks:
+            if abs(pct - 100.0 * count / total) > PERCENT_TOL + 1e-9:
+                raise ValueError(
+                    f"{name} = {pct} disagrees with its count: {count} of {total} is "
+                    f"{100.0 * count / total:.4g} % (allowed gap {PERCENT_TOL} points)"
+                )
+        return self
+
+
+class PublishedFile(Documented):
+    """``data/hybrid/published.toml``."""
+
+    source: Source = Source()
+    systematic: Systematic
+    table1: Table1

@@ -66,6 +66,9 @@ SETS = ("calibration", "validation")
 #: per axis declared or estimated robustly (median of ``|e|^2`` over its chi-square(3) median)
 CHI2_3_999 = 16.266
 CHI2_3_MEDIAN = 2.366
+#: lengths that all lie below this (mm) look like metres: the spread of the sphere placements,
+#: the sensor centres (a scanner's stand-off)
+METRES_SUSPECT_MM = 10.0
 #: the robust scale is not taken below this (mm): the rounding of the files
 MIN_SIGMA_MM = 1e-4
 DEFAULT_REQUIREMENT_MM = 0.42
@@ -173,6 +176,13 @@ def read_spheres(path) -> tuple[np.ndarray, np.ndarray]:
         raise CalibrationError(f"{path}: sphere {int(uniq[counts > 1][0])} appears more than once")
     cols, factor = _unit_columns(path, header, ["x", "y", "z"], LENGTH_UNITS, "sphere centres")
     xyz = np.column_stack([_column(path, header, rows, c) for c in cols]) * factor
+    spread = float(np.ptp(xyz, axis=0).max()) if len(xyz) > 1 else math.inf
+    if spread < METRES_SUSPECT_MM:
+        raise CalibrationError(
+            f"{path}: the {len(xyz)} sphere placements lie within {spread:.4g} mm of each other "
+            f"(below {METRES_SUSPECT_MM:g} mm): metres in the {cols[0]} columns? Declare them "
+            "x_m, y_m, z_m or write millimetres"
+        )
     return ids, xyz
 
 
@@ -198,10 +208,25 @@ def read_measurements(path, sphere_ids) -> pd.DataFrame:
     ccols, cf = _unit_columns(path, header, ["cx", "cy", "cz"], LENGTH_UNITS, "sensor centres")
     out = pd.DataFrame({"line": [n for n, _ in rows], "pose": poses, "set": [s for _, s in sets]})
     out["sphere"] = [known[int(s)] for s in sphere]
-    for i, c in enumerate(qcols):
-        out[f"q{i + 1}"] = _column(path, header, rows, c) * qf
-    for name, c in zip(("cx", "cy", "cz"), ccols, strict=True):
-        out[name] = _column(path, header, rows, c) * cf
+    joints = np.column_stack([_column(path, header, rows, c) for c in qcols])
+    if qf != 1.0 and float(np.abs(joints).max()) <= math.pi:
+        raise CalibrationError(
+            f"{path}: every joint angle of the {len(rows)} poses lies within +-pi (largest "
+            f"|value| {float(np.abs(joints).max()):.4g}) in columns {qcols[0]} ... {qcols[-1]}: "
+            "radians? Declare them q1_rad ... q6_rad or write degrees"
+        )
+    for i in range(6):
+        out[f"q{i + 1}"] = joints[:, i] * qf
+    centres = np.column_stack([_column(path, header, rows, c) for c in ccols]) * cf
+    reach = float(np.linalg.norm(centres, axis=1).max())
+    if reach < METRES_SUSPECT_MM:
+        raise CalibrationError(
+            f"{path}: every sensor centre lies within {reach:.4g} mm of the sensor origin (below "
+            f"{METRES_SUSPECT_MM:g} mm) in columns {', '.join(ccols)}: metres? Declare them "
+            "cx_m, cy_m, cz_m or write millimetres"
+        )
+    for i, name in enumerate(("cx", "cy", "cz")):
+        out[name] = centres[:, i]
     return out
 
 
@@ -262,7 +287,10 @@ def read_cell(folder) -> MeasuredCell:
     ------
     CalibrationError
         A missing file, key or column, a unit not declared, a cell that is not a number (with
-        its file, row and column), a repeated id, an unknown sphere or set, no calibration rows.
+        its file, row and column), a repeated id, an unknown sphere or set, no calibration rows;
+        a declared unit the values contradict (joint angles all within +-pi in degree columns,
+        sphere placements within 10 mm of each other or sensor centres within 10 mm of the
+        sensor in mm columns).
     """
     folder = Path(folder)
     cell_path = folder / CELL_FILE

@@ -1,0 +1,461 @@
+"""Schemas of the binocular paper's files: ``sensor.toml``, ``calibrator.toml`` and
+``station.toml`` (the scenario folder of notebook 04, ``data/binocular`` or a copy describing
+your cell), with their ``[published]`` tables.
+
+Each file is checked on load (:func:`calstudy.core.schema.validate`): every key the simulation
+reads must be there, with its type and range (lengths in mm, angles in degrees where the key says
+``_deg``, image coordinates in px), unknown keys are refused (a misspelt key is not silently a
+default), and the cross-field rules below hold: a principal point inside the image, Canny
+thresholds ``low < high``, proper rotations (the extrinsic and the hand-eye matrix, printed to 4
+decimals, must be rotations within :data:`ROTATION_TOL` before they are re-orthonormalised),
+standard distances that admit a calibrator layout, one name, distance and
+centre per field region. A message names the file, the key, the value and the allowed range, e.g.
+``calibrator.toml: standard.distance_mm: P2P7 = 58.853, P3P7 = 55.181, P5P7 = 200.0 admit no
+layout: ...``
+(:func:`calstudy.estimators.binocular.layout_problem`).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
+
+from calstudy.core.schema import (
+    Degrees,
+    Documented,
+    Finite,
+    NonNegativeFinite,
+    PositiveFinite,
+    PositiveInt,
+    Schema,
+    Vec3,
+    check_principal_point,
+    rotation_problem,
+)
+from calstudy.estimators.binocular import layout_problem
+
+#: largest ``|R^T R - I|`` of a rotation printed to 4 decimals (the paper's Table 1 and Table 4
+#: give about 1e-4); the loader then projects it onto SO(3)
+ROTATION_TOL = 2e-3
+
+Row3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+Matrix3 = Annotated[list[Row3], Field(min_length=3, max_length=3)]
+Matrix34 = Annotated[list[Row4], Field(min_length=3, max_length=3)]
+Matrix44 = Annotated[list[Row4], Field(min_length=4, max_length=4)]
+#: a count of OpenCV distortion coefficients (k1 k2 p1 p2 [k3 ...])
+DIST_LENGTHS = (4, 5, 8, 12, 14)
+#: the seven standard distances to P7 (P1P7 ... P6P7, P8P7)
+Seven = Annotated[list[PositiveFinite], Field(min_length=7, max_length=7)]
+Pair = Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
+Name = Annotated[str, Field(min_length=1)]
+#: lengths of a station in mm that all lie below this look like metres
+METRES_SUSPECT_MM = 10.0
+
+
+def _metres(values, what: str) -> None:
+    """ValueError if the lengths ``values`` (mm) all lie below :data:`METRES_SUSPECT_MM`."""
+    size = float(np.max(np.abs(np.asarray(values, dtype=float))))
+    if size < METRES_SUSPECT_MM:
+        raise ValueError(
+            f"{what} is {size:g} mm, below {METRES_SUSPECT_MM:g} mm: metres? (write millimetres)"
+        )
+
+
+def _distinct(names: list, what: str) -> list:
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"{what} repeated: {dup}")
+    return names
+
+
+class Notes(Schema):
+    """A table of texts only (``[source]``): any key, every value a string."""
+
+    model_config = ConfigDict(extra="allow", frozen=True, str_strip_whitespace=True)
+    __pydantic_extra__: dict[str, str]
+
+
+def _rotation(matrix: list, what: str) -> None:
+    problem = rotation_problem(np.array(matrix, dtype=float), ROTATION_TOL)
+    if problem:
+        raise ValueError(f"{what} is not a rotation: {problem}")
+
+
+# ----------------------------------------------------------------------------------------------
+# sensor.toml
+
+
+class Image(Documented):
+    """The ``[image]`` table of data/binocular/sensor.toml."""
+
+    width: PositiveInt
+    height: PositiveInt
+    #: mm per pixel: 1-50 um (a value in um, 4.6, is refused)
+    pixel_pitch_mm: Annotated[float, Field(gt=0, le=0.05, allow_inf_nan=False)]
+
+
+class Camera(Documented):
+    """The ``[left]`` and ``[right]`` tables of data/binocular/sensor.toml (px)."""
+
+    fx: PositiveFinite
+    fy: PositiveFinite
+    cx: Finite
+    cy: Finite
+    #: OpenCV k1 k2 p1 p2 [k3 ...]
+    dist: list[Finite]
+
+    @field_validator("dist")
+    @classmethod
+    def _dist(cls, dist: list) -> list:
+        if len(dist) not in DIST_LENGTHS:
+            raise ValueError(
+                f"{len(dist)} coefficients; OpenCV takes k1 k2 p1 p2 [k3 ...]: "
+                f"{', '.join(map(str, DIST_LENGTHS))} values"
+            )
+        for i, (name, limit) in enumerate((("k1", 10.0), ("k2", 10.0), ("p1", 0.1), ("p2", 0.1))):
+            if abs(dist[i]) > limit:
+                raise ValueError(f"{name} = {dist[i]} (entry #{i + 1}): must be within +-{limit}")
+        return dist
+
+
+class Extrinsic(Documented):
+    """The ``[extrinsic]`` table of data/binocular/sensor.toml: left2right, mm."""
+
+    rotation: Matrix3
+    translation_mm: Vec3
+
+    @field_validator("rotation")
+    @classmethod
+    def _proper(cls, rotation: list) -> list:
+        _rotation(rotation, "left2right")
+        return rotation
+
+    @field_validator("translation_mm")
+    @classmethod
+    def _baseline(cls, t: list) -> list:
+        if float(np.linalg.norm(t)) <= 0.0:
+            raise ValueError("the cameras coincide (baseline 0); stereo needs a baseline")
+        _metres(t, "the baseline's largest coordinate")
+        return t
+
+
+class Optics(Documented):
+    """The ``[optics]`` table of data/binocular/sensor.toml (Eq. 4)."""
+
+    f_number: Annotated[float, Field(ge=0.5, le=128, allow_inf_nan=False)]
+    focus_distance_mm: PositiveFinite
+
+
+class Exposure(Documented):
+    """The ``[exposure]`` table of data/binocular/sensor.toml (Eq. 3)."""
+
+    times_ms: Annotated[list[PositiveFinite], Field(min_length=1)]
+    bits: Annotated[int, Field(ge=1, le=16)]
+    dot_peak_at_100ms: PositiveFinite
+    #: the background's share of full scale at 100 ms
+    background_at_100ms: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
+    weight_contrast: NonNegativeFinite
+    weight_exposure: NonNegativeFinite
+    well_exposed_sigma: PositiveFinite
+
+    @model_validator(mode="after")
+    def _dot_brighter(self) -> Exposure:
+        if self.dot_peak_at_100ms <= self.background_at_100ms:
+            raise ValueError(
+                f"dot_peak_at_100ms = {self.dot_peak_at_100ms} is not above "
+                f"background_at_100ms = {self.background_at_100ms}; the dot would be invisible"
+            )
+        return self
+
+
+class Noise(Documented):
+    """The ``[noise]`` table of data/binocular/sensor.toml."""
+
+    read_noise_dn: NonNegativeFinite
+    electrons_per_dn: PositiveFinite
+
+
+class CalibrationUncertainty(Documented):
+    """The ``[calibration_uncertainty]`` table of data/binocular/sensor.toml."""
+
+    focal_px: NonNegativeFinite
+    principal_point_px: NonNegativeFinite
+    k1: NonNegativeFinite
+    extrinsic_rotation_rad: Annotated[float, Field(ge=0, le=0.1, allow_inf_nan=False)]
+    extrinsic_translation_mm: NonNegativeFinite
+
+
+class Detection(Documented):
+    """The ``[detection]`` table of data/binocular/sensor.toml."""
+
+    canny_low: Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)]
+    canny_high: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
+    #: an ellipse needs at least 5 points
+    min_edge_points: Annotated[int, Field(ge=5)]
+    ray_tolerance_mm: PositiveFinite
+
+    @model_validator(mode="after")
+    def _order(self) -> Detection:
+        if self.canny_low >= self.canny_high:
+            raise ValueError(
+                f"canny_low = {self.canny_low} is not below canny_high = {self.canny_high}"
+            )
+        return self
+
+
+class SensorFile(Documented):
+    """``data/binocular/sensor.toml``."""
+
+    source: Notes = Notes()
+    image: Image
+    left: Camera
+    right: Camera
+    extrinsic: Extrinsic
+    optics: Optics
+    exposure: Exposure
+    noise: Noise
+    calibration_uncertainty: CalibrationUncertainty
+    detection: Detection
+
+    @model_validator(mode="after")
+    def _focus_beyond_focal_length(self) -> SensorFile:
+        focal = self.left.fx * self.image.pixel_pitch_mm
+        if self.optics.focus_distance_mm <= focal:
+            raise ValueError(
+                f"optics.focus_distance_mm = {self.optics.focus_distance_mm} is not beyond the "
+                f"focal length {focal:.4g} mm (left.fx x image.pixel_pitch_mm); Eq. 4 needs it"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _centres_in_image(self) -> SensorFile:
+        for side in ("left", "right"):
+            cam = getattr(self, side)
+            try:
+                check_principal_point(cam.cx, cam.cy, self.image.width, self.image.height)
+            except ValueError as exc:
+                raise ValueError(f"{side}: {exc}") from None
+        return self
+
+
+# ----------------------------------------------------------------------------------------------
+# calibrator.toml
+
+
+class Standard(Documented):
+    """The ``[standard]`` table of data/binocular/calibrator.toml."""
+
+    names: Annotated[list[Name], Field(min_length=7, max_length=7)]
+    distance_mm: Seven
+    start_angle_deg: Annotated[list[Degrees], Field(min_length=6, max_length=6)]
+
+    @field_validator("names")
+    @classmethod
+    def _names(cls, names: list) -> list:
+        return _distinct(names, "distance names")
+
+    @field_validator("distance_mm")
+    @classmethod
+    def _layout(cls, distance_mm: list, info: ValidationInfo) -> list:
+        names = info.data.get("names") or [f"P{k}P7" for k in (1, 2, 3, 4, 5, 6, 8)]
+        problem = layout_problem(distance_mm, names)
+        if problem:
+            raise ValueError(problem)
+        _metres(distance_mm, "the largest distance")
+        return distance_mm
+
+
+class Cmm(Documented):
+    """The ``[cmm]`` table of data/binocular/calibrator.toml: sigma = a + b L."""
+
+    sigma_um: NonNegativeFinite
+    sigma_um_per_m: NonNegativeFinite
+
+
+class Sbr(Documented):
+    """The ``[sbr]`` table of data/binocular/calibrator.toml."""
+
+    dot_centring_um: NonNegativeFinite
+    dot_diameter_mm: PositiveFinite
+
+
+class CalibratorPublished(Documented):
+    """The ``[published]`` table of data/binocular/calibrator.toml (Tables 2-3), mm."""
+
+    table2_control: Seven
+    table2_experimental: Seven
+    table2_rmse: Pair
+    table3_control: Seven
+    table3_experimental: Seven
+    table3_rmse: Pair
+
+
+class CalibratorFile(Documented):
+    """``data/binocular/calibrator.toml``."""
+
+    source: Notes = Notes()
+    standard: Standard
+    cmm: Cmm
+    sbr: Sbr
+    published: CalibratorPublished | None = None
+
+
+# ----------------------------------------------------------------------------------------------
+# station.toml
+
+
+class HandEye(Documented):
+    """The ``[handeye]`` table of data/binocular/station.toml: sensor2flange, mm."""
+
+    matrix: Matrix44
+
+    @field_validator("matrix")
+    @classmethod
+    def _rigid(cls, matrix: list) -> list:
+        m = np.array(matrix, dtype=float)
+        if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+            raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
+        _rotation(m[:3, :3], "its 3 x 3 block")
+        _metres(m[:3, 3], "its translation's largest coordinate")
+        return matrix
+
+
+class CalibratorPlace(Documented):
+    """The ``[calibrator]`` table of data/binocular/station.toml."""
+
+    p7_distance_mm: PositiveFinite
+    p7_height_mm: Finite
+    plate_tilt_deg: Annotated[float, Field(gt=-90, lt=90, allow_inf_nan=False)]
+
+    @model_validator(mode="after")
+    def _reach(self) -> CalibratorPlace:
+        if abs(self.p7_height_mm) >= self.p7_distance_mm:
+            raise ValueError(
+                f"|p7_height_mm| = {abs(self.p7_height_mm)} is not below p7_distance_mm = "
+                f"{self.p7_distance_mm}; P7 cannot be that high at that distance"
+            )
+        return self
+
+
+class Poses(Documented):
+    """The ``[poses]`` table of data/binocular/station.toml."""
+
+    #: at least 10 mm (a value in metres is refused)
+    observation_distance_mm: Annotated[float, Field(ge=METRES_SUSPECT_MM, allow_inf_nan=False)]
+    #: AX = XB needs at least 3 poses (2 motions about different axes)
+    n_calibration: Annotated[int, Field(ge=3)]
+    n_validation: PositiveInt
+    cone_deg: Annotated[float, Field(ge=0, lt=90, allow_inf_nan=False)]
+    roll_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
+    distance_spread_mm: NonNegativeFinite
+
+    @model_validator(mode="after")
+    def _spread(self) -> Poses:
+        if self.distance_spread_mm >= self.observation_distance_mm:
+            raise ValueError(
+                f"distance_spread_mm = {self.distance_spread_mm} is not below "
+                f"observation_distance_mm = {self.observation_distance_mm}"
+            )
+        return self
+
+
+class RobotTable(Documented):
+    """The ``[robot]`` table of data/binocular/station.toml."""
+
+    model: Name
+    repeatability_mm: NonNegativeFinite
+
+
+class Tracker(Documented):
+    """The ``[laser_tracker]`` table of data/binocular/station.toml: sigma = a + b L."""
+
+    sigma_um: NonNegativeFinite
+    sigma_um_per_m: NonNegativeFinite
+
+
+Five = Annotated[list[PositiveFinite], Field(min_length=5, max_length=5)]
+
+
+class Field_(Documented):
+    """The ``[field]`` table of data/binocular/station.toml (Table 5)."""
+
+    regions: Annotated[list[Name], Field(min_length=1)]
+    names: list[Annotated[list[Name], Field(min_length=5, max_length=5)]]
+    standard_mm: list[Five]
+    centres_mm: list[Vec3]
+    faces_point_mm: Vec3
+    n_poses: PositiveInt
+
+    @field_validator("regions")
+    @classmethod
+    def _names(cls, regions: list) -> list:
+        return _distinct(regions, "region names")
+
+    @model_validator(mode="after")
+    def _one_each(self) -> Field_:
+        n = len(self.regions)
+        counts = {k: len(getattr(self, k)) for k in ("names", "standard_mm", "centres_mm")}
+        wrong = {k: v for k, v in counts.items() if v != n}
+        if wrong:
+            listed = ", ".join(f"{v} {k}" for k, v in wrong.items())
+            raise ValueError(f"{n} regions but {listed}; one per region")
+        face = np.array(self.faces_point_mm, dtype=float)
+        for region, centre in zip(self.regions, self.centres_mm, strict=True):
+            if float(np.linalg.norm(face - np.array(centre, dtype=float))) < 1e-6:
+                raise ValueError(
+                    f"faces_point_mm is the centre of {region}; it sets the direction it faces"
+                )
+        return self
+
+
+class StationPublished(Documented):
+    """The ``[published]`` table of data/binocular/station.toml (Table 4, Fig. 13, Table 5)."""
+
+    table4_preliminary: Matrix34
+    table4_updated: Matrix34
+    fig13_rmse: Pair
+    table5_preliminary: list[Five]
+    table5_updated: list[Five]
+    table5_rmse: list[Pair]
+
+    @model_validator(mode="after")
+    def _regions(self) -> StationPublished:
+        counts = [len(self.table5_preliminary), len(self.table5_updated), len(self.table5_rmse)]
+        if len(set(counts)) != 1:
+            raise ValueError(
+                "table5_preliminary, table5_updated and table5_rmse list "
+                f"{counts[0]}, {counts[1]} and {counts[2]} regions; one each"
+            )
+        return self
+
+
+class StationFile(Documented):
+    """``data/binocular/station.toml``."""
+
+    source: Notes = Notes()
+    handeye: HandEye
+    calibrator: CalibratorPlace
+    poses: Poses
+    robot: RobotTable
+    laser_tracker: Tracker
+    field: Field_
+    published: StationPublished | None = None
+
+
+#: the schema of each file of a scenario folder
+SCHEMAS: dict[str, Any] = {
+    "sensor": SensorFile,
+    "calibrator": CalibratorFile,
+    "station": StationFile,
+}
+
+__all__ = [
+    "CalibratorFile",
+    "ROTATION_TOL",
+    "SCHEMAS",
+    "SensorFile",
+    "StationFile",
+]
