@@ -10,6 +10,7 @@ from calstudy.claims import ClaimRow
 from calstudy.io import display
 from calstudy.io.display import (
     MISSING,
+    describe_figure,
     figure_html,
     format_claims,
     format_table,
@@ -36,6 +37,9 @@ def test_format_value():
     assert format_value(float("nan")) == MISSING and format_value(None) == MISSING
     assert format_value(np.bool_(True)) == "yes"
     assert format_value("nan") == MISSING and format_value("a") == "a"
+    assert format_value("<NA>") == MISSING
+    # generated text is typeset: a source column reading "+-2 mm" shows as ±2 mm
+    assert format_value("assumption: +-2 mm, 15 um, a -> b") == "assumption: ±2 mm, 15 µm, a → b"
 
 
 def test_header_reads_units():
@@ -107,3 +111,31 @@ def test_figure_html_needs_alt(tmp_path):
     assert str(tmp_path) not in figure_html(png, "x")
     with pytest.raises(ValueError, match="alt text"):
         figure_html(png, " ")
+
+
+def test_describe_figure_reads_the_figure_labels():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2)
+    a.set_title("rotation")
+    a.set_xlabel("pose")
+    a.set_ylabel(r"$\sigma_\mathrm{rot}$ (deg)")
+    b.set_xlabel("pose")
+    b.set_ylabel("residual (mm)")
+    fig.colorbar(b.imshow([[0.0, 1.0]]), ax=b, label="not a panel")
+    fig.suptitle("Per-pose residuals")
+    text = describe_figure(fig, "pose_residuals")
+    assert text == (
+        'Figure "pose residuals" (Per-pose residuals), 2 panels: "rotation" sigma_rot (deg) '
+        "against pose; residual (mm) against pose"
+    )
+    assert len(text.split()) >= 5 and ".png" not in text and "/" not in text
+    plain = plt.figure()
+    plain.add_subplot()
+    assert describe_figure(plain, "x") == 'Figure "x", a plot without axis labels'
+    long = describe_figure(fig, "a" * 500, limit=60)
+    assert len(long) <= 60 and long.endswith("…")
+    plt.close("all")

@@ -17,11 +17,14 @@ import dataclasses
 import html
 import math
 import numbers
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from calstudy.io.claims_cells import typeset
 
 #: What a missing value is shown as.
 MISSING = "—"
@@ -54,7 +57,8 @@ def header(name: object, unit: str | None = None) -> str:
 
 def format_value(value: object, digits: int = 4) -> str:
     """One cell as text: floats to ``digits`` significant digits (no ``1e-16`` noise shown as
-    more than it is), integers as integers, booleans as yes/no, missing as an em dash."""
+    more than it is), integers as integers, booleans as yes/no, missing as an em dash, text
+    with ± µm ≤ ≥ → for ``+-``, ``um``, ``<=``, ``>=``, ``->``."""
     if value is None or value is pd.NA or value is pd.NaT:
         return MISSING
     if isinstance(value, bool | np.bool_):
@@ -77,7 +81,7 @@ def format_value(value: object, digits: int = 4) -> str:
             return f"{mantissa}×10^{int(exponent)}"
         return text
     text = str(value)
-    return MISSING if text.strip() in ("", "nan", "NaN", "None") else text
+    return MISSING if text.strip() in ("", "nan", "NaN", "None", "<NA>") else typeset(text)
 
 
 def format_table(
@@ -294,3 +298,35 @@ def figure_html(path: str | Path, alt: str, width: int | None = None) -> str:
 def show_png(path: str | Path, alt: str, width: int | None = None) -> None:
     """Display the saved PNG ``path`` with its alt text; returns None."""
     _display({"text/html": figure_html(path, alt, width), "text/plain": f"[figure: {alt}]"})
+
+
+def _label(text: str) -> str:
+    """An axis label or title as plain words: no mathtext dollars or backslashes."""
+    text = re.sub(r"\\(mathrm|mathit|mathbf|rm)\{([^}]*)\}", r"\2", text or "")
+    text = text.replace("$", "").replace("\\", "").replace("{", "").replace("}", "")
+    return " ".join(text.split())
+
+
+def describe_figure(fig, name: str, limit: int = 400) -> str:
+    """A description of a matplotlib figure read from its own labels, for an alt text when a
+    notebook gives none: its name, then per panel its title and what it plots against what
+    (``'Figure "pose residuals", 2 panels: "rotation" residual (deg) against pose; ...'``).
+    """
+    panels = []
+    for ax in fig.get_axes():
+        if not ax.get_visible() or not ax.axison or ax.get_label() == "<colorbar>":
+            continue
+        title = _label(ax.get_title() or ax.get_title(loc="left"))
+        x, y = _label(ax.get_xlabel()), _label(ax.get_ylabel())
+        what = f"{y} against {x}" if x and y else (y or x)
+        panel = " ".join(p for p in (f'"{title}"' if title else "", what) if p)
+        if panel:
+            panels.append(panel)
+    suptitle = fig._suptitle.get_text() if getattr(fig, "_suptitle", None) else ""
+    head = f'Figure "{name.replace("_", " ")}"'
+    if suptitle:
+        head += f" ({_label(suptitle)})"
+    if len(panels) > 1:
+        head += f", {len(panels)} panels"
+    text = f"{head}: {'; '.join(panels)}" if panels else f"{head}, a plot without axis labels"
+    return text if len(text) <= limit else text[: limit - 1].rsplit(" ", 1)[0] + " …"
