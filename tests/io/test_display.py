@@ -18,6 +18,7 @@ from calstudy.io.display import (
     header,
     show_claims,
     show_table,
+    table_html,
 )
 
 
@@ -30,9 +31,9 @@ def shown(monkeypatch):
 
 def test_format_value():
     assert format_value(0.123456789) == "0.1235"
-    assert format_value(12345.678) == "1.235×10^4"
+    assert format_value(12345.678) == "1.235×10⁴"
     assert format_value(2.0) == "2" and format_value(np.int64(7)) == "7"
-    assert format_value(1e-16) == "1×10^-16"
+    assert format_value(1e-16) == "1×10⁻¹⁶"
     assert format_value(0.0) == "0"
     assert format_value(float("nan")) == MISSING and format_value(None) == MISSING
     assert format_value(np.bool_(True)) == "yes"
@@ -66,6 +67,23 @@ def test_wide_short_table_is_transposed():
     (t,), _ = format_table(df)
     assert t.shape == (12, 3)
     assert list(t.columns) == ["", "x", "y"] and t.iloc[0, 0] == "c0 (mm)"
+
+
+def test_a_table_with_as_many_rows_as_columns_allowed_is_split_not_transposed():
+    # transposed, its 8 rows would become 8 columns beside the column of labels: 9
+    df = pd.DataFrame({"k": list("abcdefgh"), **{f"c{i}": np.arange(8.0) for i in range(9)}})
+    tables, _ = format_table(df, max_columns=8)
+    assert all(t.shape[1] <= 8 for t in tables) and tables[0].columns[0] == "k"
+    seven = df.iloc[:7]
+    (t,), _ = format_table(seven, max_columns=8)
+    assert t.shape == (9, 8) and list(t.columns)[:2] == ["", "a"]  # 7 rows: transposed
+
+
+def test_table_html_right_aligns_numbers():
+    html = table_html(pd.DataFrame({"name": ["a", "b"], "x_mm": [1.5, np.nan], "n": [1, 2]}))
+    assert '<td class="num">1.5</td>' in html and f'<td class="num">{MISSING}</td>' in html
+    assert "<td>a</td>" in html and '<td class="num">2</td>' in html
+    assert '<td class="num">2.5×10⁻⁵</td>' in table_html(pd.DataFrame({"x": [2.5e-5]}))
 
 
 def test_wide_long_table_is_split_repeating_the_keys():

@@ -29,6 +29,8 @@ from calstudy.io.claims_cells import typeset
 #: What a missing value is shown as.
 MISSING = "—"
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
 #: Column-name suffixes read as units: ``rot_err_deg`` is shown as ``rot err (deg)``.
 UNIT_SUFFIXES = {
     "mm": "mm",
@@ -57,8 +59,8 @@ def header(name: object, unit: str | None = None) -> str:
 
 def format_value(value: object, digits: int = 4) -> str:
     """One cell as text: floats to ``digits`` significant digits (no ``1e-16`` noise shown as
-    more than it is), integers as integers, booleans as yes/no, missing as an em dash, text
-    with ± µm ≤ ≥ → for ``+-``, ``um``, ``<=``, ``>=``, ``->``."""
+    more than it is; powers of ten as ``1.2×10⁻⁵``), integers as integers, booleans as yes/no,
+    missing as an em dash, text with ± µm ≤ ≥ → for ``+-``, ``um``, ``<=``, ``>=``, ``->``."""
     if value is None or value is pd.NA or value is pd.NaT:
         return MISSING
     if isinstance(value, bool | np.bool_):
@@ -78,7 +80,7 @@ def format_value(value: object, digits: int = 4) -> str:
         text = f"{x:.{digits}g}"
         if "e" in text:
             mantissa, exponent = text.split("e")
-            return f"{mantissa}×10^{int(exponent)}"
+            return f"{mantissa}×10{str(int(exponent)).translate(_SUPERSCRIPT)}"
         return text
     text = str(value)
     return MISSING if text.strip() in ("", "nan", "NaN", "None", "<NA>") else typeset(text)
@@ -105,9 +107,11 @@ def format_table(
     digits : int or mapping, default 4
         Significant digits of floats, for all columns or per column.
     max_columns : int, default 8
-        Widest table shown. A wider one with at most ``max_columns`` rows is transposed (its
-        rows become columns, headed by the first key column); otherwise it is split into
-        tables of at most ``max_columns`` columns, each repeating the key columns.
+        Widest table shown. A wider one with fewer than ``max_columns`` rows is transposed
+        (its rows become columns, headed by the first key column, beside a column of the
+        former headers); otherwise it is split into tables of at most ``max_columns``
+        columns, each repeating the key columns. In the book the tables also stay within the
+        column at any width (``book/_static/calstudy.css``: long header words break).
     keys : sequence of str, optional
         Columns that identify a row; default the leading non-numeric columns (at most 2).
     missing : mapping, optional
@@ -159,7 +163,7 @@ def format_table(
     key_headers = [header(k, units.get(k)) for k in keys]
     if text.shape[1] <= max_columns:
         return [text], notes
-    if len(text) <= max_columns:
+    if len(text) + 1 <= max_columns:  # the rows become columns, beside one of labels
         label = key_headers[0] if key_headers else None
         body = text.set_index(label) if label else text
         flipped = body.T
@@ -172,11 +176,20 @@ def format_table(
     return tables, notes
 
 
+#: A cell that reads as a number (right-aligned in the book): ``-1.5``, ``2×10⁻³``, ``12 %``.
+_NUMERIC = re.compile(r"^[-+−]?(\d[\d,]*(\.\d+)?|\.\d+)(×10[⁻⁰¹²³⁴⁵⁶⁷⁸⁹]+)?( ?%)?$|^[−-]?∞$")
+
+
+def _td(value: object) -> str:
+    text = str(value)
+    cls = ' class="num"' if _NUMERIC.match(text) or text == MISSING else ""
+    return f"<td{cls}>{html.escape(text)}</td>"
+
+
 def _table_html(table: pd.DataFrame, caption: str | None) -> str:
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in table.columns)
     rows = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in row) + "</tr>"
-        for row in table.itertuples(index=False)
+        "<tr>" + "".join(_td(v) for v in row) + "</tr>" for row in table.itertuples(index=False)
     )
     cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
     return (
