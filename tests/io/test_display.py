@@ -115,7 +115,12 @@ def test_show_claims_is_compact(shown):
     assert t.shape[1] <= 8
     assert t.loc[0, "reproduced [95 % CI]"] == "0.999 ratio [0.66, 1.51]"
     assert t.loc[0, "repl. rate"] == "55 %" and t.loc[0, "N"] == "200"
-    assert t.loc[1, "published"] == "none in the paper" and t.loc[1, "N"] == MISSING
+    # the published figure of the register, in the unit of the reproduced one
+    assert t.loc[0, "published"] == "0.837 ratio (0.041 / 0.049 mm)"
+    assert t.loc[1, "published"] == "none in the paper (the claim states a method only)"
+    assert t.loc[1, "N"] == MISSING
+    other = format_claims([{"id": "x.new", "published": "+-2", "unit": "mm"}])
+    assert other.loc[0, "published"] == "±2 mm"  # not in the register: its own text
     assert t.loc[1, "controls"] == MISSING
     assert show_claims(rows) is None
     assert "long long" not in shown[0]["text/html"]  # the note stays on the claims page

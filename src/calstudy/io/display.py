@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calstudy.io.claims_cells import typeset
+from calstudy.claims import claim_register
+from calstudy.io.claims_cells import published_figure, typeset
 
 #: What a missing value is shown as.
 MISSING = "—"
@@ -243,12 +244,32 @@ def _as_dict(row: object) -> dict:
     raise TypeError(f"a claim row is a ClaimRow, a mapping or a Series, not {type(row).__name__}")
 
 
-def format_claims(rows: Iterable[object] | pd.DataFrame) -> pd.DataFrame:
-    """The compact claims table of :func:`show_claims`: one row per claim, text cells."""
+def _published_cell(row: dict, unit: str, register: dict) -> str:
+    """The published figure in the unit of the reproduced one, computed from the register's
+    figures as on the claims page; the row's own text for a claim not in the register."""
+    claim = register.get(row.get("id"))
+    if claim is None:
+        published = typeset(row.get("published", ""))
+        return f"{published} {typeset(unit)}".strip() if published else "none in the paper"
+    pub = published_figure(claim, unit)
+    return f"{pub.text} ({pub.detail})" if pub.detail else pub.text
+
+
+def format_claims(
+    rows: Iterable[object] | pd.DataFrame, register: pd.DataFrame | None = None
+) -> pd.DataFrame:
+    """The compact claims table of :func:`show_claims`: one row per claim, text cells.
+
+    The published figure is that of the claims register (``register``, default
+    ``data/claims.csv``) in the unit of the reproduced one (a ratio computed from the paper's
+    figures), or says why there is none.
+    """
     if isinstance(rows, pd.DataFrame):
         records = [r for _, r in rows.iterrows()]
     else:
         records = list(rows)
+    reg = claim_register() if register is None else register
+    by_id = {c["id"]: c.to_dict() for _, c in reg.iterrows()}
     out = []
     for row in map(_as_dict, records):
         unit = str(row.get("unit", "") or "")
@@ -257,7 +278,6 @@ def format_claims(rows: Iterable[object] | pd.DataFrame) -> pd.DataFrame:
         reproduced = value if value == MISSING else f"{value} {unit}".strip()
         if value != MISSING and MISSING not in (lo, hi):
             reproduced += f" [{lo}, {hi}]"
-        published = str(row.get("published", "") or "").strip()
         rate = row.get("replication_rate")
         rate_text = (
             MISSING
@@ -273,7 +293,7 @@ def format_claims(rows: Iterable[object] | pd.DataFrame) -> pd.DataFrame:
         out.append(
             {
                 "claim": row.get("id", ""),
-                "published": f"{published} {unit}".strip() if published else "none in the paper",
+                "published": _published_cell(row, unit, by_id),
                 "reproduced [95 % CI]": reproduced,
                 "N": str(n) if n > 0 else MISSING,
                 "repl. rate": rate_text,
