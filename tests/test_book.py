@@ -137,6 +137,9 @@ _INSPECT = r"""
     return !alt || alt === i.getAttribute('src') || pathLike.test(alt);
   }).map(i => `alt ${JSON.stringify(i.getAttribute('alt'))} of `
     + (i.getAttribute('src') || '').slice(0, 60));
+  // dropdowns measured open (what one click shows must fit too), closed again afterwards
+  const closed = [...art.querySelectorAll('details:not([open])')];
+  closed.forEach(d => { d.open = true; });
   const box = art.getBoundingClientRect();
   const wide = [];
   const seen = new Set();
@@ -159,6 +162,7 @@ _INSPECT = r"""
         + `${cell.clientWidth} px: ${cell.textContent.trim().slice(0, 60)}`);
     }
   }
+  closed.forEach(d => { d.open = false; });
   const links = [...art.querySelectorAll('a[href]')].map(a => a.href)
     .filter(h => h.startsWith('file:'));
   const ids = [...document.querySelectorAll('[id]')].map(e => e.id);

@@ -256,7 +256,8 @@ def _table(group: pd.DataFrame, computed: dict, toc: set[str], book_dir: Path) -
         row = computed.get(claim["id"])
         short = html.escape(_short(claim["statement"]))
         summary = f"<code>{html.escape(claim['id'])}</code> {short}"
-        claim_cell = f"<details><summary>{summary}</summary>{_details(claim, row)}</details>"
+        # the summary toggles the full-width row below it (book/_static/calstudy.css)
+        claim_cell = f"<details><summary>{summary}</summary></details>"
         published = _published_html(_published(claim, row))
         if row is None:
             cells = [claim_cell, published, '<span class="why">not computed yet</span>', "—",
@@ -269,7 +270,8 @@ def _table(group: pd.DataFrame, computed: dict, toc: set[str], book_dir: Path) -
         classes = ["", "", "num", "num", "", ""]
         tds = "".join(f'<td class="{c}">{v}</td>' if c else f"<td>{v}</td>"
                       for c, v in zip(classes, cells, strict=True))
-        lines.append(f"<tr>{tds}</tr>")
+        more = f'<tr class="claim-more"><td colspan="{len(cells)}">{_details(claim, row)}</td></tr>'
+        lines.append(f"<tr>{tds}</tr>{more}")
     lines += ["</tbody>", "</table>"]
     return lines
 
