@@ -271,3 +271,18 @@ def test_judged_in_finds_the_section_of_each_claim(tmp_path):
     assert headings(nb) == [(2, "Other"), (2, "Claims")]
     assert judged_in("binocular.coc", nb) == ("claims", "Claims")
     assert judged_in("binocular.coc", tmp_path / "missing.ipynb") is None
+
+
+def test_book_packages_are_pinned():
+    """The theme packages the book's look depends on are pinned exactly (a new pydata theme
+    once added a second header bar)."""
+    from calstudy.core.paths import REPO_ROOT
+
+    pins = {}
+    for line in (REPO_ROOT / "environment.txt").read_text().splitlines():
+        line = line.split("#")[0].strip()
+        if "==" in line:
+            name, version = line.split("==", 1)
+            pins[name.strip().lower()] = version.strip()
+    for package in ("jupyter-book", "sphinx-book-theme", "pydata-sphinx-theme"):
+        assert pins.get(package), f"{package} is not pinned with == in environment.txt"
