@@ -1,10 +1,13 @@
 """Pages of the book generated from data: the claims summary.
 
 Run as ``python -m calstudy.io.book claims book/claims.md``. The page lists every claim of
-``data/claims.csv`` with the published figure, the reproduced one (value and 95 % interval) and
-the verdict from ``results/claims.csv``; claims no notebook has computed yet show as pending.
-The output depends only on those two files and on the book's ``_toc.yml`` (a notebook name links
-to its chapter when the table of contents lists it), so it is byte-deterministic.
+``data/claims.csv`` with the published figure (in the unit of the reproduced one, computed from
+the register's figures by :mod:`calstudy.io.claims_cells`), the reproduced one (median and 95 %
+interval, N), the replication rate and the verdict from ``results/claims.csv``, and links each
+claim to the section of its notebook that judges it; claims no notebook has computed yet show
+as pending. The output depends only on those two files, the book's ``_toc.yml`` (a notebook is
+linked when the table of contents lists it) and the notebooks' headings, so it is
+byte-deterministic.
 """
 
 from __future__ import annotations
