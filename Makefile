@@ -63,7 +63,8 @@ book/notebooks/%.ipynb: notebooks/%.ipynb $(LIBRARY) $(DATA) $(STAMP)
 results/claims.csv: $(EXECUTED) src/calstudy/io/results.py | $(STAMP)
 	$(BIN)/python -c "from calstudy.io.results import aggregate_claims; aggregate_claims()"
 
-book/claims.md: results/claims.csv data/claims.csv src/calstudy/io/book.py | $(STAMP)
+book/claims.md: results/claims.csv data/claims.csv src/calstudy/io/book.py \
+		src/calstudy/io/claims_cells.py | $(STAMP)
 	$(BIN)/python -m calstudy.io.book claims $@
 
 # Result files found at start-up; a notebook may stop writing one during this run.

@@ -2,12 +2,24 @@
 
 The book is built into a temporary folder from the notebooks executed at their CI values
 (:mod:`booksite`; the session's ``ci_runs``, shared with ``test_notebooks.py``); then every
-page is loaded in Chromium at a 1,400 px window (:mod:`browser`) and checked: no console error,
-no request leaving the machine, all math typeset by the shipped MathJax (no raw ``$``, ``\\(``
-or ``\\[`` left in the text), every image loaded, no absolute path of the build machine in the
-text; on the pages of :data:`FIT_COLUMN` no element is wider than the article column and no
-table cell holds more than its width. Screenshots of the claims page and a notebook page go to
-``book/_build/screenshots/`` (git-ignored) for a reviewer.
+page is loaded in Chromium at a 1,400 px window (:mod:`browser`) and checked:
+
+- no console error, no request leaving the machine, no absolute path of the build machine;
+- all math typeset by the shipped MathJax (no raw ``$``, ``\\(`` or ``\\[`` left in the text),
+  every image loaded, with an alt text that describes it (not a file path, not a bare name);
+- on every page of the table of contents (:data:`FIT_COLUMN`) nothing wider than the article
+  column and no table cell holding more than its width (code listings scroll by the theme's
+  design and are not counted; tables, outputs, figures and equations are);
+- nothing a notebook prints that a reader should not meet: progress bars or "trial k/n" lines,
+  raw ``NaN`` cells, object reprs (``PosixPath(``, ``<... object at 0x...>``, ``dtype:``);
+  generated text written with ± and µm;
+- every link inside the book reaches its page and anchor; the claims page has a badge in its
+  verdict's colour per claim and links every computed claim to a section of its notebook;
+  one search box (no second header bar), no script twice in a page's head, page titles
+  without the book's name twice.
+
+Screenshots of the claims page and a notebook page go to ``book/_build/screenshots/``
+(git-ignored) for a reviewer.
 
 Without Chromium the tests fail and say how to install it.
 """
@@ -15,17 +27,41 @@ Without Chromium the tests fail and say how to install it.
 from __future__ import annotations
 
 from pathlib import Path
+from urllib.parse import unquote, urlparse
 
 import pytest
+import yaml
 from booksite import build_ci_book, pages
 from browser import INSTALL_HINT, Chromium, find_chromium
 
-from calstudy.core.paths import REPO_ROOT
+from calstudy.claims import claim_register
+from calstudy.core.paths import REPO_ROOT, RESULTS_DIR
+from calstudy.io.book import VERDICT_COLOURS
+from calstudy.io.results import read_claims
 
 pytestmark = pytest.mark.book
 
-#: Pages on which no element may be wider than the article column.
-FIT_COLUMN = ("claims.html",)
+
+
+def _toc_pages() -> list[str]:
+    """The HTML page of every file of ``book/_toc.yml``, in book order."""
+
+    def files(node):
+        if isinstance(node, dict):
+            own = [node[k] for k in ("root", "file") if isinstance(node.get(k), str)]
+            return own + [f for v in node.values() for f in files(v)]
+        if isinstance(node, list):
+            return [f for v in node for f in files(v)]
+        return []
+
+    toc = yaml.safe_load((REPO_ROOT / "book" / "_toc.yml").read_text())
+    return [f"{f}.html" for f in files(toc)]
+
+
+#: Pages on which no element may be wider than the article column: every page of the book
+#: (code listings scroll by the theme's design and are not counted; tables, outputs, figures
+#: and equations are).
+FIT_COLUMN = tuple(_toc_pages())
 #: Pages photographed for the reviewer, and the file names of their screenshots.
 SCREENSHOTS = {
     "claims.html": "claims.png",
@@ -39,6 +75,9 @@ _INSPECT = r"""
 (() => {
   const art = document.querySelector('article.bd-article') || document.querySelector('main')
     || document.body;
+  // code a reader reads as code: input cells and code blocks of the prose (not cell outputs)
+  const isCode = e => !!e.closest('.cell_input, pre, code, .highlight')
+    && !e.closest('.cell_output');
   const prose = art.cloneNode(true);
   prose.querySelectorAll('pre, code, script, style, textarea, mjx-container, .highlight')
     .forEach(e => e.remove());
@@ -49,6 +88,40 @@ _INSPECT = r"""
       raw.push(text.slice(Math.max(0, m.index - 30), m.index + 40).replace(/\s+/g, ' '));
     }
   }
+  // what the page shows as text and output: the article without its input cells
+  const shown = art.cloneNode(true);
+  shown.querySelectorAll('.cell_input, script, style, mjx-assistive-mml').forEach(e => e.remove());
+  // text nodes joined by spaces, so that table cells do not run together
+  const walker = document.createTreeWalker(shown, NodeFilter.SHOW_TEXT);
+  const parts = [];
+  while (walker.nextNode()) { parts.push(walker.currentNode.nodeValue); }
+  const shownText = parts.join(' ');
+  const find = (res) => {
+    const hits = [];
+    for (const re of res) {
+      for (const m of shownText.matchAll(re)) {
+        hits.push(shownText.slice(Math.max(0, m.index - 25), m.index + 45).replace(/\s+/g, ' '));
+      }
+    }
+    return hits;
+  };
+  const noise = find([/trial\s+\d+\s*\/\s*\d+/gi, /\d+\s*%\|/g, /%\|/g, /\|[█▉▊▋▌▍▎▏ ]{3,}\|/g,
+                      /\d+(\.\d+)?\s*(it\/s|s\/it)\]/g]);
+  const reprs = find([/\b(?:Pure)?(?:Posix|Windows)Path\(/g, /<[A-Za-z_][\w.]* object at 0x/g,
+                      /<Figure size [\d.]+x[\d.]+ with \d+ Axes>/g, /<matplotlib\.[\w.]+/g,
+                      /(^|[^.\w])[A-Z][a-z]\w*\([a-z_]+=/g, /\barray\(\[/g,
+                      /\bdtype: \w+/g]);
+  // text the book generates: cell outputs on a notebook page, all prose elsewhere
+  const outputs = [...art.querySelectorAll('.cell_output')].map(e => e.textContent).join(' ');
+  const generated = art.querySelector('.cell_output, .cell') ? outputs : text;
+  const typography = [];
+  for (const m of generated.matchAll(/\+-|\d\s?um\b/g)) {
+    typography.push(generated.slice(Math.max(0, m.index - 25), m.index + 25)
+      .replace(/\s+/g, ' '));
+  }
+  const nanCells = [...art.querySelectorAll('td, th')]
+    .filter(c => /(^|[^\w])(nan|NaN|<NA>|NaT)([^\w]|$)/.test(c.textContent.trim()))
+    .map(c => c.textContent.trim().slice(0, 40));
   const body = document.body.cloneNode(true);
   body.querySelectorAll('script, style').forEach(e => e.remove());
   const alts = [...document.querySelectorAll('[alt], [title]')]
@@ -56,11 +129,22 @@ _INSPECT = r"""
   const broken = [...document.images]
     .filter(i => !(i.complete && i.naturalWidth > 0))
     .map(i => i.getAttribute('src'));
+  const pathLike = /^\S*\.(png|jpe?g|svg|gif|webp)$|^(\.\.?\/|\/|_images\/|data:)/i;
+  const imgAlts = [...document.images].map(i => (i.getAttribute('alt') || '').trim())
+    .filter(a => a);
+  const badAlt = [...document.images].filter(i => {
+    const alt = (i.getAttribute('alt') || '').trim();
+    return !alt || alt === i.getAttribute('src') || pathLike.test(alt);
+  }).map(i => `alt ${JSON.stringify(i.getAttribute('alt'))} of `
+    + (i.getAttribute('src') || '').slice(0, 60));
+  // dropdowns measured open (what one click shows must fit too), closed again afterwards
+  const closed = [...art.querySelectorAll('details:not([open])')];
+  closed.forEach(d => { d.open = true; });
   const box = art.getBoundingClientRect();
   const wide = [];
   const seen = new Set();
   for (const e of art.querySelectorAll('*')) {
-    if (e.closest('mjx-assistive-mml')) continue;
+    if (e.closest('mjx-assistive-mml') || isCode(e)) continue;
     const r = e.getBoundingClientRect();
     if (r.width === 0 || r.height === 0) continue;
     if (r.right > box.right + 1 || r.left < box.left - 1) {
@@ -78,8 +162,21 @@ _INSPECT = r"""
         + `${cell.clientWidth} px: ${cell.textContent.trim().slice(0, 60)}`);
     }
   }
+  closed.forEach(d => { d.open = false; });
+  const links = [...art.querySelectorAll('a[href]')].map(a => a.href)
+    .filter(h => h.startsWith('file:'));
+  const ids = [...document.querySelectorAll('[id]')].map(e => e.id);
+  const badges = [...art.querySelectorAll('.verdict')].map(e => ({
+    cls: e.className, colour: getComputedStyle(e).backgroundColor, text: e.textContent}));
+  const headScripts = [...document.head.querySelectorAll('script')].map(e => e.outerHTML);
+  const searches = [...document.querySelectorAll('input[type=search], .search-button-field, '
+    + 'form.bd-search')].filter(e => e.getBoundingClientRect().height > 0
+    && !e.closest('.search-button__wrapper')).length;
   return {text: body.textContent + ' ' + alts.join(' '), raw_math: raw, broken: broken,
-          wide: wide, column: box.width};
+          wide: wide, column: box.width, noise: noise, reprs: reprs, nan_cells: nanCells,
+          bad_alt: badAlt, alts: imgAlts, typography: typography, links: links, ids: ids,
+          badges: badges, title: document.title, head_scripts: headScripts,
+          searches: searches};
 })()
 """
 
@@ -113,6 +210,12 @@ def seen(chromium_binary, build) -> dict[str, dict]:
             if rel in SCREENSHOTS:
                 out[rel]["screenshot"] = browser.screenshot(SCREENSHOT_DIR / SCREENSHOTS[rel])
     return out
+
+
+def _rgb(colour: str) -> str:
+    """``"#1a7f37"`` as the browser reports it: ``"rgb(26, 127, 55)"``."""
+    r, g, b = (int(colour[i : i + 2], 16) for i in (1, 3, 5))
+    return f"rgb({r}, {g}, {b})"
 
 
 def _failures(seen: dict, problems) -> str:
@@ -163,10 +266,117 @@ def test_no_absolute_path_of_the_build_machine(seen, build, ci_runs):
 
 @pytest.mark.parametrize("page", FIT_COLUMN)
 def test_nothing_wider_than_the_column(seen, page):
+    assert page in seen, f"{page} is in the table of contents but was not built"
     wide = seen[page]["wide"]
     assert not wide, f"{page}: {len(wide)} element(s) overflow the column or their cell:\n" + (
         "\n".join(wide[:20])
     )
+
+
+def test_no_progress_noise(seen):
+    """Progress bars and "trial k/n" lines go to the terminal, not into the book."""
+    assert not any(i["noise"] for i in seen.values()), _failures(
+        seen, lambda _, i: [f"progress output: {s!r}" for s in i["noise"]]
+    )
+
+
+def test_no_nan_cells(seen):
+    """A missing value is an em dash with its reason (io.display), never a raw NaN."""
+    assert not any(i["nan_cells"] for i in seen.values()), _failures(
+        seen, lambda _, i: [f"{len(i['nan_cells'])} table cell(s) read {i['nan_cells'][0]!r}"]
+        if i["nan_cells"] else []
+    )
+
+
+def test_no_object_reprs(seen):
+    """No path objects, object reprs, raw arrays or Series footers in what a page shows."""
+    assert not any(i["reprs"] for i in seen.values()), _failures(
+        seen, lambda _, i: [f"object repr: {s!r}" for s in i["reprs"]]
+    )
+
+
+def test_every_image_has_a_descriptive_alt(seen):
+    """Every image's alt text describes it: present, not a file path, a phrase of at least
+    five words (not just the figure's file name)."""
+
+    def problems(_, info):
+        found = [f"image without a describing alt text: {s}" for s in info["bad_alt"]]
+        found += [f"alt text too short to describe the image: {a!r}" for a in info["alts"]
+                  if len(a.split()) < 5]
+        return found
+
+    assert not any(problems(p, i) for p, i in seen.items()), _failures(seen, problems)
+
+
+def test_generated_text_is_typeset(seen):
+    """Generated text writes ± and µm, not "+-" and "um"."""
+    assert not any(i["typography"] for i in seen.values()), _failures(
+        seen, lambda _, i: [f"untypeset: {s!r}" for s in i["typography"]]
+    )
+
+
+def test_internal_links_resolve(seen, build):
+    """Every link to a page of the book reaches an existing file and, with a fragment, an
+    element with that id on the page (the claims page links to notebook sections)."""
+    html, _ = build
+    ids = {page: set(info["ids"]) for page, info in seen.items()}
+
+    def problems(_, info):
+        found = []
+        for link in info["links"]:
+            url, _, fragment = link.partition("#")
+            target = Path(unquote(urlparse(url).path))
+            if not target.exists():
+                found.append(f"link to a missing file: {link}")
+                continue
+            try:
+                rel = target.relative_to(html).as_posix()
+            except ValueError:
+                found.append(f"link out of the book: {link}")
+                continue
+            if fragment and rel in ids and unquote(fragment) not in ids[rel]:
+                found.append(f"link to a missing anchor: {rel}#{fragment}")
+        return found
+
+    assert not any(problems(p, i) for p, i in seen.items()), _failures(seen, problems)
+
+
+def test_claims_page_badges_and_section_links(seen):
+    """The claims page: one coloured badge per claim and per verdict count, each in its
+    verdict's colour; every claim computed links to a section of its notebook."""
+    info = seen["claims.html"]
+    expected = {v.replace(" ", "-"): _rgb(c) for v, c in VERDICT_COLOURS.items()}
+    register = claim_register()
+    assert len(info["badges"]) >= len(register)
+    for badge in info["badges"]:
+        verdict = badge["cls"].split("verdict-")[-1]
+        assert badge["colour"] == expected[verdict], badge
+        assert badge["text"].replace(" ", "-") == verdict, badge
+    sections = [link for link in info["links"] if "/notebooks/" in link and "#" in link]
+    computed = read_claims(RESULTS_DIR / "claims.csv")
+    assert len(sections) == len(computed), sections
+
+
+def test_one_header_bar_and_no_duplicate_scripts(seen):
+    """The pydata theme's second header bar (with a second search box) stays off, and no
+    script is written twice into a page's head."""
+
+    def problems(page, info):
+        found = []
+        if page != "search.html" and info["searches"] > 1:
+            found.append(f"{info['searches']} search boxes")
+        dupes = {s for s in info["head_scripts"] if info["head_scripts"].count(s) > 1}
+        found += [f"script twice in the head: {s[:80]}" for s in sorted(dupes)]
+        return found
+
+    assert not any(problems(p, i) for p, i in seen.items()), _failures(seen, problems)
+
+
+def test_page_titles(seen):
+    """A page title names the page, then the book: never the book twice."""
+    bad = {p: i["title"] for p, i in seen.items()
+           if len(set(i["title"].split(" — "))) < len(i["title"].split(" — "))}
+    assert not bad, bad
 
 
 def test_screenshots_written(seen):

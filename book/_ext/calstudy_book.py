@@ -1,4 +1,10 @@
-"""Sphinx extension of the calstudy book: one copy of each script, the book's own CSS.
+"""Sphinx extension of the calstudy book: no progress bars, one copy of each script, the book's
+own CSS.
+
+The Monte Carlo engine draws its progress bars (tqdm) on stderr; in a notebook kernel stderr is
+the cell's output, so an executed notebook holds the bars. The book shows what a notebook
+computed, not how long it took: when a notebook is read, the progress lines are dropped from its
+stderr outputs (what else a cell wrote to stderr, a warning, stays).
 
 Jupyter Book 1 loads ``sphinx_thebe`` and ``sphinx_togglebutton``, whose inline scripts end up
 twice in every page's head (the themes add them again while pages are written); the second
@@ -9,7 +15,57 @@ script line of its head. ``_static/calstudy.css`` styles the claims page (badges
 
 from __future__ import annotations
 
+import json
+import re
 from pathlib import Path
+
+#: One redraw of a tqdm bar ("label:  40%|####      | 80/200 [00:01<00:02, 57.1trial/s]") or a
+#: plain "trial k/n" progress line.
+PROGRESS = re.compile(
+    r"^[^\n]*\d+%\|[^\n]*\|\s*\d+/\d+\s*\[[^\n]*\]\s*$|^\s*trial\s+\d+\s*/\s*\d+\b[^\n]*$",
+    re.IGNORECASE,
+)
+
+
+def strip_progress(text: str) -> str:
+    """``text`` of a stream output without its progress redraws (tqdm bars and "trial k/n"
+    lines, separated by carriage returns or newlines)."""
+    kept = [
+        part
+        for part in re.split(r"(?<=[\r\n])", text)
+        if not PROGRESS.match(part.strip()) and part != "\r"  # a bar's carriage returns too
+    ]
+    out = "".join(kept)
+    return "" if not out.strip() else out
+
+
+def strip_notebook_progress(source: str) -> str:
+    """The JSON text of a notebook with progress removed from its stderr outputs (an output
+    left empty is dropped); the text unchanged if it holds none."""
+    nb = json.loads(source)
+    changed = False
+    for cell in nb.get("cells", []):
+        outputs = []
+        for out in cell.get("outputs", []):
+            if out.get("output_type") == "stream" and out.get("name") == "stderr":
+                text = out.get("text", "")
+                text = "".join(text) if isinstance(text, list) else text
+                stripped = strip_progress(text)
+                if stripped != text:
+                    changed = True
+                    if not stripped:
+                        continue
+                    out = {**out, "text": stripped}
+            outputs.append(out)
+        if "outputs" in cell:
+            cell["outputs"] = outputs
+    return json.dumps(nb, ensure_ascii=False, indent=1) if changed else source
+
+
+def _source_read(app, docname, source) -> None:
+    path = Path(app.env.doc2path(docname))
+    if path.suffix == ".ipynb":
+        source[0] = strip_notebook_progress(source[0])
 
 
 def dedupe_head(text: str) -> str:
@@ -39,6 +95,7 @@ def _dedupe_pages(app, exception) -> None:
 
 
 def setup(app):
+    app.connect("source-read", _source_read)
     app.connect("build-finished", _dedupe_pages)
     app.add_css_file("calstudy.css")
     return {"parallel_read_safe": True, "parallel_write_safe": True}

@@ -18,6 +18,14 @@ from calstudy.io.book import (
     render_claims_page,
     typeset,
 )
+from calstudy.io.claims_cells import (
+    bound_value,
+    headings,
+    judged_in,
+    published_figure,
+    ratio_of,
+    section_id,
+)
 from calstudy.io.results import aggregate_claims, write_claims
 
 
@@ -83,15 +91,21 @@ def test_page_has_counts_figure_table_and_dropdowns(tmp_path, results):
     rows = rows_of(text)
     assert set(rows) == set(claim_register()["id"])
     coc = rows["binocular.coc"]
-    assert "0.837 ratio" in coc and "(0.041/0.049 mm)" in coc  # published in the unit
-    assert "0.84 ratio" in coc and "[0.8, 0.88]" in coc
-    assert "71 %" in coc and "<td class=\"num\">200</td>" in coc
-    assert "null: not reproduced<br>oracle: reproduced" in coc
+    # published in the unit of the reproduced figure, computed from the register's 0.049 -> 0.041
+    assert "<td>0.837 ratio<br>" in coc and "0.041 / 0.049 mm" in coc
+    assert "0.84 ratio" in coc and "[0.8, 0.88]" in coc and "N = 200" in coc
+    assert "71 %" in coc
+    assert "null control: not reproduced; oracle control: reproduced" in coc  # in the dropdown
     assert '<a href="notebooks/04_binocular.html"' in coc  # listed in the toc: linked
     assert "<p><em>Note:</em> a note</p>" in coc  # the note one click away
-    assert "none in the paper" in rows["hybrid.handeye"]  # an empty published cell says why
-    assert "<td>—</td>" in rows["hybrid.handeye"]  # no controls, no replication rate
-    assert '<a href="' not in rows["hybrid.handeye"]  # 01_hybrid is not in the toc
+    assert "verdict-reproduced" in coc
+    # an empty published cell says why: a bound of the study, not a figure of the paper
+    handeye = rows["hybrid.handeye"]
+    assert "none in the paper" in handeye and "bound ≤ 3 × CRB RMS" in handeye
+    assert "Controls:" not in handeye  # no controls, no replication rate
+    assert 'title="no per-trial effect: not testable or no trials">—</span>' in handeye
+    assert '<a href="' not in handeye  # 01_hybrid is not in the toc
+    assert "<td>2–4 mm</td>" in rows["hybrid.systematic"]  # same unit: the paper's own figure
     assert "verdict-pending" in rows["selfcal.residual"]
     assert "±0.3 mm" in rows["hybrid.deviation"] and "+-" not in text
     assert "nan" not in text.lower().replace("nanc", "")
@@ -131,6 +145,7 @@ def test_v1_results_read_with_v2_columns(tmp_path):
 
 def test_typeset_and_published_value():
     assert typeset("within +-0.3 mm, 5 um, a <= b -> c") == "within ±0.3 mm, 5 µm, a ≤ b → c"
+    assert typeset("3 x CRB, 1.36/sqrt(n), Cramer-Rao") == "3 × CRB, 1.36/√n, Cramér-Rao"
     assert typeset(float("nan")) == ""
     assert published_value("0.837 (0.041/0.049 mm)") == (0.837, 0.837)
     assert published_value("2-4") == (2.0, 4.0)
@@ -142,7 +157,7 @@ def test_results_frame_roundtrip(results):
     assert isinstance(res, pd.DataFrame) and len(res) == 4
 
 
-def test_book_extension_keeps_one_copy_of_each_head_script():
+def _extension():
     import importlib.util
 
     from calstudy.core.paths import REPO_ROOT
@@ -152,6 +167,41 @@ def test_book_extension_keeps_one_copy_of_each_head_script():
     )
     ext = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(ext)
+    return ext
+
+
+def test_book_extension_drops_progress_bars_and_keeps_warnings():
+    import json
+
+    ext = _extension()
+    bar = (
+        "\rcalibration:   0%|          | 0/200 [00:00<?, ?trial/s]"
+        "\rcalibration: 100%|██████████| 200/200 [00:01<00:00, 150.2trial/s]\n"
+    )
+    assert ext.strip_progress(bar) == ""
+    assert ext.strip_progress("trial 3/48\n") == ""
+    warning = "CalibrationWarning: chi2/dof = 9.1 outside [0.5, 1.6]\n"
+    assert ext.strip_progress(warning + bar) == warning
+    assert ext.strip_progress("50%| of the poses\n") == "50%| of the poses\n"  # not a bar
+    nb = {"cells": [
+        {"cell_type": "code", "source": "", "outputs": [
+            {"output_type": "stream", "name": "stderr", "text": ["\r", bar]},
+            {"output_type": "stream", "name": "stdout", "text": "trial 1/2\n"},
+            {"output_type": "stream", "name": "stderr", "text": warning + bar},
+        ]},
+        {"cell_type": "markdown", "source": "text"},
+    ]}
+    out = json.loads(ext.strip_notebook_progress(json.dumps(nb)))
+    assert out["cells"][0]["outputs"] == [
+        {"output_type": "stream", "name": "stdout", "text": "trial 1/2\n"},  # stdout: the check's
+        {"output_type": "stream", "name": "stderr", "text": warning},
+    ]
+    clean = json.dumps({"cells": [nb["cells"][1]]})
+    assert ext.strip_notebook_progress(clean) is clean
+
+
+def test_book_extension_keeps_one_copy_of_each_head_script():
+    ext = _extension()
     page = (
         "<head>\n<script>const A = 1;</script>\n<script src='x.js'></script>\n"
         "<script>const A = 1;</script>\n</head>\n<body><script>const A = 1;</script></body>"
@@ -160,3 +210,79 @@ def test_book_extension_keeps_one_copy_of_each_head_script():
     assert fixed.count("const A = 1;") == 2  # one in the head, the body's untouched
     assert fixed.startswith("<head>\n<script>const A = 1;</script>\n<script src='x.js'>")
     assert ext.dedupe_head("no head") == "no head"
+
+
+def test_published_figure_in_the_unit_of_the_reproduced_one():
+    reg = claim_register().set_index("id", drop=False)
+
+    def pub(claim_id, unit):
+        return published_figure(reg.loc[claim_id].to_dict(), unit)
+
+    coc = pub("binocular.coc", "ratio")  # 0.049 -> 0.041 mm
+    assert coc.value == pytest.approx((0.041 / 0.049,) * 2) and coc.text == "0.837 ratio"
+    assert coc.detail == "0.041 / 0.049 mm"
+    icp = pub("dualarm.icp", "ratio")  # four pairs: mean after / mean before
+    after, before = (0.076 + 0.088 + 0.071 + 0.061) / 4, (0.471 + 0.352 + 0.553 + 0.592) / 4
+    assert icp.value[0] == pytest.approx(after / before) and icp.text == "0.150 ratio"
+    assert "(means of 4)" in icp.detail
+    assert pub("dualarm.vs_circular", "ratio").value[0] == pytest.approx(0.100 / 0.556)
+    assert pub("dualarm.global", "mm").text == "0.100 mm"  # same unit: the paper's own
+    assert pub("hybrid.systematic", "mm").value == (2.0, 4.0)
+    assert pub("selfcal.residual", "mm").text == "≤ 0.42 mm"  # a requirement
+    none = pub("selfcal.one_step", "ratio")
+    assert none.value is None and none.text == "none in the paper"
+    assert none.detail == "judged against 1 (no effect)"
+    other = pub("hybrid.correlation", "Kolmogorov distance")  # no conversion: says so
+    assert other.value is None and other.text == "none in Kolmogorov distance"
+    assert "paper: 85.64 %" in other.detail and "bound ≤ 1.36/√n" in other.detail
+    assert pub("hybrid.rps", "frame error ratio").detail  # never an empty cell without reason
+
+
+def test_ratio_of_and_bound_value():
+    assert ratio_of("0.049 -> 0.041")[0] == pytest.approx(0.041 / 0.049)
+    assert ratio_of("a: 1 / 3 -> 1 / 1; b: 2 -> 1")[0] == pytest.approx((1 / 1) / 2)
+    assert ratio_of("0.1 vs 0.5 (other 0.2)")[0] == pytest.approx(0.2)
+    assert ratio_of("96.55") is None and ratio_of("1 / 2 -> 1") is None
+    assert ratio_of("0 -> 1") is None  # nothing to divide by
+    assert bound_value({"kind": "bound", "reference": "3 x CRB RMS (stated multiple)"}) == 3.0
+    assert bound_value({"kind": "bound", "reference": "1.36/sqrt(n) (5 %)"}) is None
+    assert bound_value({"kind": "ratio", "reference": "1 (no effect)"}) is None
+
+
+def test_judged_in_finds_the_section_of_each_claim(tmp_path):
+    """Every computed claim links to a section that its notebook has, by the anchor Sphinx
+    gives the heading; a notebook without the section falls back to its Claims section."""
+    from calstudy.core.paths import REPO_ROOT, RESULTS_DIR
+
+    computed = read_results(RESULTS_DIR / "claims.csv")
+    for _, row in computed.iterrows():
+        notebook = REPO_ROOT / "notebooks" / f"{row['notebook']}.ipynb"
+        found = judged_in(row["id"], notebook)
+        assert found is not None, row["id"]
+        anchor, heading = found
+        assert anchor == section_id(heading) and heading.lower() != "claims", (row["id"], found)
+    assert section_id("1. Flexible sensor: hand-eye (Eq. 6)") == "flexible-sensor-hand-eye-eq-6"
+    assert section_id("How `hybrid.systematic` moves") == "how-hybrid-systematic-moves"
+    nb = tmp_path / "nb.ipynb"
+    nb.write_text(
+        '{"cells": [{"cell_type": "markdown", "source": ["# Title\\n", "## Other\\n"]},'
+        ' {"cell_type": "markdown", "source": "```\\n## not a heading\\n```\\n## Claims"}]}'
+    )
+    assert headings(nb) == [(2, "Other"), (2, "Claims")]
+    assert judged_in("binocular.coc", nb) == ("claims", "Claims")
+    assert judged_in("binocular.coc", tmp_path / "missing.ipynb") is None
+
+
+def test_book_packages_are_pinned():
+    """The theme packages the book's look depends on are pinned exactly (a new pydata theme
+    once added a second header bar)."""
+    from calstudy.core.paths import REPO_ROOT
+
+    pins = {}
+    for line in (REPO_ROOT / "environment.txt").read_text().splitlines():
+        line = line.split("#")[0].strip()
+        if "==" in line:
+            name, version = line.split("==", 1)
+            pins[name.strip().lower()] = version.strip()
+    for package in ("jupyter-book", "sphinx-book-theme", "pydata-sphinx-theme"):
+        assert pins.get(package), f"{package} is not pinned with == in environment.txt"

@@ -153,8 +153,9 @@ def test_notebook_writers_write_into_the_folder_and_show_the_saved_file(tmp_path
     assert png in shown[0]["text/html"]
     assert 'alt="A line rising from 0 to 1."' in shown[0]["text/html"]
     assert str(tmp_path) not in str(shown[0])
+    # without one, the alt text is read from the figure's labels, never its path
     show_figure(make_figure(), "noise_sweep")
-    assert 'alt="figure noise sweep"' in shown[1]["text/html"]
+    assert 'alt="Figure &quot;noise sweep&quot;: x (mm)"' in shown[1]["text/html"]
 
 
 def test_write_figure_is_atomic(tmp_path, monkeypatch):

@@ -1,10 +1,13 @@
 """Pages of the book generated from data: the claims summary.
 
 Run as ``python -m calstudy.io.book claims book/claims.md``. The page lists every claim of
-``data/claims.csv`` with the published figure, the reproduced one (value and 95 % interval) and
-the verdict from ``results/claims.csv``; claims no notebook has computed yet show as pending.
-The output depends only on those two files and on the book's ``_toc.yml`` (a notebook name links
-to its chapter when the table of contents lists it), so it is byte-deterministic.
+``data/claims.csv`` with the published figure (in the unit of the reproduced one, computed from
+the register's figures by :mod:`calstudy.io.claims_cells`), the reproduced one (median and 95 %
+interval, N), the replication rate and the verdict from ``results/claims.csv``, and links each
+claim to the section of its notebook that judges it; claims no notebook has computed yet show
+as pending. The output depends only on those two files, the book's ``_toc.yml`` (a notebook is
+linked when the table of contents lists it) and the notebooks' headings, so it is
+byte-deterministic.
 """
 
 from __future__ import annotations
@@ -24,8 +27,29 @@ import pandas as pd
 import yaml
 
 from calstudy.claims import CLAIM_COLUMNS, VERDICTS
-from calstudy.core.paths import DATA_DIR, RESULTS_DIR
+from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
+from calstudy.io.claims_cells import (
+    Published,
+    bound_value,
+    is_ratio,
+    judged_in,
+    published_figure,
+    published_value,
+    typeset,
+)
 from calstudy.io.results import read_claims
+
+__all__ = [
+    "FIGURE_NAME",
+    "REGISTER_COPY",
+    "RESULTS_COPY",
+    "claims_figure",
+    "main",
+    "published_value",
+    "read_results",
+    "render_claims_page",
+    "typeset",
+]
 
 #: Paper short name -> (title, bibtex key in book/references.bib), in book order.
 PAPERS = {
@@ -46,6 +70,9 @@ PAPERS = {
 }
 
 PENDING = "pending"
+
+#: Source notebooks, where a section is looked up when the book has no executed copy.
+NOTEBOOK_DIR = REPO_ROOT / "notebooks"
 
 #: Files written beside the page: the figure and copies of the two tables it is made from.
 FIGURE_NAME = "claims-verdicts.png"
@@ -84,18 +111,6 @@ the paper") are judged against a reference method on the same trials (the statem
 note name it).
 """
 
-_UNICODE = ((r"\+-", "±"), (r"(?<=\d)\s?um\b", " µm"), (r"<=", "≤"), (r">=", "≥"), (r"->", "→"))
-_LEADING_NUMBER = re.compile(r"^\s*([-+]?\d+(?:\.\d+)?)(?:\s*-\s*(\d+(?:\.\d+)?))?(.*)$")
-
-
-def typeset(text: object) -> str:
-    """Plain text with ``+-``, ``um``, ``<=``, ``>=`` and ``->`` written as ± µm ≤ ≥ →."""
-    s = "" if text is None or (isinstance(text, float) and math.isnan(text)) else str(text)
-    for pattern, repl in _UNICODE:
-        s = re.sub(pattern, repl, s)
-    return s.strip()
-
-
 def _cell(text: object) -> str:
     """Text safe inside an HTML table cell."""
     return html.escape(typeset(text).replace("\n", " "))
@@ -107,16 +122,6 @@ def _number(x: object) -> str:
     except (TypeError, ValueError):
         return ""
     return f"{x:.3g}" if math.isfinite(x) else ""
-
-
-def published_value(text: object) -> tuple[float, float] | None:
-    """The published figure of a result row as ``(low, high)`` (equal unless a range
-    ``"2-4"``), or None if the text does not start with a number."""
-    m = _LEADING_NUMBER.match(typeset(text).replace("±", "+-"))
-    if not m:
-        return None
-    low = float(m.group(1))
-    return low, float(m.group(2)) if m.group(2) else low
 
 
 def _short(statement: str, limit: int = 64) -> str:
@@ -158,109 +163,134 @@ def read_results(path: str | Path) -> pd.DataFrame:
     return res[list(CLAIM_COLUMNS)]
 
 
-def _published_html(claim: pd.Series, row: pd.Series | None) -> str:
-    if row is not None and typeset(row["published"]):
-        value = published_value(row["published"])
-        text = typeset(row["published"])
-        unit = html.escape(typeset(row["unit"]))
-        if value is None:
-            return f"{html.escape(text)} {unit}"
-        m = _LEADING_NUMBER.match(text.replace("±", "+-"))
-        head = text[: len(text) - len(m.group(3))].strip()
-        rest = m.group(3).strip()
-        extra = f'<br><span class="why">{html.escape(rest)}</span>' if rest else ""
-        return f"{html.escape(head)} {unit}{extra}"
-    if row is None and typeset(claim["published"]):
-        return f"{_cell(claim['published'])} {_cell(claim['unit'])}"
-    return ('<span class="why" title="the paper gives no figure; the claim is judged against a '
-            'reference method on the same trials (see the statement)">none in the paper'
-            "</span>")
+def _published(claim: pd.Series, row: pd.Series | None) -> Published:
+    """The published figure in the unit of the reproduced one (the register's own unit while
+    the claim is pending)."""
+    unit = typeset(row["unit"]) if row is not None else typeset(claim["unit"])
+    return published_figure(claim, unit)
+
+
+def _published_html(pub: Published) -> str:
+    main = html.escape(pub.text)
+    if pub.value is None:
+        main = f'<span class="why">{main}</span>'
+    extra = f'<br><span class="why">{html.escape(pub.detail)}</span>' if pub.detail else ""
+    return main + extra
 
 
 def _reproduced_html(row: pd.Series) -> str:
     value, lo, hi = _number(row["reproduced"]), _number(row["ci_low"]), _number(row["ci_high"])
     if not value:
-        return '<span class="why">not computed</span>' if row["verdict"] != "not testable" else "—"
+        if row["verdict"] == "not testable":
+            return '<span class="why">no figure: not testable (see the note)</span>'
+        return '<span class="why">not computed</span>'
     unit = html.escape(typeset(row["unit"]))
-    interval = f'<br><span class="why">[{lo}, {hi}]</span>' if lo and hi else ""
-    return f"{value} {unit}{interval}"
+    interval = f" [{lo}, {hi}]" if lo and hi else ""
+    n = int(row["n"])
+    trials = f'<br><span class="why">N = {n}</span>' if n > 0 else ""
+    return f"{value} {unit}<span class=\"ci\">{interval}</span>{trials}"
 
 
 def _rate_html(row: pd.Series) -> str:
     rate = row["replication_rate"]
     if rate is None or not math.isfinite(float(rate)):
-        return "—"
+        return '<span class="why" title="no per-trial effect: not testable or no trials">—</span>'
     return f"{100 * float(rate):.0f} %"
 
 
-def _controls_html(row: pd.Series) -> str:
+def _controls_text(row: pd.Series) -> str:
     parts = [
-        f"{name}: {html.escape(typeset(row[col]))}"
+        f"{name} control: {typeset(row[col])}"
         for name, col in (("null", "null_control"), ("oracle", "oracle_control"))
         if typeset(row[col])
     ]
-    return "<br>".join(parts) if parts else "—"
+    return "; ".join(parts)
 
 
 def _details(claim: pd.Series, row: pd.Series | None) -> str:
     parts = [f"<p>{_cell(claim['statement'])}</p>"]
+    published = _cell(claim["published"])
+    published = f"{published} {_cell(claim['unit'])}" if published else "no figure"
     parts.append(f"<p><em>Where in the paper:</em> {_cell(claim['where'])}. "
-                 f"<em>Published:</em> {_cell(claim['published']) or 'no figure'}"
-                 f"{' ' + _cell(claim['unit']) if typeset(claim['published']) else ''}.</p>")
+                 f"<em>Published:</em> {published}.</p>")
     if typeset(claim.get("comparison", "")):
         parts.append(f"<p><em>Compared:</em> {_cell(claim['comparison'])}</p>")
+    if row is not None and _controls_text(row):
+        parts.append(f"<p><em>Controls:</em> {html.escape(_controls_text(row))}.</p>")
     if row is not None and typeset(row["note"]):
         parts.append(f"<p><em>Note:</em> {_cell(row['note'])}</p>")
     return "".join(parts)
 
 
-def _table(group: pd.DataFrame, computed: dict, toc: set[str]) -> list[str]:
+def _section_link(claim_id: str, stem: str, book_dir: Path, toc: set[str]) -> str:
+    """Link to the notebook section where the claim is judged (the notebook number and the
+    start of the heading), or the notebook number alone if its page is not in the book."""
+    number = html.escape(stem.split("_")[0]) if stem else "—"
+    if not stem or f"notebooks/{stem}" not in toc:
+        return number
+    page = f"notebooks/{html.escape(stem)}.html"
+    found = None
+    for notebook in (book_dir / "notebooks" / f"{stem}.ipynb", NOTEBOOK_DIR / f"{stem}.ipynb"):
+        if notebook.is_file():
+            found = judged_in(claim_id, notebook)
+            break
+    if found is None:
+        return f'<a href="{page}" title="{html.escape(stem)}">{number}</a>'
+    anchor, heading = found
+    heading = re.sub(r"^\d+\.\s*", "", heading)
+    short = heading.split(": ")[0].split(" (")[0]
+    if len(short) > 28:
+        short = short[:28].rsplit(" ", 1)[0].rstrip(",;:(") + " …"
+    return (f'<a class="section-link" href="{page}#{anchor}" title="{html.escape(heading)}">'
+            f"{number} § {html.escape(short)}</a>")
+
+
+def _table(group: pd.DataFrame, computed: dict, toc: set[str], book_dir: Path) -> list[str]:
     lines = [
         '<table class="claims">',
         '<colgroup><col class="c-claim"><col class="c-pub"><col class="c-rep">'
-        '<col class="c-rate"><col class="c-n"><col class="c-verdict"><col class="c-controls">'
-        '<col class="c-nb"></colgroup>',
+        '<col class="c-rate"><col class="c-verdict"><col class="c-nb"></colgroup>',
         "<thead><tr><th>claim (click for the statement)</th><th>published</th>"
-        "<th>reproduced [95 % CI]</th><th>repl. rate</th><th>N</th><th>verdict</th>"
-        "<th>controls</th><th>nb</th></tr></thead>",
+        "<th>reproduced [95 % CI]</th><th>repl. rate</th><th>verdict</th>"
+        "<th>judged in</th></tr></thead>",
         "<tbody>",
     ]
     for _, claim in group.iterrows():
         row = computed.get(claim["id"])
         short = html.escape(_short(claim["statement"]))
-        summary = f"<code>{html.escape(claim['id'])}</code><br>{short}"
-        claim_cell = f"<details><summary>{summary}</summary>{_details(claim, row)}</details>"
+        summary = f"<code>{html.escape(claim['id'])}</code> {short}"
+        # the summary toggles the full-width row below it (book/_static/calstudy.css)
+        claim_cell = f"<details><summary>{summary}</summary></details>"
+        published = _published_html(_published(claim, row))
         if row is None:
-            cells = [claim_cell, _published_html(claim, None), "—", "—", "—", _badge(PENDING),
-                     "—", "—"]
+            cells = [claim_cell, published, '<span class="why">not computed yet</span>', "—",
+                     _badge(PENDING), "—"]
         else:
             stem = typeset(row["notebook"])
-            nb = html.escape(stem.split("_")[0]) if stem else "—"
-            if stem and f"notebooks/{stem}" in toc:
-                safe = html.escape(stem)
-                nb = f'<a href="notebooks/{safe}.html" title="{safe}">{nb}</a>'
-            n = int(row["n"])
-            cells = [claim_cell, _published_html(claim, row), _reproduced_html(row),
-                     _rate_html(row), str(n) if n > 0 else "—", _badge(typeset(row["verdict"])),
-                     _controls_html(row), nb]
-        classes = ["", "", "num", "num", "num", "", "", ""]
+            cells = [claim_cell, published, _reproduced_html(row), _rate_html(row),
+                     _badge(typeset(row["verdict"])),
+                     _section_link(claim["id"], stem, book_dir, toc)]
+        classes = ["", "", "num", "num", "", ""]
         tds = "".join(f'<td class="{c}">{v}</td>' if c else f"<td>{v}</td>"
                       for c, v in zip(classes, cells, strict=True))
-        lines.append(f"<tr>{tds}</tr>")
+        more = f'<tr class="claim-more"><td colspan="{len(cells)}">{_details(claim, row)}</td></tr>'
+        lines.append(f"<tr>{tds}</tr>{more}")
     lines += ["</tbody>", "</table>"]
     return lines
 
 
 def _kind(unit: str) -> str:
-    unit = typeset(unit)
-    return "ratio" if unit == "ratio" or unit.endswith(" ratio") else unit or "value"
+    return "ratio" if is_ratio(unit) else typeset(unit) or "value"
 
 
-def claims_figure(res: pd.DataFrame, path: str | Path) -> tuple[Path, str]:
+def claims_figure(
+    res: pd.DataFrame, path: str | Path, register: pd.DataFrame | None = None
+) -> tuple[Path, str]:
     """Draw published against reproduced, one panel per unit (ratios on a log axis around 1).
 
     Each claim is a row: the reproduced median with its 95 % interval, coloured by verdict,
-    and the published figure (a black diamond, a bar for a published range).
+    and the published figure in the same unit (a black diamond, a bar for a published range),
+    computed from the register's figures (:func:`~calstudy.io.claims_cells.published_figure`).
 
     Returns
     -------
@@ -274,11 +304,15 @@ def claims_figure(res: pd.DataFrame, path: str | Path) -> tuple[Path, str]:
 
     from calstudy.io.results import write_figure
 
+    if register is None:
+        register = pd.read_csv(DATA_DIR / "claims.csv", dtype=str, keep_default_na=False)
+    claims = {c["id"]: c for _, c in register.iterrows()}
     res = res[np.isfinite(res["reproduced"].astype(float))].copy()
     res["kind"] = res["unit"].map(_kind)
     order = [k for k in ("ratio", "mm", "%") if k in set(res["kind"])]
     order += sorted(set(res["kind"]) - set(order))
     sizes = [int((res["kind"] == k).sum()) for k in order]
+    bounds = False
     fig = Figure(figsize=(7.8, 0.9 + 0.3 * sum(sizes) + 0.55 * len(order)))
     axes = fig.subplots(
         len(order), 1, gridspec_kw={"height_ratios": [s + 1.2 for s in sizes]}, squeeze=False
@@ -295,7 +329,13 @@ def claims_figure(res: pd.DataFrame, path: str | Path) -> tuple[Path, str]:
                 values += [lo, hi]
             ax.plot(med, yi, "o", color=colour, ms=6)
             values.append(med)
-            pub = published_value(row["published"])
+            claim = claims.get(row["id"])
+            pub = None if claim is None else published_figure(claim, row["unit"]).value
+            bound = None if claim is None or pub is not None else bound_value(claim)
+            if bound is not None:
+                ax.plot(bound, yi, "|", color="black", ms=13, mew=1.6)
+                values.append(bound)
+                bounds = True
             if pub is not None:
                 if pub[1] > pub[0]:
                     ax.plot(pub, [yi, yi], color="black", lw=5, alpha=0.25)
@@ -324,6 +364,9 @@ def claims_figure(res: pd.DataFrame, path: str | Path) -> tuple[Path, str]:
                for v in VERDICTS if v in set(res["verdict"])]
     handles.append(Line2D([], [], color="black", marker="D", mfc="none", lw=0,
                           label="published"))
+    if bounds:
+        handles.append(Line2D([], [], color="black", marker="|", ms=10, mew=1.6, lw=0,
+                              label="bound (no published figure)"))
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8,
                frameon=False)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
@@ -332,7 +375,7 @@ def claims_figure(res: pd.DataFrame, path: str | Path) -> tuple[Path, str]:
         f"Published against reproduced figure for the {len(res)} computed claims, one panel "
         f"per unit ({', '.join(order)}; ratios on a log axis with 1 marked): the reproduced "
         "median as a dot with its 95 % interval as a bar, coloured by verdict, the published "
-        "figure as an open diamond."
+        "figure as an open diamond, a bound the claim is judged against as a vertical bar."
     )
     return out, alt
 
@@ -396,16 +439,16 @@ def render_claims_page(
     ]
     if res is not None and len(res):
         _copy(res_path, out_path.parent / RESULTS_COPY)
-        figure, alt = claims_figure(res, out_path.parent / FIGURE_NAME)
+        figure, alt = claims_figure(res, out_path.parent / FIGURE_NAME, reg)
         lines += [
             f"```{{figure}} {figure.name}",
             f":alt: {alt}",
             ":width: 100%",
             "",
-            "Published (open diamond; a bar for a range) against reproduced (dot: median over the "
-            "trials, bar: 95 % confidence interval), coloured by verdict. Claims without a "
-            "published figure are compared with a reference method: a ratio of 1 is as good "
-            "as the reference.",
+            "Published (open diamond; a grey bar for a range) against reproduced (dot: median over "
+            "the trials, bar: 95 % confidence interval), coloured by verdict; a black tick marks "
+            "the bound a claim without a published figure is judged against. The published "
+            "ratios are computed from the paper's figures (the table gives them).",
             "```",
             "",
         ]
@@ -418,7 +461,7 @@ def render_claims_page(
         title, key = PAPERS.get(paper, (paper, ""))
         cite = f" {{cite:p}}`{key}`" if key else ""
         lines += [f"## {paper}", "", f"*{title}*{cite}.", ""]
-        lines += _table(group, computed, toc)
+        lines += _table(group, computed, toc, out_path.parent)
         lines.append("")
 
     text = "\n".join(lines).rstrip("\n") + "\n"

@@ -17,14 +17,20 @@ import dataclasses
 import html
 import math
 import numbers
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from calstudy.claims import claim_register
+from calstudy.io.claims_cells import published_figure, typeset
+
 #: What a missing value is shown as.
 MISSING = "—"
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 #: Column-name suffixes read as units: ``rot_err_deg`` is shown as ``rot err (deg)``.
 UNIT_SUFFIXES = {
@@ -54,7 +60,8 @@ def header(name: object, unit: str | None = None) -> str:
 
 def format_value(value: object, digits: int = 4) -> str:
     """One cell as text: floats to ``digits`` significant digits (no ``1e-16`` noise shown as
-    more than it is), integers as integers, booleans as yes/no, missing as an em dash."""
+    more than it is; powers of ten as ``1.2×10⁻⁵``), integers as integers, booleans as yes/no,
+    missing as an em dash, text with ± µm ≤ ≥ → for ``+-``, ``um``, ``<=``, ``>=``, ``->``."""
     if value is None or value is pd.NA or value is pd.NaT:
         return MISSING
     if isinstance(value, bool | np.bool_):
@@ -74,10 +81,10 @@ def format_value(value: object, digits: int = 4) -> str:
         text = f"{x:.{digits}g}"
         if "e" in text:
             mantissa, exponent = text.split("e")
-            return f"{mantissa}×10^{int(exponent)}"
+            return f"{mantissa}×10{str(int(exponent)).translate(_SUPERSCRIPT)}"
         return text
     text = str(value)
-    return MISSING if text.strip() in ("", "nan", "NaN", "None") else text
+    return MISSING if text.strip() in ("", "nan", "NaN", "None", "<NA>") else typeset(text)
 
 
 def format_table(
@@ -101,9 +108,11 @@ def format_table(
     digits : int or mapping, default 4
         Significant digits of floats, for all columns or per column.
     max_columns : int, default 8
-        Widest table shown. A wider one with at most ``max_columns`` rows is transposed (its
-        rows become columns, headed by the first key column); otherwise it is split into
-        tables of at most ``max_columns`` columns, each repeating the key columns.
+        Widest table shown. A wider one with fewer than ``max_columns`` rows is transposed
+        (its rows become columns, headed by the first key column, beside a column of the
+        former headers); otherwise it is split into tables of at most ``max_columns``
+        columns, each repeating the key columns. In the book the tables also stay within the
+        column at any width (``book/_static/calstudy.css``: long header words break).
     keys : sequence of str, optional
         Columns that identify a row; default the leading non-numeric columns (at most 2).
     missing : mapping, optional
@@ -155,7 +164,7 @@ def format_table(
     key_headers = [header(k, units.get(k)) for k in keys]
     if text.shape[1] <= max_columns:
         return [text], notes
-    if len(text) <= max_columns:
+    if len(text) + 1 <= max_columns:  # the rows become columns, beside one of labels
         label = key_headers[0] if key_headers else None
         body = text.set_index(label) if label else text
         flipped = body.T
@@ -168,11 +177,20 @@ def format_table(
     return tables, notes
 
 
+#: A cell that reads as a number (right-aligned in the book): ``-1.5``, ``2×10⁻³``, ``12 %``.
+_NUMERIC = re.compile(r"^[-+−]?(\d[\d,]*(\.\d+)?|\.\d+)(×10[⁻⁰¹²³⁴⁵⁶⁷⁸⁹]+)?( ?%)?$|^[−-]?∞$")
+
+
+def _td(value: object) -> str:
+    text = str(value)
+    cls = ' class="num"' if _NUMERIC.match(text) or text == MISSING else ""
+    return f"<td{cls}>{html.escape(text)}</td>"
+
+
 def _table_html(table: pd.DataFrame, caption: str | None) -> str:
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in table.columns)
     rows = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in row) + "</tr>"
-        for row in table.itertuples(index=False)
+        "<tr>" + "".join(_td(v) for v in row) + "</tr>" for row in table.itertuples(index=False)
     )
     cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
     return (
@@ -226,12 +244,32 @@ def _as_dict(row: object) -> dict:
     raise TypeError(f"a claim row is a ClaimRow, a mapping or a Series, not {type(row).__name__}")
 
 
-def format_claims(rows: Iterable[object] | pd.DataFrame) -> pd.DataFrame:
-    """The compact claims table of :func:`show_claims`: one row per claim, text cells."""
+def _published_cell(row: dict, unit: str, register: dict) -> str:
+    """The published figure in the unit of the reproduced one, computed from the register's
+    figures as on the claims page; the row's own text for a claim not in the register."""
+    claim = register.get(row.get("id"))
+    if claim is None:
+        published = typeset(row.get("published", ""))
+        return f"{published} {typeset(unit)}".strip() if published else "none in the paper"
+    pub = published_figure(claim, unit)
+    return f"{pub.text} ({pub.detail})" if pub.detail else pub.text
+
+
+def format_claims(
+    rows: Iterable[object] | pd.DataFrame, register: pd.DataFrame | None = None
+) -> pd.DataFrame:
+    """The compact claims table of :func:`show_claims`: one row per claim, text cells.
+
+    The published figure is that of the claims register (``register``, default
+    ``data/claims.csv``) in the unit of the reproduced one (a ratio computed from the paper's
+    figures), or says why there is none.
+    """
     if isinstance(rows, pd.DataFrame):
         records = [r for _, r in rows.iterrows()]
     else:
         records = list(rows)
+    reg = claim_register() if register is None else register
+    by_id = {c["id"]: c.to_dict() for _, c in reg.iterrows()}
     out = []
     for row in map(_as_dict, records):
         unit = str(row.get("unit", "") or "")
@@ -240,7 +278,6 @@ def format_claims(rows: Iterable[object] | pd.DataFrame) -> pd.DataFrame:
         reproduced = value if value == MISSING else f"{value} {unit}".strip()
         if value != MISSING and MISSING not in (lo, hi):
             reproduced += f" [{lo}, {hi}]"
-        published = str(row.get("published", "") or "").strip()
         rate = row.get("replication_rate")
         rate_text = (
             MISSING
@@ -256,7 +293,7 @@ def format_claims(rows: Iterable[object] | pd.DataFrame) -> pd.DataFrame:
         out.append(
             {
                 "claim": row.get("id", ""),
-                "published": f"{published} {unit}".strip() if published else "none in the paper",
+                "published": _published_cell(row, unit, by_id),
                 "reproduced [95 % CI]": reproduced,
                 "N": str(n) if n > 0 else MISSING,
                 "repl. rate": rate_text,
@@ -294,3 +331,35 @@ def figure_html(path: str | Path, alt: str, width: int | None = None) -> str:
 def show_png(path: str | Path, alt: str, width: int | None = None) -> None:
     """Display the saved PNG ``path`` with its alt text; returns None."""
     _display({"text/html": figure_html(path, alt, width), "text/plain": f"[figure: {alt}]"})
+
+
+def _label(text: str) -> str:
+    """An axis label or title as plain words: no mathtext dollars or backslashes."""
+    text = re.sub(r"\\(mathrm|mathit|mathbf|rm)\{([^}]*)\}", r"\2", text or "")
+    text = text.replace("$", "").replace("\\", "").replace("{", "").replace("}", "")
+    return " ".join(text.split())
+
+
+def describe_figure(fig, name: str, limit: int = 400) -> str:
+    """A description of a matplotlib figure read from its own labels, for an alt text when a
+    notebook gives none: its name, then per panel its title and what it plots against what
+    (``'Figure "pose residuals", 2 panels: "rotation" residual (deg) against pose; ...'``).
+    """
+    panels = []
+    for ax in fig.get_axes():
+        if not ax.get_visible() or not ax.axison or ax.get_label() == "<colorbar>":
+            continue
+        title = _label(ax.get_title() or ax.get_title(loc="left"))
+        x, y = _label(ax.get_xlabel()), _label(ax.get_ylabel())
+        what = f"{y} against {x}" if x and y else (y or x)
+        panel = " ".join(p for p in (f'"{title}"' if title else "", what) if p)
+        if panel:
+            panels.append(panel)
+    suptitle = fig._suptitle.get_text() if getattr(fig, "_suptitle", None) else ""
+    head = f'Figure "{name.replace("_", " ")}"'
+    if suptitle:
+        head += f" ({_label(suptitle)})"
+    if len(panels) > 1:
+        head += f", {len(panels)} panels"
+    text = f"{head}: {'; '.join(panels)}" if panels else f"{head}, a plot without axis labels"
+    return text if len(text) <= limit else text[: limit - 1].rsplit(" ", 1)[0] + " …"

@@ -153,7 +153,8 @@ def notebook_writers(out_dir: str | Path):
     ``out_dir/name.png`` (:func:`write_figure`) and displays the saved file with ``alt`` (a
     sentence describing the figure) as the image's alt text in the book
     (:func:`calstudy.io.display.show_png`); it returns None, so a notebook cell that ends with
-    it shows the figure and no file path. Without ``alt`` the alt text names the figure, never
+    it shows the figure and no file path. Without ``alt`` the alt text is read from the
+    figure's own titles and axis labels (:func:`calstudy.io.display.describe_figure`), never
     its path.
     """
     out = Path(out_dir)
@@ -163,10 +164,11 @@ def notebook_writers(out_dir: str | Path):
         return df
 
     def show_figure(fig, name: str, alt: str | None = None) -> None:
-        from calstudy.io.display import show_png
+        from calstudy.io.display import describe_figure, show_png
 
+        alt = alt or describe_figure(fig, name)
         path = write_figure(fig, out / f"{name}.png")
-        show_png(path, alt or f"figure {name.replace('_', ' ')}")
+        show_png(path, alt)
 
     return save_table, show_figure
 
