@@ -1,4 +1,4 @@
-"""Tables and figures of your own cell and of the pose-selection study (issue 21).
+"""Tables and figures of your own cell and of the pose-selection study.
 
 - :func:`pose_selection_table` and :func:`pose_selection_figure`: optimised against random poses
   of the same number, from the rows of
