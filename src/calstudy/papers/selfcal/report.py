@@ -190,7 +190,7 @@ def summarise_robot(calib: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _convergence_figure_values(one: pd.DataFrame) -> np.ndarray:
+def poor_start_iterations(one: pd.DataFrame) -> np.ndarray:
     """Per trial: iterations from the very poor start, :data:`MAX_EVALUATIONS` unless it
     reached the same solution as the good start."""
     same = one["poor_same_solution"].astype(bool).to_numpy()
@@ -287,7 +287,7 @@ def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict:
         o,
     )
 
-    iters = _convergence_figure_values(one)
+    iters = poor_start_iterations(one)
     out["selfcal.convergence"] = (
         judge(iters, bound=float(scenario.published_iterations), **bound),
         None,

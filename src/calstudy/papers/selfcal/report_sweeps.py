@@ -21,10 +21,10 @@ import pandas as pd  # noqa: E402
 from calstudy.papers.selfcal.experiments import NULL, ONE_STEP, ORACLE, ROUTES  # noqa: E402
 from calstudy.papers.selfcal.report import (  # noqa: E402
     UNITS,
-    _convergence_figure_values,
     best_route,
     legend_outside,
     method_column,
+    poor_start_iterations,
     selfcal_verdicts,
 )
 from calstudy.papers.selfcal.scenario import Scenario  # noqa: E402
@@ -55,7 +55,7 @@ def sweep_table(calib: pd.DataFrame, sweep: pd.DataFrame, key: str, own: float) 
             sub, ONE_STEP, "crb_model_rms_mm"
         )
         one = sub[sub["method"] == ONE_STEP].sort_values("trial")
-        iterations = _convergence_figure_values(one)
+        iterations = poor_start_iterations(one)
         robot = method_column(sub, ONE_STEP, "robot_param_error") / method_column(
             sub, NULL, "robot_param_error"
         )
