@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from calstudy.papers.selfcal import report_sweeps
-from calstudy.papers.selfcal.experiments import METHODS, NULL, ONE_STEP, ORACLE, ROUTES
+from calstudy.papers.selfcal import report_owncell, report_sweeps
+from calstudy.papers.selfcal.experiments import METHODS, NULL, ONE_STEP, ONE_STEP_ML, ORACLE, ROUTES
 from calstudy.papers.selfcal.report import selfcal_verdicts
 
 #: mean validation error of the synthetic trials (mm): one-step and oracle beat the routes
@@ -133,4 +133,46 @@ def test_basin_sentence_known_answer():
     assert report_sweeps.basin_sentence(basin, 4) == (
         "1 x: 100% reach it, 100% within 4 iterations; 5 x: 50% reach it, 0% within 4 "
         "iterations (N = 30 per start scale)"
+    )
+
+
+def test_rank_and_ml_sentences_known_answers():
+    calib = pd.DataFrame(
+        {
+            "method": [ONE_STEP, ONE_STEP, ONE_STEP, NULL],
+            "jacobian_rank": [30, 29, 30, 0],
+        }
+    )
+    assert report_sweeps.rank_sentence(calib, 30) == "rank 30 in 2 of 3 trials"
+    routes = pd.DataFrame(
+        {
+            "method": [ONE_STEP, ONE_STEP_ML],
+            "trials": [200, 200],
+            "model_rms_mm_median": [0.0624, 0.0611],
+            "one_step_ratio_median": [1.0, 1.0016],
+            "one_step_ratio_ci_low": [1.0, 0.9956],
+            "one_step_ratio_ci_high": [1.0, 1.0069],
+        }
+    )
+    assert report_sweeps.ml_sentence(routes) == (
+        "one-step over one-step ML 1 [0.996, 1.01]; median model error 0.0624 mm against "
+        "0.0611 mm (N = 200)"
+    )
+
+
+def test_pose_selection_sentence_known_answer():
+    table = pd.DataFrame(
+        {
+            "n_poses": [12],
+            "trials": [200],
+            "val_rms_mm_ratio_median": [1.649],
+            "val_rms_mm_ratio_ci_low": [1.531],
+            "val_rms_mm_ratio_ci_high": [1.845],
+            "param_error_ratio_median": [1.61],
+            "param_error_ratio_ci_low": [1.505],
+            "param_error_ratio_ci_high": [1.757],
+        }
+    )
+    assert report_owncell.pose_selection_sentence(table) == (
+        "12 poses: validation 1.65 [1.53, 1.84], parameters 1.61 [1.5, 1.76] (N = 200)"
     )

@@ -1,6 +1,7 @@
 """Tables and figures of your own cell and of the pose-selection study.
 
-- :func:`pose_selection_table` and :func:`pose_selection_figure`: optimised against random poses
+- :func:`pose_selection_table`, :func:`pose_selection_sentence` and
+  :func:`pose_selection_figure`: optimised against random poses
   of the same number, from the rows of
   :func:`calstudy.papers.selfcal.experiments.pose_selection_experiment`;
 - :func:`residuals_figure` and :func:`validation_figure`: the per-measurement residuals with the
@@ -68,6 +69,20 @@ def pose_selection_table(rows: pd.DataFrame) -> pd.DataFrame:
             }
         out.append(row)
     return pd.DataFrame(out)
+
+
+def pose_selection_sentence(table: pd.DataFrame) -> str:
+    """Per number of poses, the paired ratios random over optimised (median [95 % interval]) of
+    the validation RMS and of the parameter error, from :func:`pose_selection_table`."""
+    parts = [
+        f"{int(row.n_poses)} poses: validation {row.val_rms_mm_ratio_median:.3g} "
+        f"[{row.val_rms_mm_ratio_ci_low:.3g}, {row.val_rms_mm_ratio_ci_high:.3g}], parameters "
+        f"{row.param_error_ratio_median:.3g} [{row.param_error_ratio_ci_low:.3g}, "
+        f"{row.param_error_ratio_ci_high:.3g}]"
+        for row in table.itertuples()
+    ]
+    counts = sorted({int(n) for n in table["trials"]})
+    return "; ".join(parts) + f" (N = {', '.join(str(n) for n in counts)})"
 
 
 def pose_selection_figure(rows: pd.DataFrame, title: str):

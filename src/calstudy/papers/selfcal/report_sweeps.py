@@ -6,7 +6,8 @@ five claims per sweep value), :func:`sweep_verdicts` (the five verdicts by the v
 their controls, at every sweep value), :func:`sweep_sentences` (what the sweep does to each
 verdict, as text for the chapter), :func:`verdict_grid` (the verdicts as a compact table),
 :func:`sweep_figure`; and in words for the chapter: :func:`basin_sentence` (the basin of
-convergence), :func:`route_sentence` and :func:`best_route_sentence` (the route comparison).
+convergence), :func:`route_sentence` and :func:`best_route_sentence` (the route comparison),
+:func:`ml_sentence` (the paper's LM against maximum likelihood) and :func:`rank_sentence`.
 """
 
 from __future__ import annotations
@@ -18,7 +19,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from calstudy.papers.selfcal.experiments import NULL, ONE_STEP, ORACLE, ROUTES  # noqa: E402
+from calstudy.papers.selfcal.experiments import (  # noqa: E402
+    NULL,
+    ONE_STEP,
+    ONE_STEP_ML,
+    ORACLE,
+    ROUTES,
+)
 from calstudy.papers.selfcal.report import (  # noqa: E402
     UNITS,
     best_route,
@@ -183,6 +190,26 @@ def route_sentence(routes: pd.DataFrame) -> str:
         if row.method in ROUTES
     ]
     return "; ".join(parts) + f" (N = {int(routes['trials'].iloc[0])})"
+
+
+def ml_sentence(routes: pd.DataFrame) -> str:
+    """The paper's unweighted LM against maximum likelihood on the same trials, from
+    :func:`calstudy.papers.selfcal.report.route_table`: the median of the paired ratio of their
+    mean validation errors with its 95 % interval, and the two model errors."""
+    by = routes.set_index("method")
+    ml, one = by.loc[ONE_STEP_ML], by.loc[ONE_STEP]
+    return (
+        f"one-step over one-step ML {ml['one_step_ratio_median']:.3g} "
+        f"[{ml['one_step_ratio_ci_low']:.3g}, {ml['one_step_ratio_ci_high']:.3g}]; median model "
+        f"error {one['model_rms_mm_median']:.3g} mm against {ml['model_rms_mm_median']:.3g} mm "
+        f"(N = {int(one['trials'])})"
+    )
+
+
+def rank_sentence(calib: pd.DataFrame, n_params: int) -> str:
+    """How many trials' identification Jacobians have full rank ``n_params``."""
+    ranks = calib.loc[calib["method"] == ONE_STEP, "jacobian_rank"].to_numpy(int)
+    return f"rank {n_params} in {int(np.sum(ranks == n_params))} of {ranks.size} trials"
 
 
 def best_route_sentence(table: pd.DataFrame, key: str) -> str:
