@@ -176,3 +176,14 @@ def test_pose_selection_sentence_known_answer():
     assert report_owncell.pose_selection_sentence(table) == (
         "12 poses: validation 1.65 [1.53, 1.84], parameters 1.61 [1.5, 1.76] (N = 200)"
     )
+
+
+def test_sentences_from_the_stored_table(tmp_path, scenario, frames):
+    """Read back from CSV (empty controls become missing values), the sentences are the same."""
+    calib, sweep = frames
+    table = report_sweeps.sweep_verdicts(calib, sweep, "compliance_scale", 1.0, scenario)
+    table.to_csv(tmp_path / "verdicts.csv", index=False)
+    stored = pd.read_csv(tmp_path / "verdicts.csv")
+    assert report_sweeps.sweep_sentences(stored, "compliance_scale") == (
+        report_sweeps.sweep_sentences(table, "compliance_scale")
+    )

@@ -171,7 +171,7 @@ def sweep_sentences(verdicts: pd.DataFrame, key: str) -> dict[str, str]:
             text += f", 95th percentile {first['p95']:.3g} and {last['p95']:.3g}"
         counts = sorted({int(n) for n in points["n"]})
         text += f"; N = {_join([str(n) for n in counts])} per point"
-        if points["null_control"].astype(str).str.len().all():
+        if points["null_control"].fillna("").astype(str).str.len().all():
             text += (
                 f"; null control {_by_verdict(points, key, 'null_control')}, oracle control "
                 f"{_by_verdict(points, key, 'oracle_control')}"
