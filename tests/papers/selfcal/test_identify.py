@@ -15,9 +15,6 @@ from calstudy.papers.selfcal.identify import (
     covariance,
     fit_sphere_cap,
     identify,
-    three_step,
-    three_step_reordered,
-    two_step,
 )
 from calstudy.papers.selfcal.model import (
     GlobalModel,
@@ -25,6 +22,7 @@ from calstudy.papers.selfcal.model import (
     parameters_from_robot,
     scaled_error,
 )
+from calstudy.papers.selfcal.routes import three_step, three_step_reordered, two_step
 from calstudy.papers.selfcal.simulate import draw_station, poor_start, scan_cap, simulate
 
 

@@ -14,7 +14,7 @@ from support import assert_same_table
 
 from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS
 from calstudy.core.paths import RESULTS_DIR
-from calstudy.papers.selfcal import report
+from calstudy.papers.selfcal import report, report_sweeps
 from calstudy.papers.selfcal.scenario import load_scenario
 
 STEM = "03_selfcal_one_step_identification"
@@ -32,6 +32,7 @@ def _trials(name: str) -> pd.DataFrame:
 def _compare(fresh: pd.DataFrame, name: str) -> None:
     assert_same_table(fresh, OUT / f"{name}.csv")
 
+
 @pytest.fixture(scope="module")
 def calib():
     return _trials("calibration")
@@ -44,14 +45,42 @@ def test_tables(calib):
     _compare(report.convergence_summary(calib), "convergence_counts")
     _compare(report.robot_example(calib), "robot_parameters_example")
     _compare(report.summarise_robot(calib), "robot_parameters_summary")
-    _compare(report.basin_table(_trials("basin")), "basin")
+    _compare(report.basin_table(_trials("basin"), sc.published_iterations), "basin")
+    compliance = _trials("compliance_sweep")
+    own = sc.compliance_scale
     _compare(
-        report.sweep_table(
-            calib, _trials("compliance_sweep"), "compliance_scale", sc.compliance_scale
-        ),
-        "compliance_sweep",
+        report_sweeps.sweep_table(calib, compliance, "compliance_scale", own), "compliance_sweep"
     )
-    _compare(report.sweep_table(calib, _trials("noise_sweep"), "noise_scale", 1.0), "noise_sweep")
+    _compare(
+        report_sweeps.sweep_verdicts(calib, compliance, "compliance_scale", own, sc),
+        "compliance_verdicts",
+    )
+    noise = _trials("noise_sweep")
+    _compare(report_sweeps.sweep_table(calib, noise, "noise_scale", 1.0), "noise_sweep")
+    _compare(report_sweeps.sweep_verdicts(calib, noise, "noise_scale", 1.0, sc), "noise_verdicts")
+
+
+def test_compliance_sweep_judges_all_five_claims_at_every_scale(calib):
+    """Every compliance scale of the scenario has >= 30 trials and a verdict for each claim;
+    at the scenario's own scale the verdicts are those of claims.csv."""
+    sc = load_scenario()
+    table = report_sweeps.sweep_verdicts(
+        calib, _trials("compliance_sweep"), "compliance_scale", sc.compliance_scale, sc
+    )
+    assert sorted(set(table["compliance_scale"])) == sorted(sc.compliance_sweep)
+    assert (table.groupby("compliance_scale")["claim"].nunique() == 5).all()
+    assert (table["n"] >= 30).all()
+    own = table[table["compliance_scale"] == sc.compliance_scale].set_index("claim")
+    claims = pd.read_csv(OUT / "claims.csv").set_index("id")
+    assert own["verdict"].to_dict() == claims["verdict"].to_dict()
+    comparisons = table[table["null_control"] != ""]
+    assert set(comparisons["claim"]) == {
+        "selfcal.identification",
+        "selfcal.robot_params",
+        "selfcal.residual",
+        "selfcal.one_step",
+    }
+    assert (comparisons["null_control"] == "not reproduced").all()
 
 
 def test_claims_and_controls(calib):

@@ -44,10 +44,6 @@ from calstudy.papers.selfcal.identify import (
     identifiability,
     identify,
     scaled_jacobian,
-    three_step,
-    three_step_alternated,
-    three_step_reordered,
-    two_step,
 )
 from calstudy.papers.selfcal.measured import MeasuredCell, write_cell
 from calstudy.papers.selfcal.model import (
@@ -58,6 +54,12 @@ from calstudy.papers.selfcal.model import (
     angle_wrap,
     default_model,
     scaled_error,
+)
+from calstudy.papers.selfcal.routes import (
+    three_step,
+    three_step_alternated,
+    three_step_reordered,
+    two_step,
 )
 from calstudy.papers.selfcal.scenario import Scenario, load_scenario
 from calstudy.papers.selfcal.simulate import (
@@ -392,7 +394,7 @@ def identifiability_designs(scenario: Scenario, meas: Measurements, params) -> d
 
 
 # ----------------------------------------------------------------------------------------------
-# pose selection (issue 21): optimised against random poses of the same number
+# pose selection: optimised against random poses of the same number
 
 OPTIMISED = "optimised (D-optimal)"
 RANDOM = "random"

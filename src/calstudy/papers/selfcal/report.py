@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import textwrap
 
 import matplotlib
 
@@ -19,6 +20,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.ticker import FuncFormatter, MaxNLocator  # noqa: E402
 
 from calstudy.claims import ClaimRow, claim_row, control_rows  # noqa: E402
 from calstudy.core.verdicts import (  # noqa: E402
@@ -188,16 +190,17 @@ def summarise_robot(calib: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _convergence_figure_values(one: pd.DataFrame) -> np.ndarray:
+def poor_start_iterations(one: pd.DataFrame) -> np.ndarray:
     """Per trial: iterations from the very poor start, :data:`MAX_EVALUATIONS` unless it
     reached the same solution as the good start."""
     same = one["poor_same_solution"].astype(bool).to_numpy()
     return np.where(same, one["poor_iterations"].to_numpy(float), float(MAX_EVALUATIONS))
 
 
-def basin_table(basin: pd.DataFrame) -> pd.DataFrame:
-    """Per start scale: trials, share converged, share reaching the good start's solution and
-    the iterations (median, 95th percentile) of those that did."""
+def basin_table(basin: pd.DataFrame, bound: float) -> pd.DataFrame:
+    """Per start scale: trials, share converged, share reaching the good start's solution, the
+    iterations (median, 95th percentile) of those that did, and the share that did within
+    ``bound`` iterations (the published count)."""
     rows = []
     for scale, sub in basin.groupby("start_scale", sort=True):
         same = sub["same_solution"].astype(bool).to_numpy()
@@ -211,45 +214,8 @@ def basin_table(basin: pd.DataFrame) -> pd.DataFrame:
                 "iterations_median": float(np.median(it)) if it.size else np.nan,
                 "iterations_p95": float(np.percentile(it, 95)) if it.size else np.nan,
                 "within_published_share": float(
-                    np.mean(same & (sub["iterations"].to_numpy(float) <= 4))
+                    np.mean(same & (sub["iterations"].to_numpy(float) <= bound))
                 ),
-            }
-        )
-    return pd.DataFrame(rows)
-
-
-def sweep_table(calib: pd.DataFrame, sweep: pd.DataFrame, key: str, own: float) -> pd.DataFrame:
-    """Per value of the sweep ``key`` (the calibration experiment is the point ``own``): median
-    and 95th percentile of the largest validation error of the one-step route, its median ratio
-    to the best multi-step route, and the model error ratio to the Cramer-Rao prediction."""
-    frames = [calib.assign(**{key: own}), sweep]
-    both = pd.concat(frames, ignore_index=True)
-    rows = []
-    for value, sub in both.groupby(key, sort=True):
-        best = best_route(sub)
-        one_max = method_column(sub, ONE_STEP, "val_max_mm")
-        ratio = method_column(sub, ONE_STEP, "val_mean_mm") / method_column(
-            sub, best, "val_mean_mm"
-        )
-        crb = method_column(sub, ONE_STEP, "model_rms_mm") / method_column(
-            sub, ONE_STEP, "crb_model_rms_mm"
-        )
-        rows.append(
-            {
-                key: value,
-                "trials": len(one_max),
-                "one_step_val_max_median_mm": float(np.median(one_max)),
-                "one_step_val_max_p95_mm": float(np.percentile(one_max, 95)),
-                "oracle_val_max_p95_mm": float(
-                    np.percentile(method_column(sub, ORACLE, "val_max_mm"), 95)
-                ),
-                "best_route": best,
-                "best_route_val_mean_median_mm": float(
-                    np.median(method_column(sub, best, "val_mean_mm"))
-                ),
-                "one_step_over_best_route_median": float(np.median(ratio)),
-                "model_error_over_crb_median": float(np.median(crb)),
-                "model_error_over_crb_p95": float(np.percentile(crb, 95)),
             }
         )
     return pd.DataFrame(rows)
@@ -321,7 +287,7 @@ def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict:
         o,
     )
 
-    iters = _convergence_figure_values(one)
+    iters = poor_start_iterations(one)
     out["selfcal.convergence"] = (
         judge(iters, bound=float(scenario.published_iterations), **bound),
         None,
@@ -403,13 +369,28 @@ def claims_frame(rows: list[ClaimRow]) -> pd.DataFrame:
 START_LABELS = {"good": "good initial estimate", "poor": "very poor initial estimate"}
 
 
-def _finish(fig, ax, title: str, xlabel: str, ylabel: str | None = None, legend_size=8):
-    """Axis labels, grid, legend (``legend_size`` None: matplotlib's default) and title."""
+def legend_outside(ax, fontsize=8, width=24):
+    """The axes' legend to the right of the data, outside the plotting area, its labels
+    wrapped at ``width`` characters."""
+    handles, labels = ax.get_legend_handles_labels()
+    labels = [textwrap.fill(label, width) for label in labels]
+    ax.legend(
+        handles,
+        labels,
+        fontsize=fontsize,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        frameon=False,
+    )
+
+
+def _finish(fig, ax, title: str, xlabel: str, ylabel: str | None = None):
+    """Axis labels, grid, legend (outside the data) and title."""
     ax.set_xlabel(xlabel)
     if ylabel is not None:
         ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=legend_size)
+    legend_outside(ax)
     ax.set_title(title)
     return fig
 
@@ -424,16 +405,18 @@ def convergence_figure(summary: pd.DataFrame, title: str):
         ax.plot(sub["iteration"], sub["median_mm"], "o-", label=START_LABELS.get(start, start))
         ax.fill_between(sub["iteration"], sub["p5_mm"], sub["p95_mm"], alpha=0.2)
     ax.set_yscale("log")
-    return _finish(fig, ax, title, "LM iteration", "mean position error (mm)", legend_size=None)
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    return _finish(fig, ax, title, "LM iteration", "mean position error (mm)")
 
 
 def robot_parameters_figure(trial: pd.DataFrame, title: str):
     """Identified minus nominal robot parameters with their standard deviation (Fig. 6).
 
     ``trial`` holds one trial of the robot table (``name``, ``unit``, ``true_minus_nominal``,
-    ``identified_minus_nominal``, ``std``); lengths and angles get one panel each.
+    ``identified_minus_nominal``, ``std``); lengths and angles get one panel each, stacked.
     """
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    fig, axes = plt.subplots(2, 1, figsize=(7.5, 6), constrained_layout=True)
     for ax, unit in zip(axes, ("mm", "deg"), strict=True):
         sub = trial[trial["unit"] == unit]
         x = np.arange(len(sub))
@@ -443,7 +426,7 @@ def robot_parameters_figure(trial: pd.DataFrame, title: str):
             0.6,
             yerr=sub["std"],
             capsize=3,
-            label="identified - nominal (+- 1 std)",
+            label="identified (± 1 std)",
         )
         ax.plot(
             x,
@@ -451,13 +434,13 @@ def robot_parameters_figure(trial: pd.DataFrame, title: str):
             "k_",
             markersize=14,
             mew=2,
-            label="true - nominal (simulated)",
+            label="true (simulated)",
         )
         ax.set_xticks(x, sub["name"], rotation=45)
-        ax.set_ylabel(f"difference ({unit})")
+        ax.set_ylabel(f"minus nominal ({unit})")
         ax.axhline(0.0, color="0.5", lw=0.8)
         ax.grid(axis="y", alpha=0.3)
-    axes[0].legend(fontsize=8)
+        legend_outside(ax)
     fig.suptitle(title)
     return fig
 
@@ -468,11 +451,10 @@ def residuals_figure(calib: pd.DataFrame, requirement_mm: float, title: str):
     fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
     names = (ONE_STEP, best_route(calib), ORACLE)
     values = [method_column(calib, name, "val_max_mm") for name in names]
-    bins = np.geomspace(min(v.min() for v in values), max(v.max() for v in values), 40)
+    bins = np.linspace(0.0, max(requirement_mm, *(v.max() for v in values)) * 1.05, 40)
     for name, v in zip(names, values, strict=True):
         ax.hist(v, bins=bins, histtype="step", lw=1.5, label=name)
     ax.axvline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
-    ax.set_xscale("log")
     return _finish(fig, ax, title, "largest validation error of a calibration (mm)", "trials")
 
 
@@ -486,40 +468,23 @@ def routes_figure(table: pd.DataFrame, requirement_mm: float, title: str):
     err = np.vstack([med - sub["val_mean_mm_ci_low"], sub["val_mean_mm_ci_high"] - med])
     ax.errorbar(med, y, xerr=err, fmt="o", capsize=4, label="median, 95 % CI")
     ax.axvline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
-    ax.set_yticks(y, sub["method"])
+    ax.set_yticks(y, [textwrap.fill(m, 24) for m in sub["method"]])
     ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     return _finish(fig, ax, title, "mean validation error of a calibration (mm)")
 
 
-def basin_figure(table: pd.DataFrame, title: str):
-    """Share of trials reaching the good start's solution (and within 4 iterations) against
-    the start distance; ``table`` from :func:`basin_table`."""
+def basin_figure(table: pd.DataFrame, bound: float, title: str):
+    """Share of trials reaching the good start's solution (and within ``bound`` iterations)
+    against the start distance; ``table`` from :func:`basin_table`."""
     fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
     x = table["start_scale"]
-    ax.plot(x, table["same_solution_share"], "o-", label="reaches the same solution")
-    ax.plot(x, table["within_published_share"], "s--", label="... within 4 iterations")
+    ax.plot(x, table["same_solution_share"], "o-", label="reaches the same\nsolution")
+    ax.plot(x, table["within_published_share"], "s--", label=f"... within {bound:g}\niterations")
     ax.set_ylim(-0.05, 1.05)
-    xlabel = "start distance (multiples of the very poor start: 200 mm / 20 deg base, 1 deg joints)"
+    ax.set_xticks(list(x), [f"{v:g}" for v in x])
+    xlabel = "start distance (multiples of the scenario's very poor start)"
     return _finish(fig, ax, title, xlabel, "share of trials")
-
-
-def sweep_figure(table: pd.DataFrame, key: str, requirement_mm: float, title: str, xlabel: str):
-    """One-step largest validation error (median, 95th percentile) and its ratio to the best
-    multi-step route against a swept input; ``table`` from :func:`sweep_table`."""
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
-    x = table[key]
-    ax.plot(x, table["one_step_val_max_median_mm"], "o-", label="one-step, median")
-    ax.plot(x, table["one_step_val_max_p95_mm"], "s--", label="one-step, 95th percentile")
-    ax.plot(x, table["oracle_val_max_p95_mm"], "^:", label="ideal identification, 95th pct.")
-    ax.axhline(requirement_mm, color="r", ls="--", label=f"requirement {requirement_mm:g} mm")
-    ax.set_yscale("log")
-    _finish(fig, ax, "largest validation error", xlabel, "mm")
-    ax2.plot(x, table["one_step_over_best_route_median"], "o-", label="one-step / best route")
-    ax2.plot(x, table["model_error_over_crb_median"], "s--", label="model error / CRB")
-    ax2.axhline(1.0, color="0.5", lw=0.8)
-    _finish(fig, ax2, "ratios (medians)", xlabel)
-    fig.suptitle(title)
-    return fig
 
 
 def singular_values_figure(table: pd.DataFrame, title: str):

@@ -1,6 +1,7 @@
-"""Tables and figures of your own cell and of the pose-selection study (issue 21).
+"""Tables and figures of your own cell and of the pose-selection study.
 
-- :func:`pose_selection_table` and :func:`pose_selection_figure`: optimised against random poses
+- :func:`pose_selection_table`, :func:`pose_selection_sentence` and
+  :func:`pose_selection_figure`: optimised against random poses
   of the same number, from the rows of
   :func:`calstudy.papers.selfcal.experiments.pose_selection_experiment`;
 - :func:`residuals_figure` and :func:`validation_figure`: the per-measurement residuals with the
@@ -9,15 +10,19 @@
 
 from __future__ import annotations
 
+import textwrap
+
 import matplotlib
 
 matplotlib.use("Agg", force=False)
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 from calstudy.core.verdicts import median_interval  # noqa: E402
 from calstudy.papers.selfcal.experiments import OPTIMISED, RANDOM  # noqa: E402
+from calstudy.papers.selfcal.report import legend_outside  # noqa: E402
 
 #: columns of the pose-selection rows compared between the two selections
 SELECTION_METRICS = {
@@ -70,47 +75,77 @@ def pose_selection_table(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+def pose_selection_sentence(table: pd.DataFrame) -> str:
+    """Per number of poses, the paired ratios random over optimised (median [95 % interval]) of
+    the validation RMS and of the parameter error, from :func:`pose_selection_table`."""
+    parts = [
+        f"{int(row.n_poses)} poses: validation {row.val_rms_mm_ratio_median:.3g} "
+        f"[{row.val_rms_mm_ratio_ci_low:.3g}, {row.val_rms_mm_ratio_ci_high:.3g}], parameters "
+        f"{row.param_error_ratio_median:.3g} [{row.param_error_ratio_ci_low:.3g}, "
+        f"{row.param_error_ratio_ci_high:.3g}]"
+        for row in table.itertuples()
+    ]
+    counts = sorted({int(n) for n in table["trials"]})
+    return "; ".join(parts) + f" (N = {', '.join(str(n) for n in counts)})"
+
+
 def pose_selection_figure(rows: pd.DataFrame, title: str):
-    """Error against the number of poses, optimised and random: median and quartiles."""
-    fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.8))
+    """Error against the number of poses, optimised and random: median and quartiles; one
+    panel per error, stacked for the book's column, the legend beside the data."""
+    fig, axes = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True, constrained_layout=True)
     for ax, col in zip(axes, ("param_error", "val_rms_mm"), strict=True):
         for name, style in ((OPTIMISED, "o-"), (RANDOM, "s--")):
             sel = rows[rows["selection"] == name].groupby("n_poses")[col]
             q = sel.quantile([0.25, 0.5, 0.75]).unstack()
-            ax.plot(q.index, q[0.5], style, label=f"{name} (median)")
-            ax.fill_between(q.index, q[0.25], q[0.75], alpha=0.2)
-        ax.set_xlabel("measuring poses N")
-        ax.set_ylabel(SELECTION_METRICS[col])
+            ax.plot(q.index, q[0.5], style, label=f"{name}, median")
+            ax.fill_between(q.index, q[0.25], q[0.75], alpha=0.2, label=f"{name}, quartiles")
+        ax.set_ylabel(textwrap.fill(SELECTION_METRICS[col], 24))
         ax.grid(alpha=0.3)
-    n = rows["trial"].nunique()
-    axes[0].legend(fontsize=8)
-    fig.suptitle(f"{title} ({n} trials, band: quartiles)")
-    fig.tight_layout()
+        legend_outside(ax)
+    sizes = sorted(rows["n_poses"].unique())
+    axes[-1].set_xticks(sizes, [str(int(n)) for n in sizes])
+    axes[-1].set_xlabel("measuring poses N")
+    fig.suptitle(f"{title} ({rows['trial'].nunique()} trials)")
     return fig
 
 
+def _spans_decades(values) -> bool:
+    v = np.asarray(values, float)
+    v = v[v > 0]
+    return v.size > 0 and v.max() / v.min() > 10.0
+
+
 def residuals_figure(residuals: pd.DataFrame, sigma_mm: float, threshold: float, title: str):
-    """Residual ``|e|`` per calibration measurement, outliers marked, with the rejection line."""
-    fig, ax = plt.subplots(figsize=(7.5, 3.5))
+    """Residual ``|e|`` per calibration measurement, outliers marked, with the rejection line
+    (log axis only when the residuals span more than a decade, as outliers make them)."""
+    fig, ax = plt.subplots(figsize=(7.5, 3.5), constrained_layout=True)
     ok = ~residuals["outlier"].to_numpy(bool)
     x = np.arange(len(residuals))
     ax.bar(x[ok], residuals["error_mm"][ok], color="tab:blue", label="kept")
     if (~ok).any():
         ax.bar(x[~ok], residuals["error_mm"][~ok], color="tab:red", label="outlier")
-    ax.axhline(sigma_mm * np.sqrt(threshold), ls="--", color="k", label="rejection threshold")
-    ax.set_yscale("log")
-    ax.set_xticks(x, residuals["pose"].astype(str), fontsize=6, rotation=90)
+    line = sigma_mm * np.sqrt(threshold)
+    ax.axhline(line, ls="--", color="k", label="rejection threshold")
+    if _spans_decades([*residuals["error_mm"], line]):
+        ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    step = max(1, len(x) // 25)
+    ax.set_xticks(x[::step], residuals["pose"].astype(str)[::step])
     return _finish(fig, ax, "pose", "|P - P_ref| (mm)", title)
 
 
 def validation_figure(table: pd.DataFrame, requirement_mm: float, title: str):
-    """Held-out position errors before and after calibration, against the requirement."""
-    fig, ax = plt.subplots(figsize=(7.5, 3.5))
+    """Held-out position errors before and after calibration, against the requirement (log
+    axis: the errors before and after differ by decades)."""
+    fig, ax = plt.subplots(figsize=(7.5, 3.5), constrained_layout=True)
     x = np.arange(len(table))
     ax.bar(x - 0.2, table["before_mm"], 0.4, label="before (nominal)")
     ax.bar(x + 0.2, table["after_mm"], 0.4, label="after (identified)")
     ax.axhline(requirement_mm, ls="--", color="k", label=f"requirement {requirement_mm:g} mm")
-    ax.set_yscale("log")
+    if _spans_decades([*table["before_mm"], *table["after_mm"], requirement_mm]):
+        ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.set_xticks(x, [str(i + 1) for i in x])
     return _finish(fig, ax, "held-out measurement", "position error (mm)", title)
 
 
@@ -118,6 +153,5 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str):
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    legend_outside(ax)
     return fig

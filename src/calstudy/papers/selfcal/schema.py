@@ -34,17 +34,20 @@ AngleSigma = Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
 
 class Pose(Schema):
     """The ``[base]`` table of a cell's cell.toml."""
+
     xyz_mm: Vec3
     zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
 
 
 class Repeatability(Documented):
     """The ``[repeatability]`` table of data/selfcal/scenario.toml."""
+
     sigma_mm: NonNegativeFinite
 
 
 class Base(Documented):
     """The ``[base]`` table of data/selfcal/scenario.toml."""
+
     rough_xyz_mm: Vec3
     rough_zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
     sigma_mm: NonNegativeFinite
@@ -53,6 +56,7 @@ class Base(Documented):
 
 class SensorMount(Documented):
     """The ``[sensor]`` table of data/selfcal/scenario.toml."""
+
     design_xyz_mm: Vec3
     design_zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
     sigma_mm: NonNegativeFinite
@@ -61,6 +65,7 @@ class SensorMount(Documented):
 
 class PoorStart(Documented):
     """The ``[poor_start]`` table of data/selfcal/scenario.toml."""
+
     base_mm: NonNegativeFinite
     base_deg: AngleSigma
     sensor_mm: NonNegativeFinite
@@ -72,6 +77,7 @@ class PoorStart(Documented):
 
 class Spheres(Documented):
     """The ``[spheres]`` table of data/selfcal/scenario.toml."""
+
     count: Annotated[int, Field(ge=3)]
     radius_mm: PositiveFinite
     min_separation_mm: NonNegativeFinite
@@ -94,6 +100,7 @@ class Spheres(Documented):
 
 class Scanner(Documented):
     """The ``[scanner]`` table of data/selfcal/scenario.toml."""
+
     standoff_mm: PositiveFinite
     field_mm: PositiveFinite
     depth_mm: PositiveFinite
@@ -108,6 +115,7 @@ class Scanner(Documented):
 
 class Tracker(Documented):
     """The ``[tracker]`` table of data/selfcal/scenario.toml."""
+
     u0_mm: NonNegativeFinite
     u1_mm_per_m: NonNegativeFinite
     coverage: PositiveFinite
@@ -115,6 +123,7 @@ class Tracker(Documented):
 
 class Protocol(Documented):
     """The ``[protocol]`` table of data/selfcal/scenario.toml."""
+
     views_per_sphere: PositiveInt
     validation_placements: PositiveInt
     requirement_mm: PositiveFinite
@@ -123,6 +132,7 @@ class Protocol(Documented):
 
 class Compliance(Documented):
     """The ``[compliance]`` table of data/selfcal/scenario.toml."""
+
     payload_kg: NonNegativeFinite
     stiffness_nm_per_rad: Annotated[list[PositiveFinite], Field(min_length=6, max_length=6)]
     scale: NonNegativeFinite
@@ -131,6 +141,7 @@ class Compliance(Documented):
 
 class Published(Documented):
     """The ``[published]`` table of data/selfcal/scenario.toml."""
+
     convergence_iterations: PositiveInt
 
 
@@ -152,6 +163,7 @@ class ScenarioFile(Documented):
 
 class Noise(Schema):
     """The ``[noise]`` table of a cell's cell.toml."""
+
     sensor_mm: NonNegativeFinite
     repeatability_mm: NonNegativeFinite
     tracker_mm: NonNegativeFinite
