@@ -220,7 +220,7 @@ def icp_figure(icp: pd.DataFrame, arm: int):
     spheres A and B of one arm (bars: mean over trials; whiskers: 95 % interval)."""
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3.4), sharey=True)
     for ax, sphere in zip(axes, SPHERES, strict=True):
         g = icp[(icp["arm"] == arm) & (icp["sphere"] == sphere)]
         views = sorted(g["view"].unique())
