@@ -275,18 +275,42 @@ def _cell(text: str, row: int, col: int, value: str) -> str:
 # ------------------------------------------------------------- dualarm: Tsai check, Eq. 11
 
 
-def test_opencv_handeye_min_pair_rotation_names_the_pair():
+def test_tsai_takes_poses_with_equal_orientations():
+    """Tsai-Lenz uses every pair of poses: a move without rotation among rotating ones is valid
+    data, accepted by the diversity check and solved exactly."""
     rng = np.random.default_rng(21)
     _, rot = _poses(rng, n_rot=6)
     rot = rot.copy()
     rot[4] = rot[3] @ geo.make_transform(np.eye(3), [20.0, 0.0, 0.0])  # a pure translation
     target2base = geo.make_transform(geo.random_rotation(rng), X_B)
     target2sensor = geo.invert(rot @ SENSOR2FLANGE) @ target2base
-    with pytest.raises(CalibrationError, match=r"poses 3 and 4 differ by a rotation of 0 deg"):
-        he.opencv_handeye(rot, target2sensor, "Tsai", he.MIN_PAIR_ROTATION)
-    # without the check OpenCV runs on (and the other motions still fix the answer)
-    est = he.opencv_handeye(rot, target2sensor, "Tsai")
+    est = he.opencv_handeye(rot, target2sensor, "Tsai", he.MIN_PAIR_ROTATION)
     assert geo.rotation_error(est, SENSOR2FLANGE) < 1e-6
+    assert geo.translation_error(est, SENSOR2FLANGE) < 1e-3
+
+
+def test_tsai_diversity_check_refuses_one_axis_and_no_rotation():
+    rng = np.random.default_rng(23)
+    target2base = geo.make_transform(geo.random_rotation(rng), X_B)
+    trans, one_axis = _poses(rng, n_rot=6, axis=np.array([0.0, 0.0, 1.0]))
+    for flange, match in (
+        (one_axis, r"6 poses turn about one axis \(axes within 0 deg"),
+        (trans, r"no pair of the 4 poses rotates by 0.5 deg or more \(largest 0 deg\)"),
+    ):
+        target2sensor = geo.invert(flange @ SENSOR2FLANGE) @ target2base
+        with pytest.raises(CalibrationError, match=match):
+            he.opencv_handeye(flange, target2sensor, "Tsai", he.MIN_PAIR_ROTATION)
+    # two axes 1 deg apart pass the check; 0.2 deg apart do not
+    base = geo.euler_zyx_to_matrix(20.0, 170.0, 5.0)
+    for tilt, ok in ((1.0, True), (0.2, False)):
+        axis2 = geo.rotvec_to_matrix([np.deg2rad(tilt), 0.0, 0.0]) @ [0.0, 0.0, 1.0]
+        rv = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.3], list(0.3 * axis2)])
+        flange = geo.make_transform(base @ geo.rotvec_to_matrix(rv), rng.uniform(-15, 15, (3, 3)))
+        if ok:
+            he.check_rotation_diversity(flange, he.MIN_PAIR_ROTATION)
+        else:
+            with pytest.raises(CalibrationError, match="turn about one axis"):
+                he.check_rotation_diversity(flange, he.MIN_PAIR_ROTATION)
 
 
 def test_base_to_base_chains_two_robots():

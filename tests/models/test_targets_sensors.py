@@ -233,3 +233,48 @@ def test_line_laser_centre_covariance_matches_repeated_shots(rng):
     assert corr < -0.9 and abs(corr - corr_emp) < 0.02
     batch = sensor.centre_covariance(np.tile(c, (2, 1)), R)
     np.testing.assert_allclose(batch[1], model)
+
+
+# ------------------------------------------------------------- the image of a circular target
+
+
+def _outline_centre(k, centre, normal, radius):
+    """Centre of the conic fitted (algebraically, exact for exact points) to the projected
+    outline of the circle: an independent route to the image ellipse's centre."""
+    from calstudy.core import geometry as geo
+
+    n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    e1 = np.cross(n, [0.3, 0.9, 0.1])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    pts = centre + radius * (np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2)
+    uv = geo.apply(np.eye(4), pts) @ k.T
+    x, y = (uv[:, :2] / uv[:, 2:]).T
+    m = np.column_stack([x * x, x * y, y * y, x, y, np.ones_like(x)])
+    a, b, c, d, e, _ = np.linalg.svd(m)[2][-1]
+    return -np.linalg.solve([[a, b / 2], [b / 2, c]], [d / 2, e / 2])
+
+
+def test_circle_image_centre_is_the_centre_of_the_projected_outline():
+    from calstudy.core import geometry as geo
+    from calstudy.models.targets import circle_centre_bias, circle_image_centres
+
+    k = np.array([[2000.0, 0.0, 639.5], [0.0, 2000.0, 511.5], [0.0, 0.0, 1.0]])
+    rng = np.random.default_rng(5)
+    centres = rng.uniform([-80, -60, 400], [80, 60, 900], (6, 3))
+    normals = geo.rotvec_to_matrix(rng.normal(0, 0.5, (6, 3))) @ [0.0, 0.0, -1.0]
+    ours = circle_image_centres(k, centres, normals, 5.0)
+    for c, n, o in zip(centres, normals, ours, strict=True):
+        np.testing.assert_allclose(o, _outline_centre(k, c, n, 5.0), atol=1e-6)
+    bias = circle_centre_bias(k, centres, normals, 5.0)
+    assert np.all(np.linalg.norm(bias, axis=1) > 1e-3)  # a tilted circle is biased
+    # the bias grows with the square of the radius (to first order) ...
+    ratio = np.linalg.norm(circle_centre_bias(k, centres, normals, 2.5), axis=1) / np.linalg.norm(
+        bias, axis=1
+    )
+    np.testing.assert_allclose(ratio, 0.25, rtol=0.02)
+    # ... and vanishes for a circle facing the camera on its optical axis, or of radius 0
+    facing = circle_centre_bias(k, [[0.0, 0.0, 500.0]], [[0.0, 0.0, -1.0]], 5.0)
+    np.testing.assert_allclose(facing, 0.0, atol=1e-9)
+    assert not np.any(circle_centre_bias(k, centres, normals, 0.0))

@@ -45,7 +45,8 @@ MAX_CONDITION = 1e6
 #: condition number of the whitened ML Jacobian above which R_F, T_F, X_B are unobservable (a
 #: well-posed station gives about 1e5; translation-only poses give 1e17)
 MAX_ML_CONDITION = 1e10
-#: smallest rotation (rad) between consecutive poses that Tsai-Lenz is given by the dualarm chain
+#: smallest rotation (rad) of a motion between two poses that counts for Tsai-Lenz, and smallest
+#: angle between the axes of two such motions (the dualarm chain's rotation diversity check)
 MIN_PAIR_ROTATION = np.deg2rad(0.5)
 
 OPENCV_METHODS = {
@@ -395,17 +396,35 @@ def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x
     return np.linalg.pinv(jac.T @ jac)
 
 
-def check_pair_rotations(flange2base: np.ndarray, min_pair_rotation: float) -> None:
-    """Raise a :class:`CalibrationError` naming the first consecutive pair of flange poses
-    ``(N, 4, 4)`` whose relative rotation is the smallest, if it is below ``min_pair_rotation``
-    (rad)."""
-    rel = np.swapaxes(flange2base[:-1, :3, :3], -1, -2) @ flange2base[1:, :3, :3]
-    angles = geo.rotation_angle(rel)
-    k = int(np.argmin(angles))
-    if angles[k] < min_pair_rotation:
+def check_rotation_diversity(flange2base: np.ndarray, min_rotation: float) -> None:
+    """Raise a :class:`CalibrationError` unless the flange poses ``(N, 4, 4)`` rotate enough for
+    Tsai-Lenz.
+
+    Tsai-Lenz (as ``cv2.calibrateHandEye`` runs it) uses the motion between every pair of poses;
+    a pair that does not rotate adds an equation that holds for any rotation and harms nothing.
+    The hand-eye rotation is determined once at least two motions rotate by ``min_rotation``
+    (rad) or more about axes at least ``min_rotation`` apart (each axis in the frame of the
+    motion's first flange, as the method uses it). The message says which condition fails and
+    the number behind it.
+    """
+    r = np.asarray(flange2base)[:, :3, :3]
+    i, j = np.triu_indices(len(r), 1)
+    rotvec = geo.matrix_to_rotvec(np.swapaxes(r[i], -1, -2) @ r[j])
+    angles = np.linalg.norm(rotvec, axis=1)
+    moving = angles >= min_rotation
+    if not np.any(moving):
         raise CalibrationError(
-            f"poses {k} and {k + 1} differ by a rotation of {np.degrees(angles[k]):.3g} deg "
-            f"(minimum {np.degrees(min_pair_rotation):.3g} deg); Tsai-Lenz needs rotating motions"
+            f"no pair of the {len(r)} poses rotates by {np.degrees(min_rotation):.3g} deg or "
+            f"more (largest {np.degrees(angles.max()):.3g} deg); Tsai-Lenz needs rotating motions"
+        )
+    axes = rotvec[moving] / angles[moving, None]
+    cos = np.clip(np.abs(axes @ axes.T), 0.0, 1.0)
+    spread = float(np.arccos(cos.min()))
+    if spread < min_rotation:
+        raise CalibrationError(
+            f"the {int(moving.sum())} rotating motions of the {len(r)} poses turn about one "
+            f"axis (axes within {np.degrees(spread):.3g} deg, minimum "
+            f"{np.degrees(min_rotation):.3g} deg); Tsai-Lenz needs motions about two axes"
         )
 
 
@@ -427,9 +446,11 @@ def opencv_handeye(
     method : str
         One of ``"Tsai"``, ``"Park"``, ``"Horaud"``, ``"Andreff"``, ``"Daniilidis"``.
     min_pair_rotation : float, default 0
-        Smallest rotation (rad) of the flange between consecutive poses; 0 checks nothing.
-        Tsai-Lenz takes the rotation axis of each motion, undefined for a pure translation
-        (:data:`MIN_PAIR_ROTATION` is a safe value for it).
+        With a positive value, the poses must rotate enough overall
+        (:func:`check_rotation_diversity`): at least two motions between pose pairs rotating by
+        this much (rad) or more about axes this far apart. Tsai-Lenz takes the rotation axis of
+        each motion, undefined for a pure translation; poses with equal orientations are fine
+        as long as others rotate (:data:`MIN_PAIR_ROTATION` is a safe value). 0 checks nothing.
     tol : float
         Orthonormality tolerance of the input rotations. For measured poses with rounded
         rotations, :func:`calstudy.estimators.handeye_poses.calibrate_handeye` re-projects them.
@@ -442,9 +463,9 @@ def opencv_handeye(
     Raises
     ------
     CalibrationError
-        For an unknown method, fewer than 3 poses, bad shapes, a consecutive pair rotating less
-        than ``min_pair_rotation`` (the message names the pair and its angle), or a non-finite
-        OpenCV result.
+        For an unknown method, fewer than 3 poses, bad shapes, poses without two motions rotating
+        by ``min_pair_rotation`` about axes that far apart (the message names the largest
+        rotation or the spread of the axes), or a non-finite OpenCV result.
     """
     if method not in OPENCV_METHODS:
         raise CalibrationError(
@@ -459,7 +480,7 @@ def opencv_handeye(
     if g2b.shape[0] < 3:
         raise CalibrationError(f"AX = XB needs at least 3 poses; got {g2b.shape[0]}")
     if min_pair_rotation > 0.0:
-        check_pair_rotations(g2b, min_pair_rotation)
+        check_rotation_diversity(g2b, min_pair_rotation)
     try:
         rot, trans = cv2.calibrateHandEye(
             list(g2b[:, :3, :3]),

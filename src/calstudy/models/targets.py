@@ -181,3 +181,46 @@ class HoleTarget:
 
 
 __all__ = ["HoleTarget", "ManufacturedHoleTarget", "Sphere"]
+
+
+# ----------------------------------------------------------------------------------------------
+# the image of a circular target
+
+
+def circle_image_centres(k_matrix, centres_cam, normals_cam, radius: float) -> np.ndarray:
+    """Centres ``(N, 2)`` (px) of the ellipses that circles of ``radius`` mm project to in a
+    pinhole camera ``k_matrix`` (no distortion): exact, by the projection of the circle's conic.
+
+    A circle with centre ``c`` and unit normal ``n`` (camera frame, ``(N, 3)`` each) lies in the
+    plane spanned by two unit vectors ``e1, e2`` normal to ``n``; the homography ``H = K [e1 e2
+    c]`` maps its plane coordinates to the image, so its image is the conic ``H^-T diag(1, 1,
+    -r^2) H^-1``, whose centre is ``-A^-1 b`` for the conic ``[[A, b], [b^T, c]]``. Under
+    perspective that centre is not the image of the circle's centre: a detector that fits the
+    ellipse (or takes the centroid of its edge) is biased by the difference, which grows with
+    ``radius^2`` and the tilt of the circle, and vanishes for a circle facing the camera.
+    """
+    k = np.asarray(k_matrix, dtype=float)
+    c = np.atleast_2d(np.asarray(centres_cam, dtype=float))
+    n = np.atleast_2d(np.asarray(normals_cam, dtype=float))
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(n, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(n, e1)
+    h = k @ np.stack([e1, e2, c], axis=2)  # (N, 3, 3), columns e1, e2, c
+    h_inv = np.linalg.inv(h)
+    conic = np.swapaxes(h_inv, 1, 2) @ np.diag([1.0, 1.0, -(float(radius) ** 2)]) @ h_inv
+    a, b = conic[:, :2, :2], conic[:, :2, 2]
+    return -np.linalg.solve(a, b[..., None])[..., 0]
+
+
+def circle_centre_bias(k_matrix, centres_cam, normals_cam, radius: float) -> np.ndarray:
+    """Perspective bias ``(N, 2)`` (px) of a circle's detected centre: the centre of its image
+    ellipse (:func:`circle_image_centres`) minus the image of its centre; zero for ``radius``
+    0."""
+    c = np.atleast_2d(np.asarray(centres_cam, dtype=float))
+    if radius == 0.0:
+        return np.zeros((len(c), 2))
+    k = np.asarray(k_matrix, dtype=float)
+    proj = (k @ c.T).T
+    return circle_image_centres(k, c, normals_cam, radius) - proj[:, :2] / proj[:, 2:]

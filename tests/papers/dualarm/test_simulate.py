@@ -23,3 +23,21 @@ def test_base_to_base_is_eq11(quiet):
         flange[0], quiet.cam2flange[0], w2c[0], flange[1], quiet.cam2flange[1], w2c[1]
     )
     np.testing.assert_allclose(t, quiet.base2_to_base1, atol=1e-9)
+
+
+def test_handeye_views_rotate_enough_but_never_near_half_a_turn(scenario):
+    """The practitioner's views: every hand-eye pose set passes the rotation diversity check,
+    and no pair of poses rotates near 180 deg (where a random roll puts some)."""
+    largest = []
+    for seed in range(10):
+        flange, _ = sim.handeye_images(scenario, 1 + seed % 2, np.random.default_rng(seed))
+        he.check_rotation_diversity(flange, he.MIN_PAIR_ROTATION)
+        i, j = np.triu_indices(len(flange), 1)
+        rel = np.swapaxes(flange[i, :3, :3], 1, 2) @ flange[j, :3, :3]
+        largest.append(np.degrees(geo.rotation_angle(rel)).max())
+    assert 60.0 < max(largest) < 150.0
+    random_roll = scenario.replace(handeye_roll=None)
+    flange, _ = sim.handeye_images(random_roll, 1, np.random.default_rng(0))
+    i, j = np.triu_indices(len(flange), 1)
+    rel = np.swapaxes(flange[i, :3, :3], 1, 2) @ flange[j, :3, :3]
+    assert np.degrees(geo.rotation_angle(rel)).max() > 150.0

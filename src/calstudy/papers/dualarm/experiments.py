@@ -47,8 +47,9 @@ def handeye_data(scn: Scenario, arm: int, rng: np.random.Generator):
 
 
 def hand_eyes(scn: Scenario, rng: np.random.Generator) -> np.ndarray:
-    """``cam2flange`` ``(2, 4, 4)`` of both arms by Tsai-Lenz (``cv2.calibrateHandEye``), each
-    pair of consecutive poses rotating by at least ``MIN_PAIR_ROTATION``."""
+    """``cam2flange`` ``(2, 4, 4)`` of both arms by Tsai-Lenz (``cv2.calibrateHandEye``, every
+    pair of poses), the poses checked for rotation diversity (two motions of at least
+    ``MIN_PAIR_ROTATION`` about axes that far apart)."""
     return np.stack(
         [opencv_handeye(*handeye_data(scn, arm, rng), "Tsai", MIN_PAIR_ROTATION) for arm in ARMS]
     )
@@ -113,13 +114,54 @@ def marker_base_to_base(scn: Scenario, cam2flange_est, points, arm_data) -> np.n
     )
 
 
+def _chain(scn: Scenario, rng: np.random.Generator):
+    """Steps 1-3 with what the error budget needs: ``(cam2flange_est, reconstruction,
+    base2_to_base1, arm data, the same arm data exact, survey views)``."""
+    cam2flange = hand_eyes(scn, rng)
+    views = sim.survey_views(scn, rng)
+    recon = survey_markers(scn, views)
+    pairs = [sim.arm_world_views(scn, arm, rng, exact=True) for arm in ARMS]
+    noisy, exact = [p[0] for p in pairs], [p[1] for p in pairs]
+    ours = marker_base_to_base(scn, cam2flange, recon.bundle.points, noisy)
+    return cam2flange, recon, ours, noisy, exact, views
+
+
 def coded_marker_chain(scn: Scenario, rng: np.random.Generator):
     """Steps 1-3 on one simulated station: ``(cam2flange_est (2, 4, 4), reconstruction,
     base2_to_base1 by the coded markers)``."""
-    cam2flange = hand_eyes(scn, rng)
-    recon = survey_markers(scn, sim.survey_views(scn, rng))
-    arm_data = [sim.arm_world_views(scn, arm, rng) for arm in ARMS]
-    return cam2flange, recon, marker_base_to_base(scn, cam2flange, recon.bundle.points, arm_data)
+    return _chain(scn, rng)[:3]
+
+
+def group_fits(scn: Scenario, points) -> list[np.ndarray]:
+    """Per marker group, the rigid transform taking the group's Table A1 positions onto its
+    reconstructed ones (markers never reconstructed left out)."""
+    p = np.asarray(points)
+    out = []
+    for g in (0, 1):
+        ok = (scn.marker_group == g) & np.all(np.isfinite(p), axis=1)
+        out.append(fit_rigid(scn.markers[ok], p[ok]))
+    return out
+
+
+def link_error_deg(scn: Scenario, points) -> float:
+    """Error (deg) of the survey's link: the rotation between the two groups' best fits, zero
+    when the reconstruction places one group exactly relative to the other."""
+    t0, t1 = group_fits(scn, points)
+    return float(np.degrees(geo.rotation_error(t0, t1)))
+
+
+def split_survey_error(scn: Scenario, points) -> dict[str, np.ndarray]:
+    """The reconstructed markers with one part of their error kept: ``link`` (each group's true
+    shape placed where the reconstruction puts the group: only the relative pose of the groups
+    in error) and ``shape`` (each reconstructed group moved onto its true place: only the shapes
+    in error)."""
+    p = np.asarray(points)
+    link, shape = p.copy(), p.copy()
+    for g, t in zip((0, 1), group_fits(scn, p), strict=True):
+        m = scn.marker_group == g
+        link[m] = geo.apply(t, scn.markers[m])
+        shape[m] = geo.apply(geo.invert(t), p[m])
+    return {"link": link, "shape": shape}
 
 
 def marker_error(scn: Scenario, points) -> float:
@@ -248,33 +290,49 @@ def _centre_rows(name: str, group: int, c12, ref, truth) -> list[dict]:
     return rows
 
 
+def _fitted_centres(scans, c2f, cache: dict, exact: bool = False):
+    """Arm 2's reference centre and arm 1's per-pose centres (each in its base) of one placement's
+    ``scans`` (arm 2's, then arm 1's, from :func:`~calstudy.papers.dualarm.simulate.sphere_scans`)
+    mapped by Eq. 3 with the hand-eyes ``c2f`` and the reported (or, ``exact``, true) poses;
+    ``cache`` keeps them per hand-eye pair."""
+    key = (id(c2f), exact)
+    if key not in cache:
+        (rep2, true2, cl2), (rep1, true1, cl1) = scans
+        g2, g1 = (true2, true1) if exact else (rep2, rep1)
+        arm2 = [geo.apply(q @ c2f[1], p) for q, p in zip(g2, cl2, strict=True)]
+        ref = fit_sphere(np.concatenate(arm2))[0]
+        c1 = [fit_sphere(geo.apply(q @ c2f[0], p))[0] for q, p in zip(g1, cl1, strict=True)]
+        cache[key] = (ref, np.array(c1))
+    return cache[key]
+
+
 def global_rows(scn: Scenario, cam2flange_est, b2b1: dict, rng, oracle: bool = True) -> list:
     """Tables 1-3: sphere A at ``global_groups`` places between the arms. The reading of the
     paper's reference centre: the centre fitted to all of arm 2's clouds of the placement
     together (its ``global_poses`` poses, each an ordinary move with the arm's repeatability, no
     multi-view drift), in base 2. Each of arm 1's poses is one scan, its fitted centre mapped into
-    base 2 with each estimate in ``b2b1`` (name -> base2_to_base1). With ``oracle``, also the
-    method ``true calibration``: the same scans with every calibrated transform true and the
-    poses exact (the test's measurement floor)."""
+    base 2 with each estimate in ``b2b1`` (name -> base2_to_base1, or ``(base2_to_base1,
+    cam2flange (2, 4, 4))`` for a method whose scans are mapped (Eq. 3) with other hand-eyes than
+    ``cam2flange_est``). With ``oracle``, also the method ``true calibration``: the same scans
+    with every calibrated transform true and the poses exact (the test's measurement floor)."""
     r = scn.sphere_radius["A"]
     rows = []
     for g, off in enumerate(scn.placement_offsets_mm[: scn.global_groups]):
         centre = sim.global_sphere_place(scn, off, r)
-        arm2, arm2_exact = scans_in_base(
-            scn, 2, centre, r, scn.global_poses, rng, cam2flange_est[1], drift=False
-        )
-        ref = fit_sphere(np.concatenate(arm2))[0]
         truth = geo.apply(scn.world2base[1], centre)
-        arm1, arm1_exact = scans_in_base(
-            scn, 1, centre, r, scn.global_poses, rng, cam2flange_est[0], drift=False
-        )
-        c1 = np.array([fit_sphere(p)[0] for p in arm1])
+        scans = [
+            sim.sphere_scans(scn, arm, centre, r, scn.global_poses, rng, drift=False)
+            for arm in (2, 1)
+        ]
+        centres: dict = {}
+
         for name, t in b2b1.items():
+            t, c2f = t if isinstance(t, tuple) else (t, cam2flange_est)
+            ref, c1 = _fitted_centres(scans, c2f, centres)
             rows += _centre_rows(name, g + 1, geo.apply(geo.invert(t), c1), ref, truth)
         if oracle:
             # no calibration error anywhere: true hand-eyes and base-to-base, exact poses
-            ref0 = fit_sphere(np.concatenate(arm2_exact))[0]
-            c0 = np.array([fit_sphere(p)[0] for p in arm1_exact])
+            ref0, c0 = _fitted_centres(scans, scn.cam2flange, centres, exact=True)
             c0 = geo.apply(geo.invert(scn.base2_to_base1), c0)
             rows += _centre_rows("true calibration", g + 1, c0, ref0, truth)
     return rows
@@ -299,6 +357,31 @@ def _scenario(scenario_toml: str, drift_scale: float = 1.0) -> Scenario:
         drift_step_mm=scn.drift_step_mm * drift_scale,
         drift_step_rad=scn.drift_step_rad * drift_scale,
     )
+
+
+#: the error sources of the coded-marker chain, each switched on alone in the error budget
+BUDGET_SOURCES = ("survey link", "survey shape", "hand-eye", "per-arm location")
+
+
+def budget_b2b1(scn: Scenario, cam2flange_est, points, noisy, exact) -> dict:
+    """The error budget of the coded-marker chain on one trial's draws: for each source of
+    :data:`BUDGET_SOURCES`, ``"budget: <source>"`` -> ``(base2_to_base1, cam2flange)`` with
+    that source alone in error (the survey's link or shapes (:func:`split_survey_error`), the
+    Tsai-Lenz hand-eyes (used in Eq. 11 and Eq. 3), or each arm's location on the markers: pixel
+    noise, bias and losses of its calibration views and its reported poses), every other input
+    true. The sphere test adds its own floor to each."""
+    split = split_survey_error(scn, points)
+    true_c2f = scn.cam2flange
+    cases = {
+        "survey link": (true_c2f, split["link"], exact),
+        "survey shape": (true_c2f, split["shape"], exact),
+        "hand-eye": (np.asarray(cam2flange_est), scn.markers, exact),
+        "per-arm location": (true_c2f, scn.markers, noisy),
+    }
+    return {
+        f"budget: {name}": (marker_base_to_base(scn, c2f, pts, data), c2f)
+        for name, (c2f, pts, data) in cases.items()
+    }
 
 
 def station_trial(scn: Scenario, rng: np.random.Generator, plate_sigma_px: float) -> list:
@@ -328,6 +411,7 @@ def station_trial(scn: Scenario, rng: np.random.Generator, plate_sigma_px: float
             "rms_px": recon.bundle.rms_px,
             "rms_mm": recon.bundle.rms_mm,
             "marker_rms_mm": marker_error(scn, recon.bundle.points),
+            "link_deg": link_error_deg(scn, recon.bundle.points),
             "clusters": len(recon.clusters),
         }
     )
@@ -389,3 +473,94 @@ def plate_experiment(scenario_toml: str = "", n_trials: int = 30, sigmas=(0.1,))
     detection noise (rule 11, target: the paper's 0.556 mm for the plate)."""
     points = tuple({"plate_sigma_px": float(s)} for s in sigmas)
     return Experiment("plate_pilot", plate_trial, _scenario(scenario_toml), n_trials, points)
+
+
+def survey_trial(
+    scn: Scenario,
+    rng: np.random.Generator,
+    bridge_views: int,
+    bridge_tilt_deg: float,
+    calibration_poses: int,
+) -> dict:
+    """The coded-marker route alone (hand-eyes, survey, each arm's calibration poses, Eq. 11, the
+    Tables 1-2 test) with a survey of ``bridge_views`` linking images tilted up to
+    ``bridge_tilt_deg`` and ``calibration_poses`` poses per arm: its mean Euclidean sphere-centre
+    error, the link error of the survey and the markers' RMS error."""
+    sc = scn.replace(
+        survey_bridge_views=int(bridge_views),
+        survey_bridge_tilt=np.deg2rad(bridge_tilt_deg),
+        calibration_poses=int(calibration_poses),
+    )
+    cam2flange, recon, ours = coded_marker_chain(sc, rng)
+    df = pd.DataFrame(global_rows(sc, cam2flange, {"coded markers": ours}, rng, oracle=False))
+    return {
+        "coded_euclid_mm": float(df["euclid_mm"].mean()),
+        "link_deg": link_error_deg(sc, recon.bundle.points),
+        "marker_rms_mm": marker_error(sc, recon.bundle.points),
+    }
+
+
+def survey_points(scn: Scenario, bridge_views=(4, 16), bridge_tilts_deg=(5.0, 25.0), poses=(6, 10)):
+    """The sweep points of the survey design: the scenario's design, and one input at a time
+    changed to each of the given values (linking images, their tilt, calibration poses per
+    arm)."""
+    base = {
+        "bridge_views": int(scn.survey_bridge_views),
+        "bridge_tilt_deg": float(round(np.degrees(scn.survey_bridge_tilt), 6)),
+        "calibration_poses": int(scn.calibration_poses),
+    }
+    points = [base]
+    for key, values in (
+        ("bridge_views", bridge_views),
+        ("bridge_tilt_deg", bridge_tilts_deg),
+        ("calibration_poses", poses),
+    ):
+        for v in values:
+            p = {**base, key: type(base[key])(v)}
+            if p not in points:
+                points.append(p)
+    return tuple(points)
+
+
+def survey_experiment(
+    scenario_toml: str = "",
+    n_trials: int = 30,
+    bridge_views=(4, 16),
+    bridge_tilts_deg=(5.0, 25.0),
+    poses=(6, 10),
+) -> Experiment:
+    """The survey-design sweeps (inputs the paper leaves open, rule 11): the coded-marker
+    route's sphere-centre error against the number of linking images, their tilt and the
+    calibration poses per arm, one at a time from the scenario's design."""
+    scn = _scenario(scenario_toml)
+    points = survey_points(scn, bridge_views, bridge_tilts_deg, poses)
+    return Experiment("survey_sweep", survey_trial, scn, n_trials, points)
+
+
+def budget_trial(scn: Scenario, rng: np.random.Generator) -> list:
+    """The error budget of the coded-marker chain on one station: the Tables 1-2 test rows of
+    the whole chain (``coded markers``), of each source of :data:`BUDGET_SOURCES` alone
+    (``budget: <source>``, :func:`budget_b2b1`) and of no calibration error (``true
+    calibration``, the test's floor), all on the same draws; and one row (part ``eq10``) on
+    the survey's bundle adjustment with and without the Euclidean residual of Eq. 10, which is
+    triangulated from the pixels Eq. 9 already uses."""
+    cam2flange, recon, ours, noisy, exact, views = _chain(scn, rng)
+    b2b1 = {
+        "coded markers": ours,
+        **budget_b2b1(scn, cam2flange, recon.bundle.points, noisy, exact),
+    }
+    # Eq. 9 alone: the Euclidean weight so large that Eq. 10 carries no weight
+    eq9 = survey_markers(scn.replace(marker_sigma_mm=1e9), views).bundle.points
+    eq10 = {
+        "part": "eq10",
+        "marker_rms_mm": marker_error(scn, recon.bundle.points),
+        "marker_rms_eq9_only_mm": marker_error(scn, eq9),
+        "link_deg": link_error_deg(scn, recon.bundle.points),
+        "link_eq9_only_deg": link_error_deg(scn, eq9),
+    }
+    return [*global_rows(scn, cam2flange, b2b1, rng), eq10]
+
+
+def budget_experiment(scenario_toml: str = "", n_trials: int = 30) -> Experiment:
+    """The error budget by source, ``n_trials`` paired trials."""
+    return Experiment("budget", budget_trial, _scenario(scenario_toml), n_trials)

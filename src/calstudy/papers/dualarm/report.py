@@ -162,7 +162,8 @@ def table3(global_df: pd.DataFrame, published: Published) -> pd.DataFrame:
 
 
 def calibration_summary(trials: pd.DataFrame) -> pd.DataFrame:
-    """RMS over trials of the hand-eye and base-to-base errors, and the bundle figures."""
+    """RMS over trials of the hand-eye and base-to-base errors, and the bundle figures (a
+    figure without a rotation or translation part is missing there)."""
     calibration, bundle = part(trials, "calibration"), part(trials, "bundle")
     rows = [
         {
@@ -191,6 +192,11 @@ def calibration_summary(trials: pd.DataFrame) -> pd.DataFrame:
                 "rotation_deg_rms": np.nan,
                 "translation_mm_rms": b["marker_rms_mm"],
             },
+            {
+                "quantity": "survey link (relative rotation of the groups)",
+                "rotation_deg_rms": float(np.sqrt(np.mean(bundle["link_deg"] ** 2))),
+                "translation_mm_rms": np.nan,
+            },
         ]
     )
     return pd.concat([out, extra], ignore_index=True)
@@ -214,7 +220,7 @@ def icp_figure(icp: pd.DataFrame, arm: int):
     spheres A and B of one arm (bars: mean over trials; whiskers: 95 % interval)."""
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3.4), sharey=True)
     for ax, sphere in zip(axes, SPHERES, strict=True):
         g = icp[(icp["arm"] == arm) & (icp["sphere"] == sphere)]
         views = sorted(g["view"].unique())

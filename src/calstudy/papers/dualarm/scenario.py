@@ -54,6 +54,8 @@ class Scenario:
     max_incidence: float
     working_distance_mm: float
     sigma_px: float
+    marker_radius_mm: float
+    circle_radius_mm: float
     marker_sigma_mm: float
     loss_rate: float
     max_view_angle: float
@@ -65,10 +67,12 @@ class Scenario:
     plate_points: np.ndarray
     handeye_poses: int
     handeye_tilt: float
+    handeye_roll: float
     survey_views_per_group: int
     survey_bridge_views: int
     survey_bridge_distance_mm: float
     survey_bridge_tilt: float
+    survey_bridge_roll: float
     survey_tilt: float
     min_shared_markers: int
     global_groups: int
@@ -78,6 +82,7 @@ class Scenario:
     stand_height_mm: float
     plate_tilt: float
     plate_jitter: float
+    plate_offset_mm: tuple
     plate_outlier_rate: float
     plate_outlier_px: tuple
     ransac_threshold_px: float
@@ -94,10 +99,13 @@ class Scenario:
         return dataclasses.replace(self, **changes)
 
     def noise_free(self) -> Scenario:
-        """The same station with exact detections, sensor, robot poses and no marker losses."""
+        """The same station with exact detections (no noise, no perspective bias of the circle
+        centres), sensor, robot poses and no marker losses."""
         return self.replace(
             point_sigma_mm=0.0,
             sigma_px=0.0,
+            marker_radius_mm=0.0,
+            circle_radius_mm=0.0,
             loss_rate=0.0,
             repeat_sigma_mm=0.0,
             repeat_sigma_rad=0.0,
@@ -183,6 +191,8 @@ _SCALARS = {
     "working_distance_mm": ("sensor.working_distance_mm", False),
     "sigma_px": ("detection.sigma_px", False),
     "marker_sigma_mm": ("detection.marker_sigma_mm", False),
+    "marker_radius_mm": ("detection.marker_radius_mm", False),
+    "circle_radius_mm": ("handeye.circle_radius_mm", False),
     "loss_rate": ("detection.loss_rate", False),
     "max_view_angle": ("detection.max_view_angle_deg", True),
     "repeat_sigma_mm": ("robot.repeat_sigma_mm", False),
@@ -191,10 +201,12 @@ _SCALARS = {
     "drift_step_rad": ("robot.drift_step_sigma_deg", True),
     "handeye_poses": ("handeye.n_poses", False),
     "handeye_tilt": ("handeye.tilt_deg", True),
+    "handeye_roll": ("handeye.roll_deg", True),
     "survey_views_per_group": ("survey.views_per_group", False),
     "survey_bridge_views": ("survey.bridge_views", False),
     "survey_bridge_distance_mm": ("survey.bridge_distance_mm", False),
     "survey_bridge_tilt": ("survey.bridge_tilt_deg", True),
+    "survey_bridge_roll": ("survey.bridge_roll_deg", True),
     "survey_tilt": ("survey.tilt_deg", True),
     "min_shared_markers": ("survey.min_shared_markers", False),
     "global_groups": ("global_test.n_groups", False),
@@ -245,6 +257,7 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
         plate_points=_plate_points(d, src),
         placement_offsets_mm=tuple(require(d, "global_test.placement_offsets_mm", src)),
         plate_outlier_px=tuple(require(d, "circular_plate.outlier_px", src)),
+        plate_offset_mm=tuple(require(d, "circular_plate.offset_mm", src)),
         **scalars,
     )
 

@@ -38,6 +38,7 @@ RotVec = Annotated[
 
 class Camera(Documented):
     """The ``[camera]`` table of data/dualarm/scenario.toml."""
+
     width: PositiveInt
     height: PositiveInt
     fx_px: PositiveFinite
@@ -53,12 +54,14 @@ class Camera(Documented):
 
 class Stereo(Documented):
     """The ``[stereo]`` table of data/dualarm/scenario.toml."""
+
     baseline_mm: PositiveFinite
     convergence_distance_mm: PositiveFinite
 
 
 class Sensor(Documented):
     """The ``[sensor]`` table of data/dualarm/scenario.toml."""
+
     point_sigma_mm: NonNegativeFinite
     #: a sphere fit needs at least 4 points
     points_per_scan: Annotated[int, Field(ge=4)]
@@ -68,7 +71,10 @@ class Sensor(Documented):
 
 class Detection(Documented):
     """The ``[detection]`` table of data/dualarm/scenario.toml."""
+
     sigma_px: NonNegativeFinite
+    #: radius of a coded marker's centre circle (its perspective bias grows with radius^2)
+    marker_radius_mm: Annotated[float, Field(ge=0, le=50, allow_inf_nan=False)]
     marker_sigma_mm: NonNegativeFinite
     #: the probability that a visible marker is lost in an image
     loss_rate: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
@@ -77,6 +83,7 @@ class Detection(Documented):
 
 class Markers(Documented):
     """The ``[markers]`` table of data/dualarm/scenario.toml."""
+
     names: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=3)]
     xyz_mm: Annotated[list[Vec3], Field(min_length=3)]
     groups: Annotated[list[str], Field(min_length=2, max_length=2)]
@@ -98,6 +105,7 @@ class Markers(Documented):
 
 class Calibration(Documented):
     """The ``[calibration]`` table of data/dualarm/scenario.toml."""
+
     cam2flange_1_rotvec: RotVec
     cam2flange_1_mm: Vec3
     cam2flange_2_rotvec: RotVec
@@ -108,12 +116,14 @@ class Calibration(Documented):
 
 class Layout(Documented):
     """The ``[layout]`` table of data/dualarm/scenario.toml."""
+
     world2base1_rotvec: RotVec
     world2base1_mm: Vec3
 
 
 class Robot(Documented):
     """The ``[robot]`` table of data/dualarm/scenario.toml."""
+
     repeat_sigma_mm: NonNegativeFinite
     repeat_sigma_deg: NonNegativeFinite
     drift_step_sigma_mm: NonNegativeFinite
@@ -122,26 +132,43 @@ class Robot(Documented):
 
 class Spheres(Documented):
     """The ``[spheres]`` table of data/dualarm/scenario.toml."""
+
     diameter_a_mm: PositiveFinite
     diameter_b_mm: PositiveFinite
 
 
 class HandEye(Documented):
     """The ``[handeye]`` table of data/dualarm/scenario.toml."""
+
     grid_rows: Annotated[int, Field(ge=2)]
     grid_cols: Annotated[int, Field(ge=2)]
     pitch_mm: PositiveFinite
     #: Tsai-Lenz needs at least 3 poses (2 motions about different axes)
     n_poses: Annotated[int, Field(ge=3)]
     tilt_deg: Tilt
+    #: turn of the image about the optical axis between views, within +-roll_deg
+    roll_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
+    #: radius of the plate's circles; less than half the pitch (checked below)
+    circle_radius_mm: NonNegativeFinite
+
+    @model_validator(mode="after")
+    def _circles_apart(self) -> HandEye:
+        if 2 * self.circle_radius_mm >= self.pitch_mm:
+            raise ValueError(
+                f"circle_radius_mm = {self.circle_radius_mm} overlaps the next circle at "
+                f"pitch_mm = {self.pitch_mm}; below half the pitch"
+            )
+        return self
 
 
 class Survey(Documented):
     """The ``[survey]`` table of data/dualarm/scenario.toml."""
+
     views_per_group: PositiveInt
     bridge_views: PositiveInt
     bridge_distance_mm: PositiveFinite
     bridge_tilt_deg: Tilt
+    bridge_roll_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
     tilt_deg: Tilt
     #: PnP needs at least 3 shared markers
     min_shared_markers: Annotated[int, Field(ge=3)]
@@ -149,6 +176,7 @@ class Survey(Documented):
 
 class GlobalTest(Documented):
     """The ``[global_test]`` table of data/dualarm/scenario.toml."""
+
     n_groups: PositiveInt
     n_poses: PositiveInt
     calibration_poses: PositiveInt
@@ -167,10 +195,13 @@ class GlobalTest(Documented):
 
 class CircularPlate(Documented):
     """The ``[circular_plate]`` table of data/dualarm/scenario.toml."""
+
     tilt_deg: Tilt
     jitter_deg: Tilt
     outlier_rate: Fraction
     outlier_px: Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
+    #: where the plate lies: (x, y) mm from the point between the marker groups, on the table
+    offset_mm: Annotated[list[Finite], Field(min_length=2, max_length=2)]
     ransac_threshold_px: PositiveFinite
 
     @model_validator(mode="after")
@@ -183,6 +214,7 @@ class CircularPlate(Documented):
 
 class Icp(Documented):
     """The ``[icp]`` table of data/dualarm/scenario.toml."""
+
     z_weight: PositiveFinite
     z_threshold_mm: PositiveFinite
     max_iterations: PositiveInt

@@ -16,6 +16,7 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.stereo_views import View, make_view
+from calstudy.models.targets import circle_centre_bias
 from calstudy.papers.dualarm.scenario import ARMS, Scenario
 
 # ----------------------------------------------------------------------------------------------
@@ -30,10 +31,13 @@ def view_poses(
     tilt: float,
     axis=(0.0, 0.0, 1.0),
     up=None,
+    roll: float | None = None,
 ) -> np.ndarray:
     """``cam2world`` ``(n, 4, 4)`` of cameras ``distance_mm`` from ``target``, looking at it from
-    directions within ``tilt`` rad of ``axis`` (uniform in the cone), image rotated at random
-    about the optical axis unless ``up`` fixes it."""
+    directions within ``tilt`` rad of ``axis`` (uniform in the cone). The image is rotated at
+    random about the optical axis unless ``up`` fixes it; with ``roll``, by a uniform angle within
+    ``+-roll`` rad of the orientation ``up`` (default: a fixed direction normal to ``axis``)
+    gives, as an operator turns the sensor a little between views rather than at random."""
     a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
     helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     e1 = np.cross(a, helper)
@@ -43,10 +47,15 @@ def view_poses(
     cos_t = 1.0 - rng.random(n) * (1.0 - np.cos(tilt))
     phi = rng.random(n) * 2 * np.pi
     spin = rng.random(n) * 2 * np.pi
+    turn = (2.0 * rng.random(n) - 1.0) * (roll or 0.0)
     for k in range(n):
         s = np.sqrt(1.0 - cos_t[k] ** 2)
         d = cos_t[k] * a + s * (np.cos(phi[k]) * e1 + np.sin(phi[k]) * e2)
-        u = up if up is not None else np.cos(spin[k]) * e1 + np.sin(spin[k]) * e2
+        if roll is not None:
+            ref = np.asarray(up if up is not None else e1, dtype=float)
+            u = geo.rotvec_to_matrix(d * turn[k]) @ ref
+        else:
+            u = up if up is not None else np.cos(spin[k]) * e1 + np.sin(spin[k]) * e2
         out[k] = geo.look_at(np.asarray(target) + distance_mm * d, target, up=u)
     return out
 
@@ -84,13 +93,29 @@ def mid_point(scn: Scenario) -> np.ndarray:
     return 0.5 * (scn.group_centre(1) + scn.group_centre(2))
 
 
+def plate_place(scn: Scenario) -> np.ndarray:
+    """Centre ``(3,)`` of Table 3's circular plate (world): on the table (z = 0),
+    ``plate_offset_mm`` (x, y) from the point between the marker groups."""
+    mid = mid_point(scn)
+    dx, dy = scn.plate_offset_mm
+    return np.array([mid[0] + dx, mid[1] + dy, 0.0])
+
+
 # ----------------------------------------------------------------------------------------------
 # images of the markers and of the calibration plate
 
 
+def _bias(camera_k, points_cam, normal_cam, radius: float) -> np.ndarray:
+    """Perspective bias ``(N, 2)`` (px) of circular targets of ``radius`` at ``points_cam``
+    facing ``normal_cam`` (3,), in the camera with intrinsics ``camera_k``."""
+    normals = np.broadcast_to(normal_cam, np.shape(points_cam))
+    return circle_centre_bias(camera_k, points_cam, normals, radius)
+
+
 def observe_markers(scn: Scenario, world2cam, rng: np.random.Generator) -> View:
     """Markers detected in one stereo pair: visible in both images and facing the camera, each
-    lost with probability ``loss_rate``, centres with ``sigma_px`` noise."""
+    lost with probability ``loss_rate``; each centre is the centre of the marker circle's image
+    ellipse (perspective bias for ``marker_radius_mm``) with ``sigma_px`` noise."""
     w2c = np.asarray(world2cam)
     pl = geo.apply(w2c, scn.markers)
     pr = geo.apply(scn.rig.left2right, pl)
@@ -103,6 +128,11 @@ def observe_markers(scn: Scenario, world2cam, rng: np.random.Generator) -> View:
     ul[front] = scn.rig.left.project(pl[front])
     ur[front] = scn.rig.right.project(pr[front])
     seen = front & scn.rig.left.in_image(ul) & scn.rig.right.in_image(ur)
+    if scn.marker_radius_mm > 0.0 and np.any(front):
+        up_l = w2c[:3, :3] @ [0.0, 0.0, 1.0]
+        up_r = scn.rig.left2right[:3, :3] @ up_l
+        ul[front] += _bias(scn.rig.left.K, pl[front], up_l, scn.marker_radius_mm)
+        ur[front] += _bias(scn.rig.right.K, pr[front], up_r, scn.marker_radius_mm)
     seen &= rng.random(len(pl)) >= scn.loss_rate
     noise = rng.normal(0.0, scn.sigma_px, (2, len(pl), 2))
     ids = np.flatnonzero(seen)
@@ -118,7 +148,8 @@ def plate_images(
     sigma_px: float | None = None,
 ) -> np.ndarray:
     """Circle centres ``(n, N, 2)`` (px) of the plate at ``plate2world`` in the left image of
-    each of the ``n`` cameras ``cam2world``, with ``sigma_px`` noise (the scenario's unless
+    each of the ``n`` cameras ``cam2world``: the centres of the circles' image ellipses
+    (perspective bias for ``circle_radius_mm``), with ``sigma_px`` noise (the scenario's unless
     given); with ``outliers``, a
     fraction ``plate_outlier_rate`` of them moved by ``plate_outlier_px`` in a random direction
     (gross detection errors)."""
@@ -127,6 +158,9 @@ def plate_images(
         true = geo.invert(c2w) @ plate2world
         sig = scn.sigma_px if sigma_px is None else sigma_px
         uv = scn.rig.left.observe(true, scn.plate_points, sig, rng)
+        if scn.circle_radius_mm > 0.0:
+            pts = geo.apply(true, scn.plate_points)
+            uv += _bias(scn.rig.left.K, pts, true[:3, 2], scn.circle_radius_mm)
         if outliers:
             bad = rng.random(len(uv)) < scn.plate_outlier_rate
             lo, hi = scn.plate_outlier_px
@@ -142,7 +176,12 @@ def handeye_images(scn: Scenario, arm: int, rng: np.random.Generator):
     flange2base (n, 4, 4), circle centres (n, N, 2))``."""
     plate2world = geo.make_transform(np.eye(3), scn.group_centre(arm))
     cam2world = view_poses(
-        rng, plate2world[:3, 3], scn.working_distance_mm, scn.handeye_poses, scn.handeye_tilt
+        rng,
+        plate2world[:3, 3],
+        scn.working_distance_mm,
+        scn.handeye_poses,
+        scn.handeye_tilt,
+        roll=scn.handeye_roll,
     )
     _, reported = arm_poses(scn, arm, cam2world, rng, drift=False)
     return reported, plate_images(scn, plate2world, cam2world, rng)
@@ -151,13 +190,13 @@ def handeye_images(scn: Scenario, arm: int, rng: np.random.Generator):
 def circular_plate_images(
     scn: Scenario, rng: np.random.Generator, sigma_px: float | None = None
 ) -> list:
-    """Table 3's comparison: a circle plate halfway between the arms (overlapping field), each
+    """Table 3's comparison: a circle plate in the overlapping field, on the table beside the
+    sphere stand (``plate_offset_mm`` from the point between the marker groups), each
     arm images it from ``calibration_poses`` poses from its own side, with gross detection
     errors and circle centres good to ``sigma_px`` (calibrated to the paper's plate figure,
     rule 11; the scenario's marker noise unless given). Per arm ``(reported flange2base
     (n, 4, 4), circle centres (n, N, 2))``."""
-    mid = mid_point(scn)
-    plate2world = geo.make_transform(np.eye(3), [mid[0], mid[1], 0.0])
+    plate2world = geo.make_transform(np.eye(3), plate_place(scn))
     out = []
     for arm, side in zip(ARMS, (1.0, -1.0), strict=True):
         axis = (0.0, side * np.sin(scn.plate_tilt), np.cos(scn.plate_tilt))
@@ -177,7 +216,10 @@ def circular_plate_images(
 
 def survey_views(scn: Scenario, rng: np.random.Generator, bridges: bool = True) -> list[View]:
     """The scanner's unordered stereo images of the markers: ``survey_views_per_group`` of each
-    group and ``survey_bridge_views`` of both (none with ``bridges=False``)."""
+    group and ``survey_bridge_views`` of both (none with ``bridges=False``), the linking images
+    held with the short side of the image along the line of the groups (world y, across the stereo
+    baseline: at 1000 mm the two images of a rig converging at 500 mm overlap little along the
+    baseline), turned by at most ``survey_bridge_roll`` about the optical axis."""
     poses = [
         view_poses(
             rng,
@@ -197,20 +239,29 @@ def survey_views(scn: Scenario, rng: np.random.Generator, bridges: bool = True) 
                 scn.survey_bridge_views,
                 scn.survey_bridge_tilt,
                 up=(0.0, 1.0, 0.0),
+                roll=scn.survey_bridge_roll,
             )
         )
     cam2world = np.concatenate(poses)
     return [observe_markers(scn, geo.invert(c), rng) for c in cam2world]
 
 
-def arm_world_views(scn: Scenario, arm: int, rng: np.random.Generator):
+def arm_world_views(scn: Scenario, arm: int, rng: np.random.Generator, exact: bool = False):
     """Arm ``arm`` sees its marker group from ``calibration_poses`` poses: ``(reported
-    flange2base, views)``."""
+    flange2base, views)``; with ``exact`` also ``(true flange2base, views without noise, bias or
+    losses)`` of the same poses (the per-arm location switched off in the error budget)."""
     cam2world = view_poses(
         rng, scn.group_centre(arm), scn.working_distance_mm, scn.calibration_poses, scn.survey_tilt
     )
-    _, reported = arm_poses(scn, arm, cam2world, rng, drift=False)
-    return reported, [observe_markers(scn, geo.invert(c), rng) for c in cam2world]
+    true, reported = arm_poses(scn, arm, cam2world, rng, drift=False)
+    views = [observe_markers(scn, geo.invert(c), rng) for c in cam2world]
+    if not exact:
+        return reported, views
+    quiet = scn.noise_free()
+    return (reported, views), (
+        true,
+        [observe_markers(quiet, geo.invert(c), rng) for c in cam2world],
+    )
 
 
 # ----------------------------------------------------------------------------------------------

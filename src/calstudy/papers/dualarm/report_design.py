@@ -1,0 +1,263 @@
+"""Tables, figures and generated sentences on the design of the ``dualarm`` station: the survey
+sweeps (where the verdict of ``dualarm.global`` changes), the error budget of the coded-marker
+chain by source, the detection model per target type and the check of Eq. 10 against Eq. 9.
+
+Inputs are the Monte Carlo tables of :func:`~calstudy.papers.dualarm.experiments.
+survey_experiment` and :func:`~calstudy.papers.dualarm.experiments.budget_experiment`.
+Millimetres, degrees where a column says so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from calstudy.core import geometry as geo
+from calstudy.core.verdicts import judge, median_interval
+from calstudy.models.targets import circle_centre_bias
+from calstudy.papers.dualarm import simulate as sim
+from calstudy.papers.dualarm.experiments import BUDGET_SOURCES
+from calstudy.papers.dualarm.report import part, published_figures
+from calstudy.papers.dualarm.scenario import Published, Scenario
+
+#: the three inputs of the survey sweeps: column -> words
+SWEEPS = {
+    "bridge_views": "linking images",
+    "bridge_tilt_deg": "tilt of the linking images (deg)",
+    "calibration_poses": "calibration poses per arm",
+}
+
+
+def _global_verdict(samples, published: Published):
+    f = published_figures(published)
+    return judge(
+        samples,
+        kind="value",
+        direction="lower",
+        null=f["global_reference"],
+        published=f["global"],
+        min_trials=30,
+    )
+
+
+def sweep_table(sweep: pd.DataFrame, published: Published) -> pd.DataFrame:
+    """Per sweep point: the coded-marker route's mean Euclidean sphere-centre error (median over
+    trials with its 95 % interval), the survey's link error, and the verdict ``dualarm.global``
+    would get at that point by the v2 rule."""
+    rows = []
+    for key, g in sweep.groupby(list(SWEEPS), sort=True):
+        v = _global_verdict(g["coded_euclid_mm"].to_numpy(), published)
+        rows.append(
+            {
+                **dict(zip(SWEEPS, key, strict=True)),
+                "median_mm": v.median,
+                "ci_low_mm": v.ci_low,
+                "ci_high_mm": v.ci_high,
+                "link_deg": float(g["link_deg"].median()),
+                "n": len(g),
+                "verdict": v.verdict,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def _base_point(scn: Scenario) -> dict:
+    return {
+        "bridge_views": int(scn.survey_bridge_views),
+        "bridge_tilt_deg": float(round(np.degrees(scn.survey_bridge_tilt), 6)),
+        "calibration_poses": int(scn.calibration_poses),
+    }
+
+
+def sweep_lines(table: pd.DataFrame, scn: Scenario) -> dict[str, pd.DataFrame]:
+    """Each sweep (column of :data:`SWEEPS`) as the rows of :func:`sweep_table` where the other
+    two inputs keep the scenario's design, sorted by the swept input."""
+    base = _base_point(scn)
+    out = {}
+    for col in SWEEPS:
+        keep = np.ones(len(table), dtype=bool)
+        for other in SWEEPS:
+            if other != col:
+                keep &= np.isclose(table[other].to_numpy(float), base[other])
+        out[col] = table[keep].sort_values(col).reset_index(drop=True)
+    return out
+
+
+def _fmt(x: float) -> str:
+    return f"{x:g}"
+
+
+def sweep_sentences(table: pd.DataFrame, scn: Scenario) -> str:
+    """One generated sentence per sweep: where the verdict of ``dualarm.global`` changes along it,
+    or that it does not over the swept range, with the medians at the ends."""
+    out = []
+    for col, line in sweep_lines(table, scn).items():
+        name = SWEEPS[col].split(" (")[0]
+        xs, verdicts = line[col].tolist(), line["verdict"].tolist()
+        ends = (
+            f"median {line['median_mm'].iloc[0]:.3f} mm at {_fmt(xs[0])}, "
+            f"{line['median_mm'].iloc[-1]:.3f} mm at {_fmt(xs[-1])}"
+        )
+        changes = [k for k in range(1, len(xs)) if verdicts[k] != verdicts[k - 1]]
+        if not changes:
+            out.append(
+                f"Along the {name} ({', '.join(map(_fmt, xs))}), the verdict stays "
+                f"'{verdicts[0]}' ({ends})."
+            )
+        else:
+            steps = "; ".join(
+                f"from '{verdicts[k - 1]}' at {_fmt(xs[k - 1])} to '{verdicts[k]}' at {_fmt(xs[k])}"
+                for k in changes
+            )
+            out.append(f"Along the {name}, the verdict changes {steps} ({ends}).")
+    return " ".join(out)
+
+
+def sweep_figure(table: pd.DataFrame, scn: Scenario, published: Published):
+    """Three panels, one per sweep: median sphere-centre error of the coded-marker route with its
+    95 % interval, the paper's 0.100 mm and the best other method of Table 3."""
+    import matplotlib.pyplot as plt
+
+    f = published_figures(published)
+    fig, axes = plt.subplots(1, 3, figsize=(8, 3.2), sharey=True)
+    for ax, (col, line) in zip(axes, sweep_lines(table, scn).items(), strict=True):
+        x = line[col].to_numpy(float)
+        y = line["median_mm"].to_numpy(float)
+        err = np.abs(line[["ci_low_mm", "ci_high_mm"]].to_numpy(float).T - y)
+        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label="coded markers (median)")
+        ax.axhline(f["global"], color="C2", ls="--", label=f"paper: {f['global']:.3f} mm")
+        ax.axhline(
+            f["global_reference"],
+            color="C3",
+            ls=":",
+            label=f"best other method: {f['global_reference']:.3f} mm",
+        )
+        ax.set_xlabel(SWEEPS[col])
+        ax.set_ylim(bottom=0)
+    axes[0].set_ylabel("sphere-centre error (mm)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, frameon=False)
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
+    return fig
+
+
+def budget_methods() -> dict[str, str]:
+    """Method names of the budget rows -> labels, whole chain first, test floor last."""
+    return {
+        "coded markers": "all sources (whole chain)",
+        **{f"budget: {s}": f"{s} alone" for s in BUDGET_SOURCES},
+        "true calibration": "test floor (no calibration error)",
+    }
+
+
+def budget_table(budget: pd.DataFrame) -> pd.DataFrame:
+    """The error budget: per source switched on alone, the mean Euclidean sphere-centre error of
+    the Tables 1-2 test per trial, as its median over the paired trials with a 95 % interval,
+    and its share of the whole chain's median in quadrature."""
+    g = part(budget, "global").groupby(["method", "trial"])["euclid_mm"].mean().unstack(0)
+    whole = float(np.median(g["coded markers"]))
+    rows = []
+    for method, label in budget_methods().items():
+        med, lo, hi = median_interval(g[method].to_numpy())
+        rows.append(
+            {
+                "source": label,
+                "median_mm": med,
+                "ci_low_mm": lo,
+                "ci_high_mm": hi,
+                "share_of_variance_pct": 100 * (med / whole) ** 2,
+                "n": int(g[method].size),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def budget_figure(table: pd.DataFrame):
+    """Horizontal bars of :func:`budget_table` with their 95 % intervals."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 3.2))
+    y = np.arange(len(table))[::-1]
+    med = table["median_mm"].to_numpy(float)
+    err = np.abs(table[["ci_low_mm", "ci_high_mm"]].to_numpy(float).T - med)
+    colors = ["C0"] + ["C1"] * (len(table) - 2) + ["C7"]
+    ax.barh(y, med, xerr=err, color=colors, capsize=3)
+    ax.set_yticks(y, table["source"])
+    ax.set_xlabel("mean sphere-centre error per trial, median over trials (mm)")
+    fig.tight_layout()
+    return fig
+
+
+def eq10_table(budget: pd.DataFrame) -> pd.DataFrame:
+    """The survey's bundle adjustment with Eq. 9 and 10 against Eq. 9 alone, on the same images:
+    medians over trials of the markers' RMS error and the link error, and the median paired
+    ratio."""
+    e = part(budget, "eq10")
+    rows = []
+    for name, both, alone in (
+        ("markers vs Table A1, RMS (mm)", "marker_rms_mm", "marker_rms_eq9_only_mm"),
+        ("survey link error (deg)", "link_deg", "link_eq9_only_deg"),
+    ):
+        ratio = median_interval((e[both] / e[alone]).to_numpy())
+        rows.append(
+            {
+                "quantity": name,
+                "Eq. 9 and 10": float(e[both].median()),
+                "Eq. 9 alone": float(e[alone].median()),
+                "paired ratio": ratio[0],
+                "ratio_ci_low": ratio[1],
+                "ratio_ci_high": ratio[2],
+                "n": len(e),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def detection_table(scn: Scenario, rng: np.random.Generator, n_views: int = 20) -> pd.DataFrame:
+    """The detection model per target type: RMS and largest perspective bias of the detected
+    circle centres (exact conic centre minus the image of the centre) in the views each step
+    uses, and the random noise added on top."""
+    mid = sim.mid_point(scn)
+    plate = geo.make_transform(np.eye(3), sim.plate_place(scn))
+    cases = []
+    he_place = geo.make_transform(np.eye(3), scn.group_centre(1))
+    cam = sim.view_poses(
+        rng, he_place[:3, 3], scn.working_distance_mm, n_views, scn.handeye_tilt, roll=0.0
+    )
+    cases.append(("plate circles, hand-eye views", cam, he_place, scn.circle_radius_mm))
+    axis = (0.0, np.sin(scn.plate_tilt), np.cos(scn.plate_tilt))
+    cam = sim.view_poses(
+        rng, plate[:3, 3], scn.working_distance_mm, n_views, scn.plate_jitter, axis
+    )
+    cases.append(("plate circles, Table 3 plate", cam, plate, scn.circle_radius_mm))
+    cam = sim.view_poses(
+        rng, scn.group_centre(1), scn.working_distance_mm, n_views, scn.survey_tilt
+    )
+    cases.append(("coded markers, views of one group", cam, None, scn.marker_radius_mm))
+    cam = sim.view_poses(
+        rng, mid, scn.survey_bridge_distance_mm, n_views, scn.survey_bridge_tilt, up=(0, 1, 0)
+    )
+    cases.append(("coded markers, linking images", cam, None, scn.marker_radius_mm))
+    k = scn.rig.left.K
+    rows = []
+    for name, cams, target, radius in cases:
+        biases = []
+        for c2w in cams:
+            w2c = geo.invert(c2w)
+            if target is None:
+                pts, normal = geo.apply(w2c, scn.markers), w2c[:3, :3] @ [0.0, 0.0, 1.0]
+            else:
+                t2c = w2c @ target
+                pts, normal = geo.apply(t2c, scn.plate_points), t2c[:3, 2]
+            normals = np.broadcast_to(normal, pts.shape)
+            biases.append(np.linalg.norm(circle_centre_bias(k, pts, normals, radius), axis=1))
+        b = np.concatenate(biases)
+        rows.append(
+            {
+                "target and views": name,
+                "radius_mm": radius,
+                "bias_rms_px": float(np.sqrt(np.mean(b**2))),
+                "bias_max_px": float(b.max()),
+            }
+        )
+    return pd.DataFrame(rows)
