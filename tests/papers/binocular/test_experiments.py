@@ -112,3 +112,14 @@ def test_factories_rebuild_the_same_experiment():
     assert ex.field_experiment(n_trials=2).name == "field"
     with pytest.raises(CalibrationError, match="n_trials"):
         ex.binocular_experiment(n_trials=0)
+
+
+def test_a_scenario_without_the_lens_rim_is_refused_by_name(scenario):
+    import copy
+    import dataclasses
+
+    config = copy.deepcopy(scenario.config)
+    del config["sensor"]["optics"]["rim_radius_mm"]
+    bare = dataclasses.replace(scenario, config=config)
+    with pytest.raises(CalibrationError, match=r"sensor.toml: missing key 'optics.rim_radius_mm'"):
+        ex.defocus_shift(bare, [800.0], tilts_deg=(0.0,))

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calstudy.core import geometry as geo
+from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import detect_centre, rectify_coc
@@ -134,26 +135,24 @@ def blur_spots(scenario: Scenario, centres_cam) -> tuple[np.ndarray, np.ndarray,
     opt = scenario.config["sensor"]["optics"]
     deltas = np.asarray(scenario.coc_radius_px(c[:, 2]), dtype=float).reshape(-1)
     sides = np.where(c[:, 2] >= opt["focus_distance_mm"], 1.0, -1.0)
-    centres, _ = optics.rim_shadow(
-        c[:, :2] / c[:, 2:3],
-        opt["f_number"],
-        scenario.focal_mm,
-        opt["rim_radius_mm"],
-        opt["rim_distance_mm"],
-    )
+    centres, _ = optics.rim_shadow(c[:, :2] / c[:, 2:3], *_rim_inputs(scenario))
     return deltas, sides, centres
+
+
+def _rim_inputs(scenario: Scenario) -> tuple[float, float, float, float]:
+    """F-number, focal length, rim radius and rim distance of ``sensor.toml [optics]``."""
+    sensor = scenario.config["sensor"]
+    return (
+        sensor["optics"]["f_number"],
+        scenario.focal_mm,
+        require(sensor, "optics.rim_radius_mm", "sensor.toml"),
+        require(sensor, "optics.rim_distance_mm", "sensor.toml"),
+    )
 
 
 def rim_radius(scenario: Scenario) -> float:
     """Radius of the lens rim's shadow on the entrance pupil, in pupil radii."""
-    opt = scenario.config["sensor"]["optics"]
-    _, r = optics.rim_shadow(
-        np.zeros(2),
-        opt["f_number"],
-        scenario.focal_mm,
-        opt["rim_radius_mm"],
-        opt["rim_distance_mm"],
-    )
+    _, r = optics.rim_shadow(np.zeros(2), *_rim_inputs(scenario))
     return float(r)
 
 
