@@ -56,6 +56,30 @@ def test_modification_removes_distance_errors(calibrator):
     assert np.abs(after).max() < 0.05 * np.abs(before).max()
 
 
+def test_modification_keeps_p7_and_p8_the_centroids(calibrator):
+    pts, _ = bino.solve_calibrator_layout(
+        calibrator["standard"]["distance_mm"], calibrator["standard"]["start_angle_deg"]
+    )
+    rng = np.random.default_rng(2)
+    measured = bino.with_virtual(pts[:6] + rng.normal(0, 0.05, (6, 3)))
+    pairs = bino.all_pairs(8)
+    standard = np.linalg.norm(pts[pairs[:, 0]] - pts[pairs[:, 1]], axis=1)
+    w = bino.virtual_weights()
+    np.testing.assert_allclose(w @ measured[:6], measured, atol=1e-12)
+    modified, delta = bino.modify_observed_error(measured, pairs, standard, combine=w)
+    # the virtual targets move with their three SBRs: still exactly their centroids
+    np.testing.assert_allclose(modified, bino.with_virtual(modified[:6]), atol=1e-9)
+    np.testing.assert_allclose(delta, w @ delta[:6], atol=1e-12)
+    before = bino.distances_to_p7(measured) - bino.distances_to_p7(pts)
+    after = bino.distances_to_p7(modified) - bino.distances_to_p7(pts)
+    assert np.abs(after).max() < 0.05 * np.abs(before).max()
+    # every point free is the identity combination
+    same, _ = bino.modify_observed_error(measured, pairs, standard, combine=np.eye(8))
+    np.testing.assert_allclose(same, bino.modify_observed_error(measured, pairs, standard)[0])
+    with pytest.raises(CalibrationError, match="combine must be"):
+        bino.modify_observed_error(measured, pairs, standard, combine=np.eye(6))
+
+
 def test_modification_needs_eight_distances():
     pts = np.random.default_rng(1).normal(0, 50, (8, 3))
     pairs = bino.all_pairs(8)[:7]

@@ -115,6 +115,16 @@ def with_virtual(points) -> np.ndarray:
     return np.concatenate([p, p7, p8], axis=-2)
 
 
+def virtual_weights() -> np.ndarray:
+    """``(8, 6)`` weights ``W`` with ``with_virtual(p) == W @ p``: P1-P6 themselves, P7 and P8
+    the centroids of their three targets."""
+    w = np.zeros((8, 6))
+    w[np.arange(6), np.arange(6)] = 1.0
+    w[6, list(P7_FROM)] = 1.0 / len(P7_FROM)
+    w[7, list(P8_FROM)] = 1.0 / len(P8_FROM)
+    return w
+
+
 def distances_to_p7(points8) -> np.ndarray:
     """Distances P1P7 ... P6P7 and P8P7 (Table 2's rows) of ``(..., 8, 3)`` points."""
     p = geo.check_finite("calibrator targets", points8)
@@ -239,7 +249,7 @@ def all_pairs(n: int) -> np.ndarray:
 
 
 def modify_observed_error(
-    points, pairs, standard_mm, rcond: float = 1e-3
+    points, pairs, standard_mm, rcond: float = 1e-3, combine=None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Modify measured target coordinates with the calibrator's standard distances (Eq. 23-25).
 
@@ -265,6 +275,11 @@ def modify_observed_error(
 
     rcond : float, default 1e-3
         Relative cut-off of the pseudo-inverse's singular values.
+    combine : (m, n) array, optional
+        Points that are combinations of ``n`` free ones, ``points == combine @ free`` (the
+        calibrator's virtual P7 and P8 are centroids: :func:`virtual_weights`). The unknowns are
+        then the free points' modifications (Eq. 25 by the chain rule) and every combined point
+        moves with them; ``points`` must satisfy the combination. Default: every point is free.
 
     Returns
     -------
@@ -308,7 +323,15 @@ def modify_observed_error(
     for axis in range(3):
         a[rows, 3 * pr[:, 0] + axis] = cosines[:, axis]
         a[rows, 3 * pr[:, 1] + axis] = -cosines[:, axis]
-    delta = (np.linalg.pinv(a, rcond=rcond) @ (std - length)).reshape(p.shape)
+    if combine is None:
+        delta = (np.linalg.pinv(a, rcond=rcond) @ (std - length)).reshape(p.shape)
+        return p + delta, delta
+    w = np.asarray(combine, dtype=float)
+    if w.ndim != 2 or w.shape[0] != p.shape[0]:
+        raise CalibrationError(f"combine must be ({p.shape[0]}, n), got {w.shape}")
+    a = a @ np.kron(w, np.eye(3))
+    delta_free = (np.linalg.pinv(a, rcond=rcond) @ (std - length)).reshape(-1, 3)
+    delta = w @ delta_free
     return p + delta, delta
 
 

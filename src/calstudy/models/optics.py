@@ -6,7 +6,9 @@ are :mod:`calstudy.estimators.coc`):
 - :func:`coc_radius_mm` and :func:`coc_radius_far_mm`: the radius of the circle of confusion of
   an object point off the focused distance (Eq. 4, and its far-field form Eq. 5);
 - :func:`render_dot`: the sharp image of a round dot on a plane (exact perspective and lens
-  distortion per pixel), :func:`defocus` (the Gaussian energy model of Eq. 7) and
+  distortion per pixel), :func:`defocus` (the Gaussian energy model of Eq. 7),
+  :func:`defocus_vignetted` (the same blur spot cut off axis by a lens rim: :func:`rim_shadow`,
+  :func:`defocus_kernel`) and
   :func:`expose` (exposure time, saturation, shot and read noise, 8-bit quantisation);
 - :func:`fuse_exposures`: exposure fusion with contrast and well-exposedness weights (Eq. 3).
 
@@ -266,6 +268,95 @@ def defocus(image, delta_px: float) -> np.ndarray:
     if delta_px < 0.05:
         return img.copy()
     return cv2.GaussianBlur(img, (0, 0), sigmaX=float(delta_px), borderType=cv2.BORDER_REPLICATE)
+
+
+# ----------------------------------------------------------------------------------------------
+# off-axis (vignetted) blur spots
+
+
+def rim_shadow(
+    field_tan, f_number: float, focal_mm: float, rim_radius_mm: float, rim_distance_mm: float
+):
+    """Where a lens rim cuts the entrance pupil for an off-axis object point, in pupil radii.
+
+    The entrance pupil has radius ``a = f / (2 F)``. A rim of radius ``R`` at ``L`` in front of
+    the pupil (towards the object; a rim behind it has ``L < 0``) lets through, from an object
+    point in the direction ``t = (X/Z, Y/Z)``, the rays whose pupil point ``p`` satisfies
+    ``|p + L t| <= R``: the transmitted pupil is the unit disc intersected with the disc of
+    radius ``R / a`` centred at ``-L t / a`` (the "cat's eye" of mechanical vignetting). On the
+    axis, or with a rim wider than ``a + L |t|``, nothing is cut.
+
+    Parameters
+    ----------
+    field_tan : (..., 2) array_like
+        ``(X/Z, Y/Z)`` of the object point(s) in the camera frame.
+    f_number, focal_mm : float
+        Aperture number and focal length (mm), > 0.
+    rim_radius_mm, rim_distance_mm : float
+        The rim's radius (> 0) and its axial distance in front of the entrance pupil, mm.
+
+    Returns
+    -------
+    centre : (..., 2) array
+        Centre of the rim's disc in pupil radii.
+    radius : float
+        Its radius in pupil radii.
+    """
+    if not (f_number > 0 and focal_mm > 0 and rim_radius_mm > 0 and math.isfinite(rim_distance_mm)):
+        raise CalibrationError(
+            f"F {f_number}, focal length {focal_mm} mm and rim radius {rim_radius_mm} mm must be "
+            f"positive and the rim distance {rim_distance_mm} mm finite"
+        )
+    a = focal_mm / (2.0 * f_number)
+    return -rim_distance_mm * np.asarray(field_tan, dtype=float) / a, rim_radius_mm / a
+
+
+def defocus_kernel(
+    delta_px: float, side: float = 1.0, rim_centre=(0.0, 0.0), rim_radius: float = math.inf
+):
+    """Blur spot of a defocused point (Eq. 7), cut by a lens rim (:func:`rim_shadow`).
+
+    A defocused point is imaged as the pupil scaled by the CoC radius ``delta`` px (a ray through
+    pupil point ``p``, in pupil radii, lands ``delta p`` from the chief ray), upright for a point
+    beyond the focused distance (``side = +1``) and inverted for a nearer one (``side = -1``);
+    the energy over the spot is the Gaussian of Eq. 7 (``sigma = delta``, the paper's model,
+    whose tail reaches beyond the geometric disc). Points of the spot whose pupil point lies
+    outside the rim's disc (centre ``rim_centre``, ``rim_radius`` in pupil radii) get no light.
+    Without a rim the kernel is the symmetric Gaussian of :func:`defocus`.
+
+    Returns
+    -------
+    (n, n) float32 array, n = 2 ceil(3 delta) + 1, summing to 1
+        ``k[j, i]``: the share of a point's energy landing ``(i - n//2, j - n//2)`` px from it.
+    """
+    if not (np.isfinite(delta_px) and delta_px > 0):
+        raise CalibrationError(f"circle-of-confusion radius {delta_px} px must be finite, > 0")
+    h = int(math.ceil(3.0 * delta_px))
+    y, x = np.mgrid[-h : h + 1, -h : h + 1].astype(np.float64)
+    k = np.exp(-(x * x + y * y) / (2.0 * delta_px**2))
+    if math.isfinite(rim_radius):
+        cx, cy = rim_centre
+        dist = np.hypot(side * x / delta_px - cx, side * y / delta_px - cy)
+        k *= np.clip(0.5 + (rim_radius - dist) * delta_px, 0.0, 1.0)  # one-pixel soft edge
+    total = k.sum()
+    if not total > 0:
+        raise CalibrationError("the rim blocks every ray of the blur spot")
+    return (k / total).astype(np.float32)
+
+
+def defocus_vignetted(image, delta_px: float, side: float, rim_centre, rim_radius: float):
+    """Blur an image by :func:`defocus_kernel` (a convolution); below 0.05 px the image is left
+    as it is, and without a cut the result is that of :func:`defocus`."""
+    img = np.asarray(image, dtype=np.float32)
+    if not np.isfinite(delta_px) or delta_px < 0:
+        raise CalibrationError(f"circle-of-confusion radius {delta_px} px must be finite, >= 0")
+    if delta_px < 0.05:
+        return img.copy()
+    if float(np.hypot(*rim_centre)) + 3.0 <= rim_radius:  # the rim clears the whole spot
+        return defocus(img, delta_px)
+    k = defocus_kernel(delta_px, side, rim_centre, rim_radius)
+    # filter2D correlates: flip the kernel to convolve
+    return cv2.filter2D(img, cv2.CV_32F, k[::-1, ::-1].copy(), borderType=cv2.BORDER_REPLICATE)
 
 
 def expose(

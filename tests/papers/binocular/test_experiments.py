@@ -18,11 +18,34 @@ def scenario():
     return load_scenario()
 
 
-def test_defocus_shift_grows_with_the_circle_of_confusion(scenario):
-    table = ex.defocus_shift(scenario, [850.0, 750.0])
+def test_defocus_shift_is_zero_in_focus_and_flips_sign_across_the_focus(scenario):
+    table = ex.defocus_shift(scenario, [850.0, 800.0, 900.0], tilts_deg=(0.0,))
     assert table["coc_radius_px"].iloc[0] == 0.0
-    assert table["fused_shift_px"].iloc[1] > 3 * table["fused_shift_px"].iloc[0]
-    assert table["fused_rectified_shift_px"].iloc[1] < table["fused_shift_px"].iloc[1]
+    # in focus, fronto-parallel: only pixel sampling (and the tiny eccentricity) act
+    assert table["shift_px"].iloc[0] < 0.05
+    near, far = table["radial_shift_px"].iloc[1], table["radial_shift_px"].iloc[2]
+    # the rim's cut moves a nearer dot outwards and a farther one inwards, by a share of delta
+    assert near > 0.2 and far < -0.2
+    assert abs(near) > 10 * table["shift_px"].iloc[0]
+
+
+def test_optics_trial_oracle_removes_the_defocus_error(scenario):
+    setup = ex.Setup(ex.with_optics(scenario, f_number=5.6), (), ())
+    rows = pd.DataFrame([ex.optics_trial(setup, np.random.default_rng(i)) for i in range(3)])
+    assert (rows["t2_oracle"] < rows["t2_without"]).all()
+    again = ex.optics_trial(setup, np.random.default_rng(0))
+    assert again == rows.iloc[0].to_dict()
+
+
+def test_with_optics_replaces_values_and_rejects_unknown_or_bad_ones(scenario):
+    s = ex.with_optics(scenario, f_number=4.0, dot_diameter_mm=3.0)
+    assert s.config["sensor"]["optics"]["f_number"] == 4.0
+    assert s.dot_radius_mm == 1.5
+    assert scenario.config["sensor"]["optics"]["f_number"] == 8.0  # the original is untouched
+    with pytest.raises(CalibrationError, match="unknown optics inputs"):
+        ex.with_optics(scenario, aperture=4.0)
+    with pytest.raises(CalibrationError, match="must be a positive number"):
+        ex.with_optics(scenario, f_number=-1.0)
 
 
 def small_setup(scenario):
@@ -89,3 +112,14 @@ def test_factories_rebuild_the_same_experiment():
     assert ex.field_experiment(n_trials=2).name == "field"
     with pytest.raises(CalibrationError, match="n_trials"):
         ex.binocular_experiment(n_trials=0)
+
+
+def test_a_scenario_without_the_lens_rim_is_refused_by_name(scenario):
+    import copy
+    import dataclasses
+
+    config = copy.deepcopy(scenario.config)
+    del config["sensor"]["optics"]["rim_radius_mm"]
+    bare = dataclasses.replace(scenario, config=config)
+    with pytest.raises(CalibrationError, match=r"sensor.toml: missing key 'optics.rim_radius_mm'"):
+        ex.defocus_shift(bare, [800.0], tilts_deg=(0.0,))

@@ -3,6 +3,8 @@ claims and controls are recomputed by the report functions (no simulation) and c
 
 from __future__ import annotations
 
+import json
+
 import pandas as pd
 import pytest
 from support import assert_same_table
@@ -10,6 +12,7 @@ from support import assert_same_table
 from calstudy.core.paths import RESULTS_DIR
 from calstudy.io.results import read_claims
 from calstudy.papers.binocular import report
+from calstudy.papers.binocular.scenario import published
 
 STEM = "04_binocular_correction"
 OUT = RESULTS_DIR / STEM
@@ -24,6 +27,7 @@ def frames():
 
 def _same(got: pd.DataFrame, name: str) -> None:
     assert_same_table(got, OUT / f"{name}.csv", atol=1e-8)  # pandas' default, as before
+
 
 def test_tables(frames):
     trials, field = frames
@@ -46,3 +50,19 @@ def test_claims_and_controls(frames):
     for col in ("reproduced", "ci_low", "ci_high", "replication_rate"):
         pd.testing.assert_series_equal(got[col], want[col], rtol=2e-5, check_dtype=False)
     _same(pd.DataFrame(controls), "controls")
+
+
+def test_optics_sweeps_and_the_calibrated_f_number():
+    if not (OUT / "trials_optics_sweep.csv").is_file():
+        pytest.skip("results/04_binocular_correction has no optics sweeps yet")
+    fsweep = pd.read_csv(OUT / "trials_fnumber_sweep.csv")
+    osweep = pd.read_csv(OUT / "trials_optics_sweep.csv")
+    fnumber = report.optics_sweep_table(fsweep, "f_number")
+    _same(fnumber, "fnumber_sweep")
+    _same(report.optics_sweep_table(osweep, "focus_distance_mm"), "focus_distance_sweep")
+    _same(report.optics_sweep_table(osweep, "dot_diameter_mm"), "dot_diameter_sweep")
+    assert (fnumber["n"] >= 30).all()
+    run = json.loads((OUT / "run.json").read_text())["parameters"]
+    target = published("calibrator", "table2_rmse")[0]
+    calibrated = report.calibrated_f_number(fnumber, target)
+    assert run["f_number"] == (calibrated if calibrated is not None else 8.0)

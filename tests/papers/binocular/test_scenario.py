@@ -40,7 +40,8 @@ def test_missing_key_names_the_file_and_the_key(tmp_path):
 
 def test_scenario_derived_values():
     s = scn.load_scenario()
-    assert s.focal_mm == pytest.approx(12058.0 * 0.0046)
+    v = 12058.0 * 0.0046  # lens-to-sensor distance; thin lens focused at 850 mm
+    assert s.focal_mm == pytest.approx(v * 850.0 / (v + 850.0))
     assert s.dot_radius_mm == 2.5
     assert s.coc_radius_px(850.0) == 0.0
     assert s.detection == {"low": 0.25, "high": 0.5, "min_points": 20}

@@ -8,12 +8,16 @@ flange poses the controller reports), so the sweeps share the trial's draws. The
 runs the oracle controls (the calibration views exposed again without defocus; the points
 triangulated with the exact cameras; Fig. 13 with the true hand-eye matrix). :func:`field_trial`
 is the field check of Section 4.3. :func:`binocular_experiment` and :func:`field_experiment` are
-the factories of :func:`calstudy.io.runs.run_experiments`. :func:`defocus_shift` is the
-noise-free study of how defocus moves a detected centre.
+the factories of :func:`calstudy.io.runs.run_experiments`. :func:`optics_trial` and
+:func:`optics_experiment` run Table 2 alone over the optics the paper does not state (F-number,
+focused distance, dot size: :func:`with_optics`). :func:`defocus_shift` is the noise-free study of
+how defocus moves a detected centre, against depth and tilt.
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import hashlib
 import json
 import math
@@ -102,7 +106,12 @@ def standard_to_p7(world: World) -> np.ndarray:
 
 def _modify(world: World, points8) -> np.ndarray:
     return np.array(
-        [bino.modify_observed_error(p, world.standard_pairs, world.standard_mm)[0] for p in points8]
+        [
+            bino.modify_observed_error(
+                p, world.standard_pairs, world.standard_mm, combine=bino.virtual_weights()
+            )[0]
+            for p in points8
+        ]
     )
 
 
@@ -314,12 +323,14 @@ def binocular_experiment(
     n_trials: int = 200,
     robot_scales=ROBOT_SCALES,
     calibration_scales=CALIBRATION_SCALES,
+    f_number: float | None = None,
 ) -> Experiment:
-    """The Monte Carlo of Tables 2-4 and Fig. 13 with both sweeps (:func:`binocular_trial`)."""
+    """The Monte Carlo of Tables 2-4 and Fig. 13 with both sweeps (:func:`binocular_trial`);
+    ``f_number`` replaces ``sensor.toml [optics] f_number`` (the calibrated value)."""
     if n_trials < 1:
         raise CalibrationError(f"n_trials is {n_trials}; need at least 1")
     setup = Setup(
-        _scenario(scenario_dir),
+        with_optics(_scenario(scenario_dir), f_number=f_number),
         tuple(float(r) for r in robot_scales),
         tuple(float(c) for c in calibration_scales),
     )
@@ -328,42 +339,136 @@ def binocular_experiment(
     )
 
 
-def field_experiment(scenario_dir: str = "", n_trials: int = 30) -> Experiment:
+def field_experiment(
+    scenario_dir: str = "", n_trials: int = 30, f_number: float | None = None
+) -> Experiment:
     """The Monte Carlo of Table 5 (:func:`field_trial`)."""
-    setup = Setup(_scenario(scenario_dir), (), ())
+    setup = Setup(with_optics(_scenario(scenario_dir), f_number=f_number), (), ())
     return Experiment("field", field_trial, setup, int(n_trials), scenario_key=scenario_key(setup))
+
+
+# ----------------------------------------------------------------------------------------------
+# optics sweeps: F-number, focused distance, dot size (Table 2 only)
+
+#: The optics a sweep point may change: key of the trial, table and key in the scenario files.
+OPTICS_KEYS = {
+    "f_number": ("sensor", "optics", "f_number"),
+    "focus_distance_mm": ("sensor", "optics", "focus_distance_mm"),
+    "dot_diameter_mm": ("calibrator", "sbr", "dot_diameter_mm"),
+}
+
+
+def with_optics(scenario: Scenario, **values) -> Scenario:
+    """A copy of ``scenario`` with some of :data:`OPTICS_KEYS` replaced (None keeps the file's
+    value); the layout, robot and frames are shared."""
+    values = {k: v for k, v in values.items() if v is not None}
+    unknown = set(values) - set(OPTICS_KEYS)
+    if unknown:
+        raise CalibrationError(
+            f"unknown optics inputs {sorted(unknown)}; known: {list(OPTICS_KEYS)}"
+        )
+    if not values:
+        return scenario
+    config = copy.deepcopy(scenario.config)
+    for key, value in values.items():
+        table, section, name = OPTICS_KEYS[key]
+        if not (math.isfinite(float(value)) and float(value) > 0):
+            raise CalibrationError(f"{key} is {value}; it must be a positive number")
+        config[table][section][name] = float(value)
+    return dataclasses.replace(scenario, config=config)
+
+
+def optics_trial(
+    setup: Setup,
+    rng,
+    f_number: float = 0.0,
+    focus_distance_mm: float = 0.0,
+    dot_diameter_mm: float = 0.0,
+) -> dict:
+    """Table 2 of one trial (steps (a)-(f)) with other optics (0: the scenario's value): the
+    RMSE of the seven distances to P7 without (``t2_without``) and with (``t2_with``) the
+    rectification, and with the calibration views exposed again without defocus
+    (``t2_oracle``), at the default errors."""
+    scenario = with_optics(
+        setup.scenario,
+        f_number=f_number or None,
+        focus_distance_mm=focus_distance_mm or None,
+        dot_diameter_mm=dot_diameter_mm or None,
+    )
+    imaging = Imaging()
+    world = draw_world(scenario, rng, imaging)
+    model = world.model(scenario, 1.0)
+    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    n_cal = scenario.config["station"]["poses"]["n_calibration"]
+    cal = view_calibrator(scenario, world, n_cal, rng, imaging, model)
+    sharp = reimage(scenario, cal, rng, Imaging(defocus=False), model)
+    std = standard_to_p7(world)
+    raw, rect = cal.points(model, tol)
+    sharp_raw, _ = sharp.points(model, tol)
+    row = {}
+    for label, pts in (("without", raw), ("with", rect), ("oracle", sharp_raw)):
+        d = bino.distances_to_p7(bino.with_virtual(pts)).mean(0)
+        row[f"t2_{label}"] = rmse(d - std)
+    return row
+
+
+def optics_experiment(
+    name: str, scenario_dir: str = "", n_trials: int = 30, points=(), f_number: float | None = None
+) -> Experiment:
+    """Table 2 at each point of an optics sweep (:func:`optics_trial`): ``points`` are mappings
+    of some of ``f_number``, ``focus_distance_mm``, ``dot_diameter_mm`` (missing: the
+    scenario's value, with ``f_number`` if given)."""
+    if n_trials < 1 or not points:
+        raise CalibrationError(f"an optics sweep needs points and n_trials >= 1 ({n_trials})")
+    setup = Setup(with_optics(_scenario(scenario_dir), f_number=f_number), (), ())
+    full = [{k: float(p.get(k, 0.0)) for k in OPTICS_KEYS} for p in points]
+    return Experiment(
+        name, optics_trial, setup, int(n_trials), points=full, scenario_key=scenario_key(setup)
+    )
 
 
 # ----------------------------------------------------------------------------------------------
 # defocus shift of a detected centre
 
 
-def defocus_shift(scenario: Scenario, depths_mm, tilt_deg: float = 20.0) -> pd.DataFrame:
+def defocus_shift(
+    scenario: Scenario, depths_mm, tilts_deg=(0.0, 20.0, 40.0), field_deg: float = 15.0
+) -> pd.DataFrame:
     """How defocus moves the detected centre of one dot, noise-free, without and with rectification.
 
-    A dot 10 deg off the left camera's axis (tilted ``tilt_deg`` about x) is rendered at each
-    depth with the CoC radius of Eq. 4; its centre is detected in the blurred image itself
-    (``blur_only``) and after two noise-free exposures (saturation and 8-bit quantisation kept)
-    fused by Eq. 3 (``fused``), each without and with rectification. The shift is the detected
-    minus the true image of the dot centre, px.
+    A dot ``field_deg`` off the left camera's axis (towards the image corner), tilted by each of
+    ``tilts_deg`` about the image's x axis, is rendered at each depth with its blur spot (the CoC
+    radius of Eq. 4 and the lens rim's cut, :func:`calstudy.papers.binocular.simulate.
+    blur_spots`), exposed twice without noise (saturation and 8-bit quantisation kept) and fused
+    (Eq. 3); its centre is detected without and with the rectification. The shift is the
+    detected minus the true image of the dot centre, px: its size, and its component along the
+    field direction (``radial``, > 0 away from the image centre). The row at the focused
+    distance gives the in-focus shift (perspective and pixel sampling alone).
     """
     camera = scenario.sensor.left
-    t = math.radians(tilt_deg)
-    normal = np.array([0.0, math.sin(t), -math.cos(t)])
     rng = np.random.default_rng(0)  # unused: no noise
+    direction = np.array([0.8, 0.6])
+    field = math.tan(math.radians(field_deg)) * direction
     rows = []
-    for z in depths_mm:
-        centre = float(z) * np.array([0.15, 0.1, 1.0])  # off-axis: vignetting and distortion act
-        delta = float(scenario.coc_radius_px(z))
-        uv, origin, blurred = render_blurred_dot(scenario, camera, centre, normal, delta)
-        fused = expose_and_fuse(scenario, blurred, rng, 0.0, math.inf)
-        row = {"depth_mm": float(z), "coc_radius_px": delta}
-        for label, img in (("blur_only", blurred), ("fused", fused)):
-            raw = detect_centre(img, origin, **scenario.detection) - uv
-            rect = rectified_centre(scenario, img, origin, delta) - uv
-            row[f"{label}_shift_u_px"] = raw[0]
-            row[f"{label}_shift_v_px"] = raw[1]
-            row[f"{label}_shift_px"] = float(np.hypot(*raw))
-            row[f"{label}_rectified_shift_px"] = float(np.hypot(*rect))
-        rows.append(row)
+    for tilt in tilts_deg:
+        t = math.radians(float(tilt))
+        normal = np.array([0.0, math.sin(t), -math.cos(t)])
+        for z in depths_mm:
+            centre = float(z) * np.array([field[0], field[1], 1.0])
+            uv, origin, blurred = render_blurred_dot(scenario, camera, centre, normal)
+            delta = float(scenario.coc_radius_px(z))
+            fused = expose_and_fuse(scenario, blurred, rng, 0.0, math.inf)
+            raw = detect_centre(fused, origin, **scenario.detection) - uv
+            rect = rectified_centre(scenario, fused, origin, delta) - uv
+            rows.append(
+                {
+                    "tilt_deg": float(tilt),
+                    "depth_mm": float(z),
+                    "coc_radius_px": delta,
+                    "shift_px": float(np.hypot(*raw)),
+                    "radial_shift_px": float(raw @ direction),
+                    "rectified_shift_px": float(np.hypot(*rect)),
+                    "rectified_radial_shift_px": float(rect @ direction),
+                }
+            )
     return pd.DataFrame(rows)

@@ -9,6 +9,7 @@ simulates. The default scenario is the row with robot and calibration scale 1.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pandas as pd
@@ -27,10 +28,8 @@ from calstudy.papers.binocular.scenario import Scenario, paper_table, published
 #: The error source each correction targets, named when its oracle control is not significant.
 MECHANISMS = {
     "binocular.coc": (
-        "a defocus error the rectification can act on (a symmetric Gaussian blur of a "
-        "symmetric dot barely moves an ellipse centre; an asymmetry coupled to defocus, e.g. "
-        "perspective eccentricity with blur at the Canny boundary, a non-uniform "
-        "retro-reflective dot, depth varying across a tilted dot, is not modelled)"
+        "a defocus error the rectification can act on (off-axis blur spots cut by the lens rim "
+        "move a defocused dot's centre; removing the defocus does not lower the RMSE here)"
     ),
     "binocular.observed_error": "an observed (camera-model) error that the modification can see",
     "binocular.transformation": "a hand-eye matrix error that dominates the Fig. 13 distances",
@@ -307,6 +306,32 @@ def verdicts(trials: pd.DataFrame, field: pd.DataFrame) -> dict:
     return out
 
 
+def result_text(claim) -> str:
+    """A claim row's figure for the chapter: median ratio, interval and replication rate, or,
+    without a figure (not testable), why not."""
+    if claim.reproduced is None or not np.isfinite(claim.reproduced):
+        return f"no figure is judged (oracle control {claim.oracle_control or 'absent'})"
+    return (
+        f"median ratio {claim.reproduced:.3g} [{claim.ci_low:.3g}, {claim.ci_high:.3g}], "
+        f"replication rate {claim.replication_rate:.2f}, N={claim.n}"
+    )
+
+
+def fig13_text(trials: pd.DataFrame) -> str:
+    """Fig. 13 and the hand-eye error of the default trials beside the paper's Fig. 13, as a
+    sentence (medians)."""
+    d = default(trials)
+    pub = published("station", "fig13_rmse")
+    return (
+        f"The preliminary matrix gives a Fig. 13 RMSE of {d['fig13_preliminary'].median():.3g} mm "
+        f"(the paper: {pub[0]:.3g} mm), the updated one {d['fig13_updated'].median():.3g} mm "
+        f"(the paper: {pub[1]:.3g} mm); the hand-eye error itself goes from "
+        f"{d['rot_err_preliminary_mrad'].median():.3g} to {d['rot_err_updated_mrad'].median():.3g} "
+        f"mrad in rotation and from {d['trans_err_preliminary_mm'].median():.3g} to "
+        f"{d['trans_err_updated_mm'].median():.3g} mm in translation."
+    )
+
+
 def _published_text(claim: str) -> str:
     if claim == "binocular.field":
         t5 = np.array(published("station", "table5_rmse"))
@@ -386,26 +411,27 @@ def sweep_table(trials: pd.DataFrame, sweep: str) -> pd.DataFrame:
 
 
 def shift_figure(table: pd.DataFrame, scenario: Scenario):
-    """Detected-centre shift against depth, without and with rectification."""
+    """Radial centre shift against depth for each tilt, without and with rectification."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
-    for label, name in (("fused", "fused exposures"), ("blur_only", "blur only")):
-        ax.plot(table["depth_mm"], table[f"{label}_shift_px"], "o-", label=f"{name}")
+    fig, ax = plt.subplots(figsize=(7.6, 3.8))
+    for i, (tilt, d) in enumerate(table.groupby("tilt_deg", sort=True)):
+        ax.plot(d["depth_mm"], d["radial_shift_px"], "o-", color=f"C{i}", label=f"tilt {tilt:g}°")
         ax.plot(
-            table["depth_mm"],
-            table[f"{label}_rectified_shift_px"],
+            d["depth_mm"],
+            d["rectified_radial_shift_px"],
             "s--",
-            label=f"{name}, rectified",
+            color=f"C{i}",
+            label=f"tilt {tilt:g}°, rectified",
         )
-    ax2 = ax.twinx()
-    ax2.plot(table["depth_mm"], table["coc_radius_px"], "k:")
-    ax2.set_ylabel("circle-of-confusion radius, dotted (px)")
-    focus = scenario.config["sensor"]["optics"]["focus_distance_mm"]
-    ax.set_xlabel(f"dot depth (mm); focused at {focus:g} mm")
-    ax.set_ylabel("centre shift (px)")
-    ax.set_title("Defocus shift of a detected dot centre (noise-free)")
-    ax.legend(loc="upper center", fontsize=8)
+    ax.axhline(0.0, color="grey", lw=0.8)
+    opt = scenario.config["sensor"]["optics"]
+    ax.set_xlabel(
+        f"dot depth (mm); focused at {opt['focus_distance_mm']:g} mm, f/{opt['f_number']:.2g}"
+    )
+    ax.set_ylabel("centre shift along the field (px)")
+    ax.set_title("Defocus shift of a detected dot centre, 15° off axis (noise-free)", fontsize=10)
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
     fig.tight_layout()
     return fig
 
@@ -420,10 +446,10 @@ def summary_figure(summary: pd.DataFrame):
     ax.errorbar(summary["ratio"], y, xerr=err, fmt="o", label="simulation (median, 95 % CI)")
     ax.plot(summary["published_ratio"], y, "r*", markersize=10, label="paper")
     ax.axvline(1.0, color="grey", lw=0.8)
-    ax.set_yticks(y, summary["step"], fontsize=7)
+    ax.set_yticks(y, summary["step"], fontsize=8)
     ax.set_xlabel("RMSE with / without the step")
     ax.invert_yaxis()
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.15), ncol=2)
     fig.tight_layout()
     return fig
 
@@ -432,14 +458,14 @@ def sweep_figure(sweep: pd.DataFrame, x: str, series, paper, xlabel: str, ylabel
     """Median RMSEs of a sweep against the swept scale ``x``, with the paper's values dotted."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    fig, ax = plt.subplots(figsize=(7.6, 3.6))
     for col, label in series:
         ax.plot(sweep[x], sweep[col], "o-", label=label)
     for i, (value, label) in enumerate(paper):
         ax.axhline(value, color=f"C{i}", ls=":", label=label)
-    ax.set_xlabel(xlabel)
+    ax.set_xlabel(xlabel, fontsize=9)
     ax.set_ylabel(ylabel)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
     fig.tight_layout()
     return fig
 
@@ -479,3 +505,107 @@ def calibration_sweep_figure(sweep: pd.DataFrame):
         "camera calibration error scale (x sensor.toml [calibration_uncertainty])",
         "RMSE of distances to P7 (mm, median)",
     )
+
+
+# ----------------------------------------------------------------------------------------------
+# optics: calibration of the F-number (rule 11) and sweeps
+
+#: The optics sweeps: trial column, label, unit.
+OPTICS = (
+    ("f_number", "F-number", ""),
+    ("focus_distance_mm", "focused distance", "mm"),
+    ("dot_diameter_mm", "dot diameter", "mm"),
+)
+
+
+def optics_sweep_table(sweep: pd.DataFrame, key: str) -> pd.DataFrame:
+    """Per value of ``key`` (the other optics at their default): N, median RMSEs of Table 2
+    without/with rectification and without defocus, the claim's ratio and its oracle's, and the
+    verdict of ``binocular.coc`` by the v2 rule (with the oracle gate) at that point."""
+    others = [k for k, _, _ in OPTICS if k != key]
+    sel = sweep
+    for k in others:
+        if k in sel:
+            sel = sel[sel[k] == 0.0]
+    rows = []
+    for value, d in sel.groupby(key, sort=True):
+        if key != "f_number" and value == 0.0:
+            continue
+        d = d.sort_values("trial")
+        v, _, oracle = _judged(d, "binocular.coc", "t2_without", "t2_with", "t2_oracle")
+        rows.append(
+            {
+                key: float(value),
+                "n": len(d),
+                "t2_without_mm": float(d["t2_without"].median()),
+                "t2_with_mm": float(d["t2_with"].median()),
+                "t2_oracle_mm": float(d["t2_oracle"].median()),
+                "coc_ratio": float((d["t2_with"] / d["t2_without"]).median()),
+                "oracle_ratio": oracle.effect_median,
+                "verdict_coc": v.verdict,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def calibrated_f_number(table: pd.DataFrame, target_mm: float) -> float | None:
+    """The F-number at which the median Table 2 RMSE without rectification meets ``target_mm``
+    (the paper's baseline), by log-log interpolation between the two points of the F-number
+    sweep ``table`` (:func:`optics_sweep_table`) that bracket it; None if none do."""
+    t = table.sort_values("f_number")
+    f = np.log(t["f_number"].to_numpy())
+    y = np.log(t["t2_without_mm"].to_numpy())
+    goal = math.log(target_mm)
+    for i in range(len(t) - 1):
+        lo, hi = sorted((y[i], y[i + 1]))
+        if lo <= goal <= hi and y[i] != y[i + 1]:
+            w = (goal - y[i]) / (y[i + 1] - y[i])
+            return float(round(math.exp(f[i] + w * (f[i + 1] - f[i])), 2))
+    return None
+
+
+def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit: str) -> str:
+    """One sentence: the verdict of ``claim`` along a sweep (column ``key`` of ``table``, verdicts
+    in ``verdict_<name>``) and where it changes."""
+    vals = table[key].to_numpy()
+    verdicts = table[f"verdict_{claim.split('.')[1]}"].tolist()
+
+    def fmt(x):
+        if key == "f_number":
+            return f"f/{x:g}"
+        return f"{x:g}{unit}" if unit == "x" else f"{x:g} {unit}"
+
+    if len(set(verdicts)) == 1:
+        return (
+            f"Over the {label} sweep ({fmt(vals[0])} to {fmt(vals[-1])}) {claim} stays "
+            f"{verdicts[0]}."
+        )
+    parts = [f"{verdicts[0]} at {fmt(vals[0])}"]
+    for i in range(1, len(vals)):
+        if verdicts[i] != verdicts[i - 1]:
+            parts.append(f"{verdicts[i]} from {fmt(vals[i])}")
+    return f"Along the {label} sweep {claim} is " + ", ".join(parts) + "."
+
+
+def optics_sweep_figure(tables: dict, target_mm: float):
+    """Median Table 2 RMSE without / with rectification and without defocus against each optics
+    input (one panel each), with the paper's baseline dotted."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(OPTICS), figsize=(7.8, 3.0), sharey=True)
+    for ax, (key, label, unit) in zip(axes, OPTICS, strict=True):
+        t = tables[key]
+        for col, name, style in (
+            ("t2_without_mm", "without rectification", "o-"),
+            ("t2_with_mm", "with rectification", "s--"),
+            ("t2_oracle_mm", "defocus off (oracle)", "^:"),
+        ):
+            ax.plot(t[key], t[col], style, label=name)
+        ax.axhline(target_mm, color="k", ls=":", lw=0.8, label="paper, without rectification")
+        ax.set_xlabel(f"{label} ({unit})" if unit else label, fontsize=9)
+        ax.tick_params(labelsize=8)
+    axes[0].set_ylabel("Table 2 RMSE (mm, median)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=7, bbox_to_anchor=(0.5, 0.0))
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
+    return fig

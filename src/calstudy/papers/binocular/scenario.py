@@ -68,8 +68,15 @@ class Scenario:
 
     @property
     def focal_mm(self) -> float:
-        """Focal length of the left camera, mm (``fx`` times the pixel pitch)."""
-        return float(self.sensor.left.fx * self.config["sensor"]["image"]["pixel_pitch_mm"])
+        """Focal length of the left camera, mm, by the thin-lens equation.
+
+        ``fx`` times the pixel pitch is the lens-to-sensor distance ``v`` of a lens focused at
+        ``d_A`` (``sensor.toml [optics] focus_distance_mm``), not the focal length:
+        ``1/f = 1/v + 1/d_A``, ``f = v d_A / (v + d_A)``.
+        """
+        v = float(self.sensor.left.fx * self.config["sensor"]["image"]["pixel_pitch_mm"])
+        d_a = float(self.config["sensor"]["optics"]["focus_distance_mm"])
+        return v * d_a / (v + d_a)
 
     @property
     def dot_radius_mm(self) -> float:

@@ -3,9 +3,10 @@
 The simulated world moves a "true" robot that differs from the nominal model by the robot file's
 tolerances, and images through "true" cameras that differ from Table 1 by the calibration
 uncertainty of ``sensor.toml``. Each dot is rendered in a region of interest (ROI) of both
-cameras: exact perspective and distortion, circle of confusion (Eq. 4, 7), two exposures fused
-(Eq. 3), sensor noise; its centre is detected (Eq. 12), with and without the rectification
-(Eq. 8-11), and triangulated with the calibrated sensor (Eq. 1).
+cameras: exact perspective and distortion, circle of confusion (Eq. 4, 7) with the blur spot cut
+off axis by a lens rim (:func:`blur_spots`), two exposures fused (Eq. 3), sensor noise; its centre
+is detected (Eq. 12), with and without the rectification (Eq. 8-11), and triangulated with the
+calibrated sensor (Eq. 1).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calstudy.core import geometry as geo
+from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import detect_centre, rectify_coc
@@ -121,19 +123,70 @@ class Imaging:
     defocus: bool = True
 
 
-def render_blurred_dot(scenario: Scenario, camera: PinholeCamera, centre, normal, delta_px):
+def blur_spots(scenario: Scenario, centres_cam) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The blur spot of each dot (camera frame, ``(m, 3)`` mm): CoC radius (Eq. 4, px), the side
+    of the focused distance (+1 beyond, -1 nearer) and the centre of the lens rim's shadow on the
+    pupil (:func:`calstudy.models.optics.rim_shadow`, ``sensor.toml [optics]``), and its radius.
+
+    Returns ``(deltas (m,), sides (m,), rim_centres (m, 2))``; the rim radius is
+    :func:`rim_radius`.
+    """
+    c = np.asarray(centres_cam, dtype=float).reshape(-1, 3)
+    opt = scenario.config["sensor"]["optics"]
+    deltas = np.asarray(scenario.coc_radius_px(c[:, 2]), dtype=float).reshape(-1)
+    sides = np.where(c[:, 2] >= opt["focus_distance_mm"], 1.0, -1.0)
+    centres, _ = optics.rim_shadow(c[:, :2] / c[:, 2:3], *_rim_inputs(scenario))
+    return deltas, sides, centres
+
+
+def _rim_inputs(scenario: Scenario) -> tuple[float, float, float, float]:
+    """F-number, focal length, rim radius and rim distance of ``sensor.toml [optics]``."""
+    sensor = scenario.config["sensor"]
+    return (
+        sensor["optics"]["f_number"],
+        scenario.focal_mm,
+        require(sensor, "optics.rim_radius_mm", "sensor.toml"),
+        require(sensor, "optics.rim_distance_mm", "sensor.toml"),
+    )
+
+
+def rim_radius(scenario: Scenario) -> float:
+    """Radius of the lens rim's shadow on the entrance pupil, in pupil radii."""
+    _, r = optics.rim_shadow(np.zeros(2), *_rim_inputs(scenario))
+    return float(r)
+
+
+def blur(scenario: Scenario, sharp, deltas, sides, rim_centres) -> np.ndarray:
+    """Defocus ``m`` sharp ROIs ``(m, rows, cols)``, each by its own blur spot (Eq. 7 with the
+    rim's cut, :func:`calstudy.models.optics.defocus_vignetted`)."""
+    r = rim_radius(scenario)
+    return np.stack(
+        [
+            optics.defocus_vignetted(img, d, s, c, r)
+            for img, d, s, c in zip(sharp, deltas, sides, rim_centres, strict=True)
+        ]
+    )
+
+
+def render_blurred_dot(scenario: Scenario, camera: PinholeCamera, centre, normal, delta_px=None):
     """Sharp image of a dot (camera frame: ``centre`` mm, unit ``normal``) in an ROI around
-    it, blurred by the circle of confusion ``delta_px`` (Eq. 7).
+    it, blurred by its blur spot (:func:`blur_spots`; ``delta_px`` overrides the CoC radius,
+    0: in focus).
 
     Returns ``(uv, origin, blurred)``: the projected centre ``(2,)`` px, the ROI's top-left
     pixel and the ROI.
     """
-    uv = camera.project(np.asarray(centre, dtype=float).reshape(1, 3))[0]
+    centre = np.asarray(centre, dtype=float)
+    uv = camera.project(centre.reshape(1, 3))[0]
+    deltas, sides, rims = blur_spots(scenario, centre)
+    if delta_px is not None:
+        deltas = np.array([float(delta_px)])
     radius = scenario.dot_radius_mm
     r_px = radius * camera.fx / centre[2]
-    origin, shape = optics.roi_around(uv, r_px, 4.0 * delta_px + 10.0, camera.width, camera.height)
+    margin = 4.0 * float(deltas[0]) + 10.0
+    origin, shape = optics.roi_around(uv, r_px, margin, camera.width, camera.height)
     sharp = optics.render_dot(camera.K, camera.dist_coeffs, centre, normal, radius, origin, shape)
-    return uv, origin, optics.defocus(sharp, delta_px)
+    return uv, origin, blur(scenario, sharp[None], deltas, sides, rims)[0]
 
 
 def expose_and_fuse(
@@ -163,12 +216,12 @@ def render_rois(scenario, camera: PinholeCamera, centres_cam, normals_cam):
     """Sharp ROIs of ``m`` dots in one camera, one ROI shape for all, large enough for each dot
     with the margin its circle of confusion (Eq. 4) needs.
 
-    Returns ``(sharp, origins, deltas)``: the ``(m, rows, cols)`` ROIs, their top-left pixels
-    ``(m, 2)`` and the true CoC radii ``(m,)``.
+    Returns ``(sharp, origins, spots)``: the ``(m, rows, cols)`` ROIs, their top-left pixels
+    ``(m, 2)`` and the true blur spots of :func:`blur_spots` (CoC radii, sides, rim centres).
     """
     centres = np.asarray(centres_cam, dtype=float)
     depth = centres[:, 2]
-    deltas = np.asarray(scenario.coc_radius_px(depth), dtype=float).reshape(-1)
+    deltas, sides, rims = blur_spots(scenario, centres)
     uv = camera.project(centres)
     r_px = float(np.max(scenario.dot_radius_mm * camera.fx / depth))
     margin = float(np.max(4.0 * deltas)) + 10.0
@@ -183,7 +236,7 @@ def render_rois(scenario, camera: PinholeCamera, centres_cam, normals_cam):
         origins,
         rois[0][1],
     )
-    return sharp, origins, deltas
+    return sharp, origins, (deltas, sides, rims)
 
 
 def image_dots(
@@ -199,9 +252,9 @@ def image_dots(
     """
     if rendered is None:
         rendered = render_rois(scenario, camera, centres_cam, normals_cam)
-    sharp, origins, true_deltas = rendered
+    sharp, origins, (true_deltas, sides, rims) = rendered
     deltas = true_deltas if imaging.defocus else np.zeros(len(true_deltas))
-    blurred = np.stack([optics.defocus(img, d) for img, d in zip(sharp, deltas, strict=True)])
+    blurred = blur(scenario, sharp, deltas, sides, rims)
     if not imaging.noise:
         return blurred, origins, deltas, rendered
     noise = scenario.config["sensor"]["noise"]
