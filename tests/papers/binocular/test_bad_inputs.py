@@ -51,6 +51,12 @@ CASES = [
      r"optics\.f_number: missing \(required\); optics\.f_nmber = 8\.0: unknown key"),
     ("negative focus distance", "sensor", "focus_distance_mm = 850.0", "focus_distance_mm = -850.0",
      r"optics\.focus_distance_mm = -850\.0: must be > 0"),
+    ("negative lens rim", "sensor", "rim_radius_mm = 12.0", "rim_radius_mm = -12.0",
+     r"optics\.rim_radius_mm = -12\.0: must be > 0"),
+    ("lens rim in metres", "sensor", "rim_distance_mm = 40.0", "rim_distance_mm = 4000.0",
+     r"optics\.rim_distance_mm = 4000\.0: must be >= -1000 and <= 1000"),
+    ("no lens rim", "sensor", "rim_radius_mm = 12.0\n", "",
+     r"optics\.rim_radius_mm: missing \(required\)"),
     ("no exposure time", "sensor", "times_ms = [100.0, 70.0]", "times_ms = []",
      r"exposure\.times_ms = \[\]: must have at least 1 entries, not 0"),
     ("32-bit output", "sensor", "bits = 8", "bits = 32", r"exposure\.bits = 32: must be >= 1 and <= 16"),
@@ -139,7 +145,7 @@ CASES = [
     ("observation distance in metres", "station", "observation_distance_mm = 850.0", "observation_distance_mm = 0.85",
      r"poses\.observation_distance_mm = 0\.85: must be >= 10"),
     ("focus inside the focal length", "sensor", "focus_distance_mm = 850.0", "focus_distance_mm = 50.0",
-     r"optics\.focus_distance_mm = 50\.0 is not beyond the focal length 55\.47 mm"),
+     r"optics\.focus_distance_mm = 50\.0 is not beyond the lens-to-sensor distance 55\.47 mm"),
     ("distance names repeated", "calibrator", 'names = ["P1P7", "P2P7"', 'names = ["P1P7", "P1P7"',
      r"standard\.names = .*distance names repeated: \['P1P7'\]"),
     ("region names repeated", "station", 'regions = ["Region 1", "Region 2", "Region 3"]', 'regions = ["Region 1", "Region 1", "Region 3"]',
@@ -222,7 +228,7 @@ def test_own_folder_without_published_tables(tmp_path):
     """A folder describing your own cell needs no [published] table."""
     for table in scn.TABLES:
         text = TEXT[table]
-        cut = text.find("[published]")
+        cut = text.find("\n[published]")
         (tmp_path / f"{table}.toml").write_text(text if cut < 0 else text[:cut])
     own = scn.load_scenario(tmp_path)
     assert np.array_equal(own.layout, scn.load_scenario().layout)

@@ -147,6 +147,12 @@ class Optics(Documented):
 
     f_number: Annotated[float, Field(ge=0.5, le=128, allow_inf_nan=False)]
     focus_distance_mm: PositiveFinite
+    #: which published baseline the notebook calibrates the f-number to (text, for the reader)
+    calibrate_f_number_to: str = ""
+    #: the lens rim that cuts the pupil for off-axis points (mechanical vignetting), in mm
+    rim_radius_mm: PositiveFinite
+    #: its distance in front of the entrance pupil (negative: behind it), in mm
+    rim_distance_mm: Annotated[float, Field(ge=-1000, le=1000, allow_inf_nan=False)]
 
 
 class Exposure(Documented):
@@ -221,12 +227,13 @@ class SensorFile(Documented):
     detection: Detection
 
     @model_validator(mode="after")
-    def _focus_beyond_focal_length(self) -> SensorFile:
-        focal = self.left.fx * self.image.pixel_pitch_mm
-        if self.optics.focus_distance_mm <= focal:
+    def _focus_beyond_image_distance(self) -> SensorFile:
+        image_distance = self.left.fx * self.image.pixel_pitch_mm
+        if self.optics.focus_distance_mm <= image_distance:
             raise ValueError(
                 f"optics.focus_distance_mm = {self.optics.focus_distance_mm} is not beyond the "
-                f"focal length {focal:.4g} mm (left.fx x image.pixel_pitch_mm); Eq. 4 needs it"
+                f"lens-to-sensor distance {image_distance:.4g} mm (left.fx x "
+                "image.pixel_pitch_mm): a measuring camera images at a magnification below 1"
             )
         return self
 
