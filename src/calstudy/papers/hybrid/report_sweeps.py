@@ -66,22 +66,23 @@ def _verdict_or_reason(make):
         return None
 
 
-def summarise_ranges(trials: pd.DataFrame) -> pd.DataFrame:
-    """The move-range sweep (:func:`handeye_ranges_experiment`): per range and value the median
-    hand-eye ratio with its 95 % confidence interval, the 95th percentile, the share of trials
-    within the bound and the ``hybrid.handeye`` verdict by its rule."""
-    ratios = handeye_ratios(trials, ["parameter", "value"])
+def summarise_handeye_sweep(trials: pd.DataFrame, keys) -> pd.DataFrame:
+    """A hand-eye sweep (sensor noise only): per value of ``keys`` the median hand-eye ratio with
+    its 95 % confidence interval, the 95th percentile, the ML's median ratio and the
+    ``hybrid.handeye`` verdict by its rule on that value's trials."""
+    keys = list(keys)
+    ratios = handeye_ratios(trials, keys)
     rows = []
-    for (name, value), sub in ratios.groupby(["parameter", "value"], sort=False):
+    for key, sub in ratios.groupby(keys, sort=True):
         v = _verdict_or_reason(
             lambda s=sub: judge(
                 s["sphere"], kind="bound", direction="lower", bound=CRB_MULTIPLE, min_trials=30
             )
         )
+        row = dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True))
         rows.append(
-            {
-                "parameter": name,
-                "value_mm": value,
+            row
+            | {
                 "trials": len(sub),
                 "median_ratio": float(np.median(sub["sphere"])),
                 "ci_low": np.nan if v is None else v.ci_low,
@@ -92,6 +93,13 @@ def summarise_ranges(trials: pd.DataFrame) -> pd.DataFrame:
             }
         )
     return pd.DataFrame(rows)
+
+
+def summarise_ranges(trials: pd.DataFrame) -> pd.DataFrame:
+    """The move-range sweep (``handeye_ranges_experiment``): :func:`summarise_handeye_sweep` per
+    range and value (mm)."""
+    out = summarise_handeye_sweep(trials, ["parameter", "value"])
+    return out.rename(columns={"value": "value_mm"})
 
 
 def where_verdict_changes(values, verdicts, default, what: str, unit: str = "") -> str:
