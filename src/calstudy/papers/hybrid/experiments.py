@@ -56,6 +56,7 @@ from calstudy.papers.hybrid.scenario import (
     load_features,
     load_production,
     load_scenario,
+    load_station,
 )
 from calstudy.papers.hybrid.simulate import (
     HybridStation,
@@ -224,14 +225,20 @@ def rps_trial(
 # trial functions and factories of notebook 01
 
 
-def stationary_run(setup: dict, rng: np.random.Generator, scenario: str = "station") -> list[dict]:
+def stationary_run(
+    setup: dict,
+    rng: np.random.Generator,
+    scenario: str = "station",
+    pixel_sigma: float | None = None,
+) -> list[dict]:
     """One station: the sphere hand-eye (4 + 6 moves), the ten stationary sensors by Eq. 23 and
     the 3-2-1 frame from the calibrated sensors A, B, C.
 
-    Rows with ``step == "stationary"``: ``sensor, variant`` and the errors of
-    :func:`stationary_trial`; rows with ``step == "rps"``: the columns of :func:`rps_trial`.
+    ``pixel_sigma`` overrides the hole-centre noise of ``station.toml`` (px). Rows with
+    ``step == "stationary"``: ``sensor, variant`` and the errors of :func:`stationary_trial`;
+    rows with ``step == "rps"``: the columns of :func:`rps_trial`.
     """
-    station = make_station(rng, **_check_scenario(scenario))
+    station = make_station(rng, pixel_sigma=pixel_sigma, **_check_scenario(scenario))
     meas, _ = simulate_sphere_measurements(station, *paper_moves(station), rng)
     s2f = sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
     rows = stationary_trial(station, s2f, rng)
@@ -245,6 +252,16 @@ def stationary_experiment(n_trials: int = 200) -> Experiment:
     """Stationary sensors and the 3-2-1 frame in both scenarios (points ``scenario``)."""
     points = [{"scenario": name} for name in SCENARIOS]
     return Experiment("stationary", stationary_run, {"version": 3}, n_trials, points)
+
+
+def stationary_pixel_experiment(pixel_sigmas=None, n_trials: int = 30) -> Experiment:
+    """The stationary sensors against the hole-centre noise (px), sensor noise only (the
+    scenario of the verdict). Default values: ``[cameras] pixel_sigmas`` of ``station.toml``."""
+    values = load_station()["cameras"]["pixel_sigmas"] if pixel_sigmas is None else pixel_sigmas
+    if len(values) == 0:
+        raise CalibrationError("no pixel noise values to sweep; give at least one")
+    points = [{"scenario": "sensor noise only", "pixel_sigma": float(v)} for v in values]
+    return Experiment("stationary_pixel", stationary_run, {"version": 3}, n_trials, points)
 
 
 def rps_penalty_run(setup: dict, rng: np.random.Generator) -> list[dict]:

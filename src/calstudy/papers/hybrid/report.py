@@ -21,9 +21,11 @@ from calstudy.papers.hybrid.compensation import analyse_run
 from calstudy.papers.hybrid.report_sweeps import (
     CHI2_CRITICAL,
     CRB_MULTIPLE,
+    ML_MULTIPLE,
     bin_distance,
     chi_square_distance,
     kolmogorov_bound,
+    stationary_ratios,
 )
 from calstudy.papers.hybrid.scenario import (
     AXES,
@@ -93,9 +95,6 @@ def nominal_model_cost(handeye_summary, stationary_summary):
 #: model, which is the whole noise model only there (the station scenario adds the robot's pose
 #: error, which the ML does not model: it is not judged there)
 VERDICT_SCENARIO = "sensor noise only"
-#: "works" criterion of hybrid.stationary: the homography chain's field error at most this
-#: multiple of the PnP chain's (maximum likelihood for the pixel noise) on the same images
-ML_MULTIPLE = 1.5
 
 
 def handeye_figures(handeye: pd.DataFrame) -> pd.DataFrame:
@@ -111,21 +110,9 @@ def handeye_figures(handeye: pd.DataFrame) -> pd.DataFrame:
 
 
 def stationary_figures(stationary: pd.DataFrame) -> pd.DataFrame:
-    """Per trial of :data:`VERDICT_SCENARIO`: the RMS field error over the ten sensors of each
-    variant and the ratio homography / PnP of the images-only chains."""
-    sub = stationary[(stationary["scenario"] == VERDICT_SCENARIO)]
-    sub = sub[sub["step"] == "stationary"]
-    rms = sub.groupby(["trial", "variant"])["field_error_mm"].apply(
-        lambda v: float(np.sqrt(np.mean(v**2)))
-    )
-    wide = rms.unstack("variant")
-    wide["ratio"] = wide["images only, homography"] / wide["images only, pnp"]
-    wide["ratio_full_chain"] = wide["homography"] / wide["pnp"]
-    # null control: the design pose (no calibration) against the same PnP chain; oracle: both
-    # chains with the target's errors removed (exact holes and back-to-front transform)
-    wide["null"] = wide["design pose"] / wide["images only, pnp"]
-    wide["oracle"] = wide["exact target, homography"] / wide["exact target, pnp"]
-    return wide.reset_index()
+    """Per trial of :data:`VERDICT_SCENARIO`: the ratios of
+    :func:`calstudy.papers.hybrid.report_sweeps.stationary_ratios`."""
+    return stationary_ratios(stationary[stationary["scenario"] == VERDICT_SCENARIO])
 
 
 def calibration_claims(handeye, stationary, notebook: str):

@@ -102,6 +102,56 @@ def summarise_ranges(trials: pd.DataFrame) -> pd.DataFrame:
     return out.rename(columns={"value": "value_mm"})
 
 
+#: "works" criterion of hybrid.stationary: the homography chain's field error at most this
+#: multiple of the PnP chain's (maximum likelihood for the pixel noise) on the same images
+ML_MULTIPLE = 1.5
+
+
+def stationary_ratios(stationary: pd.DataFrame, keys=()) -> pd.DataFrame:
+    """Per trial (and value of ``keys``): the RMS field error over the ten sensors of each
+    variant, the claim's ratio homography / PnP (images only), the same with the calibrated
+    hand-eye and reported poses (``ratio_full_chain``), the null control (design pose / PnP)
+    and the oracle control (both chains with an exact target)."""
+    keys = list(keys)
+    sub = stationary[stationary["step"] == "stationary"]
+    rms = sub.groupby(keys + ["trial", "variant"])["field_error_mm"].apply(
+        lambda v: float(np.sqrt(np.mean(v**2)))
+    )
+    wide = rms.unstack("variant")
+    wide["ratio"] = wide["images only, homography"] / wide["images only, pnp"]
+    wide["ratio_full_chain"] = wide["homography"] / wide["pnp"]
+    wide["null"] = wide["design pose"] / wide["images only, pnp"]
+    wide["oracle"] = wide["exact target, homography"] / wide["exact target, pnp"]
+    return wide.reset_index()
+
+
+def summarise_stationary_sweep(stationary: pd.DataFrame, key: str) -> pd.DataFrame:
+    """A stationary-sensor sweep: per value of ``key`` the median ratio of the claim with its
+    95 % confidence interval, the 95th percentile, the oracle's median ratio and the
+    ``hybrid.stationary`` verdict by its rule on that value's trials."""
+    ratios = stationary_ratios(stationary, [key])
+    rows = []
+    for value, sub in ratios.groupby(key, sort=True):
+        v = _verdict_or_reason(
+            lambda s=sub: judge(
+                s["ratio"], kind="bound", direction="lower", bound=ML_MULTIPLE, min_trials=30
+            )
+        )
+        rows.append(
+            {
+                key: float(value),
+                "trials": len(sub),
+                "median_ratio": float(np.median(sub["ratio"])),
+                "ci_low": np.nan if v is None else v.ci_low,
+                "ci_high": np.nan if v is None else v.ci_high,
+                "p95_ratio": float(np.quantile(sub["ratio"], 0.95)),
+                "oracle_median_ratio": float(np.median(sub["oracle"])),
+                "verdict": "too few trials" if v is None else v.verdict,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
 def where_verdict_changes(values, verdicts, default, what: str, unit: str = "") -> str:
     """One sentence: the verdict at the default value of a swept assumption and the values
     between which it changes (``values`` ascending, one verdict each)."""

@@ -105,6 +105,8 @@ class Cameras(Documented):
     width: PositiveInt
     height: PositiveInt
     pixel_sigma: NonNegativeFinite
+    #: the values of the hole-centre noise swept by notebook 01
+    pixel_sigmas: Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
     @model_validator(mode="after")
     def _centre_in_image(self) -> Cameras:
