@@ -24,6 +24,7 @@ from calstudy.papers.hybrid.report_sweeps import (
     ML_MULTIPLE,
     bin_distance,
     chi_square_distance,
+    deviation_verdicts,
     kolmogorov_bound,
     stationary_ratios,
 )
@@ -391,7 +392,7 @@ def headline_summary(trials: pd.DataFrame) -> pd.DataFrame:
 def summarise_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
     """Median and 95 % interval of the two headline shares and of the Kolmogorov distance of
     the correlation bins per assumption and value, with the verdict of ``hybrid.correlation``
-    (its rule, on that value's trials) and of the deviation share's magnitude."""
+    and of ``hybrid.deviation`` (their rules, on that value's trials)."""
     rows = []
     for (name, value), sub in sweep.groupby(["parameter", "value"], sort=False):
         row = {"parameter": name, "value": value, "trials": len(sub)}
@@ -399,6 +400,7 @@ def summarise_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
         row["correlation_verdict"] = _verdict_text(
             lambda s=sub, b=bound: judge(s["r_distance"], kind="bound", direction="lower", bound=b)
         )
+        row["deviation_verdict"] = _verdict_text(lambda s=sub: deviation_verdicts(s)[0])
         for col in ("within_0p3", "r_above_0p7", "r_distance"):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
         rows.append(row)
