@@ -11,7 +11,7 @@ from calstudy.core import geometry as geo
 from calstudy.core import montecarlo
 from calstudy.estimators import handeye as he
 from calstudy.estimators import sphere_csv
-from calstudy.papers.hybrid import experiments, scenario, simulate
+from calstudy.papers.hybrid import experiments, handeye_experiments, scenario, simulate
 
 
 def test_noise_free_station_recovers_everything_exactly():
@@ -21,9 +21,13 @@ def test_noise_free_station_recovers_everything_exactly():
     assert geo.rotation_error(s2f, s.sensor2flange_true) < 1e-9
     assert geo.translation_error(s2f, s.sensor2flange_true) < 1e-7
     rows = experiments.stationary_trial(s, s2f, rng)
-    worst_rot = max(r["rotation_error_deg"] for r in rows)
-    worst_trans = max(r["translation_error_mm"] for r in rows)
+    calibrations = [r for r in rows if r["variant"] != "design pose"]
+    worst_rot = max(r["rotation_error_deg"] for r in calibrations)
+    worst_trans = max(r["translation_error_mm"] for r in calibrations)
     assert worst_rot < 1e-6 and worst_trans < 1e-6
+    # the sensors sit off their design pose by the mounting error, which only a calibration finds
+    design = [r["field_error_mm"] for r in rows if r["variant"] == "design pose"]
+    assert len(design) == 10 and min(design) > 0.05
     calibrated = np.array([r["estimate"] for r in rows if r["variant"] == "homography"])
     s = simulate.with_overrides(s, datum_sigma=0.0)
     for r in experiments.rps_trial(s, calibrated, rng, penalties=(1.0, 1e4)):
@@ -81,3 +85,36 @@ def test_robot_error_sweep_scales_the_systematic_error_of_the_same_stations():
     assert (np.diff(sweep["systematic_coord_median_mm"]) > 0).all()
     assert (np.diff(sweep["within_0p3_uncompensated"]) < 0).all()
     assert np.ptp(sweep["within_0p3"]) <= 2.0
+
+
+def test_move_ranges_bound_the_pure_translations_and_refuse_a_stripe_across_the_centre():
+    s, _ = ideal_station(seed=5)
+    ref = s.sphere_reference_pose()
+    for span, across in ((5.0, 0.5), (60.0, 3.0)):
+        st = handeye_experiments.with_move_ranges(s, span, across)
+        q_t, _ = st.sphere_moves(40, 2, rng(6))
+        shifts = s.nominal.fk_many(q_t)[:, :3, 3] - s.nominal.fk_many(q_t[:1])[:, :3, 3]
+        in_sensor = shifts @ ref[:3, :3]  # base -> sensor axes (the reference orientation)
+        assert np.all(np.abs(in_sensor) <= np.array([span, across, span]) + 1e-6)
+        assert np.abs(in_sensor[:, 0]).max() > 0.5 * span  # the range is used, not ignored
+    # across the laser plane beyond the stripe offset (R/4 = 3.2 mm) the centre changes side
+    st = handeye_experiments.with_move_ranges(s, None, 12.0)
+    with pytest.raises(CalibrationError, match="wrong side of the laser plane"):
+        for seed in range(20):
+            simulate.simulate_sphere_measurements(st, 4, 2, rng(seed))
+    with pytest.raises(CalibrationError, match="unknown move range 'rotation_range_deg'"):
+        handeye_experiments.handeye_ranges_experiment([15.0], [2.0]).trial(
+            {"n_trans": 4, "n_rot": 6, "baselines": False}, rng(1), "rotation_range_deg", 3.0
+        )
+
+
+def test_mounting_error_has_the_stated_tolerance_as_three_sigma():
+    st = scenario.load_station()["stationary"]
+    design = np.repeat(simulate._stationary_sensors(st)[None], 400, axis=0)
+    mounted = simulate._mount_stationary(design, st, rng(4))
+    shift = (mounted[..., :3, 3] - design[..., :3, 3]).reshape(-1, 3)
+    turn = np.rad2deg(geo.rotation_error(mounted.reshape(-1, 4, 4), design.reshape(-1, 4, 4)))
+    np.testing.assert_allclose(shift.std(axis=0), st["mounting_tolerance_mm"] / 3, rtol=0.05)
+    # the angle of a rotation vector with N(0, s^2) per axis has RMS s * sqrt(3)
+    rms = np.sqrt(np.mean(turn**2))
+    assert rms == pytest.approx(st["mounting_tolerance_deg"] / 3 * np.sqrt(3), rel=0.05)

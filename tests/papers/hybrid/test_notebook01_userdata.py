@@ -31,7 +31,7 @@ def test_notebook01_runs_on_user_csv(tmp_path):
     run(NOTEBOOK, params, tmp_path)
     out_nb = tmp_path / NOTEBOOK.name
     text = json.dumps(json.loads(out_nb.read_text()))
-    assert f"calibrated from: user measurements from {csv} (10 rows)" in text
+    assert f"Calibrated from: user measurements from {csv} (10 rows)" in text
     table = pd.read_csv(
         tmp_path / "out" / "01_hybrid_global_calibration" / "handeye_calibration.csv"
     )

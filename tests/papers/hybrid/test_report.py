@@ -123,3 +123,43 @@ def test_table1_rejects_trials_with_different_coordinate_counts():
     trials = _trials([(20, 6, 2, 1, 1), (20, 6, 2, 1, 2)], [(15, 5, 2, 1, 1)] * 2, [6, 6])
     with pytest.raises(CalibrationError, match="disagree on the number of coordinates"):
         report.table1(trials, 10)
+
+
+def test_whole_deviation_distribution_distances_and_where_a_verdict_changes():
+    from calstudy.papers.hybrid import report_sweeps
+
+    published = np.array([21.26, 47.13, 28.16, 3.45, 0.0])
+    paper = np.array([[37, 82, 49, 6, 0]])
+    assert report_sweeps.chi_square_distance(paper, published)[0] < 0.05
+    assert report_sweeps.CHI2_CRITICAL == pytest.approx(7.815, abs=1e-3)
+    all_first = np.array([[174, 0, 0, 0, 0]])
+    assert report_sweeps.chi_square_distance(all_first, published)[0] > 100
+    text = report_sweeps.where_verdict_changes(
+        [0.3, 0.0, 0.1], ["not reproduced", "reproduced", "reproduced"], 0.1, "x", "mm"
+    )
+    assert text == (
+        "x: the verdict changes from reproduced at 0.1 mm to not reproduced at 0.3 mm "
+        "(swept 0-0.3 mm, reproduced at the default 0.1 mm)"
+    )
+    same = report_sweeps.where_verdict_changes([1, 2], ["reproduced"] * 2, 1, "y")
+    assert same == "y: reproduced at every value swept (1-2)"
+
+
+def test_deviation_oracle_removes_exactly_the_drift():
+    rng = np.random.default_rng(5)
+    n_f = 6
+    systematic = rng.normal(0, 2.0, (n_f, 3))
+    drift = rng.normal(0, 1.0, (n_f, 3))
+
+    def products(n, shift):
+        c = rng.normal(0, 0.5, (n, n_f, 3))
+        return c + systematic + shift + rng.normal(0, 0.02, c.shape), c
+
+    run = {"compensation": products(10, 0.0), "follow-up": products(30, drift), "drift": drift}
+    a = compensation.analyse_run(run, 10)
+    still = {"compensation": run["compensation"]}
+    still["follow-up"] = (run["follow-up"][0] - drift, run["follow-up"][1])
+    b = compensation.analyse_run(still, 10)
+    assert a["within_0p3"] < 60.0  # a drift of 1 mm defeats the offset
+    assert a["within_0p3_oracle"] == b["within_0p3"] == 100.0
+    assert np.isnan(compensation.analyse_run(still, 10)["within_0p3_oracle"])

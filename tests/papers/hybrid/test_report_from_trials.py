@@ -14,7 +14,7 @@ from support import assert_same_table
 
 from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS
 from calstudy.core.paths import RESULTS_DIR
-from calstudy.papers.hybrid import report
+from calstudy.papers.hybrid import report, report_sweeps
 from calstudy.papers.hybrid.scenario import load_scenario
 
 NB01 = RESULTS_DIR / "01_hybrid_global_calibration"
@@ -57,6 +57,21 @@ def test_notebook01_tables_and_verdicts_from_trials():
         report.summarise_penalty_sweep(_trials(NB01, "rps_penalty")), NB01 / "rps_penalty_sweep.csv"
     )
     _compare(report.nominal_model_cost(he_summary, st_summary), NB01 / "nominal_model_cost.csv")
+    _compare(
+        report_sweeps.summarise_ranges(_trials(NB01, "handeye_ranges")),
+        NB01 / "handeye_ranges_sweep.csv",
+    )
+    _compare(
+        report_sweeps.summarise_handeye_sweep(noise, ["sigma_point_mm"]),
+        NB01 / "handeye_noise_verdicts.csv",
+    )
+    _compare(
+        report_sweeps.summarise_handeye_sweep(moves, ["n_rot"]), NB01 / "handeye_moves_verdicts.csv"
+    )
+    _compare(
+        report_sweeps.summarise_stationary_sweep(_trials(NB01, "stationary_pixel"), "pixel_sigma"),
+        NB01 / "stationary_pixel_sweep.csv",
+    )
     claims, controls = report.calibration_claims(handeye, stationary, NB01.name)
     _compare(_claims_frame(claims), NB01 / "claims.csv")
     _compare(pd.DataFrame(controls)[list(CONTROL_COLUMNS)], NB01 / "controls.csv")
@@ -76,6 +91,10 @@ def test_notebook02_tables_and_verdicts_from_trials():
         report.summarise_robot_error_sweep(_trials(NB02, "robot_error")),
         NB02 / "robot_error_sweep.csv",
     )
+    _compare(
+        report_sweeps.deviation_distribution(production, n), NB02 / "deviation_distribution.csv"
+    )
+    _compare(report_sweeps.summarise_drift(_trials(NB02, "sensitivity")), NB02 / "drift_sweep.csv")
     claims, controls = report.production_claims(production, n, NB02.name)
     _compare(_claims_frame(claims), NB02 / "claims.csv")
     _compare(pd.DataFrame(controls)[list(CONTROL_COLUMNS)], NB02 / "controls.csv")

@@ -82,6 +82,9 @@ class Moves(Documented):
     across_plane_range_mm: NonNegativeFinite
     rotation_range_deg: Annotated[float, Field(gt=0, le=180, allow_inf_nan=False)]
     rotation_min_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
+    #: the values of the two move ranges swept by notebook 01
+    translation_ranges_mm: Annotated[list[PositiveFinite], Field(min_length=1)]
+    across_plane_ranges_mm: Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
     @model_validator(mode="after")
     def _range(self) -> Moves:
@@ -102,6 +105,8 @@ class Cameras(Documented):
     width: PositiveInt
     height: PositiveInt
     pixel_sigma: NonNegativeFinite
+    #: the values of the hole-centre noise swept by notebook 01
+    pixel_sigmas: Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
     @model_validator(mode="after")
     def _centre_in_image(self) -> Cameras:
@@ -119,6 +124,9 @@ class Stationary(Documented):
     """The ``[stationary]`` table of data/hybrid/station.toml."""
     positions_mm: Annotated[list[Vec3], Field(min_length=3)]
     tilts_deg: list[Annotated[list[Degrees], Field(min_length=2, max_length=2)]]
+    #: mounting tolerance of a sensor on the fixture (3 sigma per axis), mm and deg
+    mounting_tolerance_mm: NonNegativeFinite
+    mounting_tolerance_deg: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)]
 
     @model_validator(mode="after")
     def _same_count(self) -> Stationary:

@@ -72,6 +72,7 @@ class HybridStation:
     back2front_cmm: np.ndarray
     front2sensor: np.ndarray
     statcam2base_true: np.ndarray
+    statcam2base_design: np.ndarray
     base2work_nominal: np.ndarray
     base2work_true: np.ndarray
     datums_work: np.ndarray
@@ -216,21 +217,23 @@ class HybridStation:
         """Joint angles and the target's ``back2statcam`` for calibrating stationary sensor ``i``.
 
         The back face is held at the stand-off of the sensor, facing it; the yaw about the
-        sensor axis is the first (15 degree steps) that the nominal robot reaches (searched once
-        per sensor and cached), and the true robot is then taught from that configuration.
+        sensor axis is the first (15 degree steps) that the nominal robot reaches at the sensor's
+        design pose (searched once per sensor and cached), and the true robot is then taught from
+        that configuration over the sensor where it truly sits (the operator sees its image).
         """
         statcam2base = self.statcam2base_true[index]
         front2flange = self.sensor2flange_true @ self.front2sensor
 
-        def flange_for(yaw, back2front):
+        def flange_for(yaw, back2front, where=statcam2base):
             back2statcam = geo.make_transform(RX_PI @ _rz(yaw), [0.0, 0.0, self.standoff])
-            front2base = statcam2base @ back2statcam @ geo.invert(back2front)
+            front2base = where @ back2statcam @ geo.invert(back2front)
             return front2base @ geo.invert(front2flange), back2statcam
 
-        key = (index, statcam2base.tobytes())
+        design = self.statcam2base_design[index]
+        key = (index, design.tobytes())
         if key not in _STATIONARY_SEEDS:
             for yaw in np.deg2rad(np.arange(0.0, 360.0, 15.0)):
-                pose, _ = flange_for(yaw, self.target.back2front())
+                pose, _ = flange_for(yaw, self.target.back2front(), design)
                 try:
                     _STATIONARY_SEEDS[key] = (yaw, self.solve_ik(self.nominal, pose))
                     break
@@ -292,6 +295,8 @@ def make_station(
     )
     sphere = Sphere(centre=np.array(cfg["sphere"]["centre_mm"], dtype=float))
     target, made, back2front_cmm = _make_target(cfg["target"], rng)
+    statcam2base_design = _stationary_sensors(cfg["stationary"])
+    statcam2base_true = _mount_stationary(statcam2base_design, cfg["stationary"], rng)
     standoff = cfg["sensor"]["standoff_mm"]
     wcfg = cfg["workpiece"]
     base2work_nominal, work2base_true = _place_workpiece(wcfg, rng)
@@ -310,7 +315,8 @@ def make_station(
         target_made=made,
         back2front_cmm=back2front_cmm,
         front2sensor=geo.make_transform(RX_PI, [0.0, 0.0, standoff]),
-        statcam2base_true=_stationary_sensors(cfg["stationary"]),
+        statcam2base_true=statcam2base_true,
+        statcam2base_design=statcam2base_design,
         base2work_nominal=base2work_nominal,
         base2work_true=geo.invert(work2base_true),
         datums_work=np.array(
@@ -374,6 +380,17 @@ def _stationary_sensors(st: dict) -> np.ndarray:
         np.column_stack([np.zeros(len(tilts)), tilts[:, 1], np.zeros(len(tilts))])
     )
     return geo.make_transform(rot, np.array(st["positions_mm"], dtype=float))
+
+
+def _mount_stationary(design: np.ndarray, st: dict, rng: np.random.Generator) -> np.ndarray:
+    """``statcam2base (10, 4, 4)`` where the stationary sensors truly sit: the design pose moved
+    by the mounting tolerance of ``[stationary]`` read as 3 sigma per axis."""
+    return geo.perturb(
+        design,
+        np.deg2rad(st["mounting_tolerance_deg"]) / 3.0,
+        st["mounting_tolerance_mm"] / 3.0,
+        rng,
+    )
 
 
 def _place_workpiece(wcfg: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

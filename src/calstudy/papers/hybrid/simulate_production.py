@@ -199,11 +199,14 @@ def _stationary_readings(
 def simulate_run(ps: ProductionStation, scenario: Scenario, rng: np.random.Generator) -> dict:
     """The paper's protocol on one station: ``n_compensation_max`` products after installation
     (the first ``n_before`` are the ones of Fig. 6), then, after a drift of ``drift_sigma`` per
-    coordinate, ``n_follow_up`` products. Returns ``{phase: (hybrid, cmm)}`` for :data:`PHASES`."""
+    coordinate, ``n_follow_up`` products. Returns ``{phase: (hybrid, cmm)}`` for :data:`PHASES`
+    and ``"drift"``, the ``(F, 3)`` shift added to the follow-up readings (0 at the coordinates
+    fixed by the frame), which a measured station does not know."""
     comp = simulate_products(ps, scenario, scenario.n_compensation_max, rng)
     drift = rng.normal(0.0, scenario.drift_sigma_mm, (len(ps.features.ids), 3))
     follow = simulate_products(ps, scenario, scenario.n_follow_up, rng, drift=drift)
-    return {"compensation": comp, "follow-up": follow}
+    drift = np.where(ps.features.fixed, 0.0, drift)
+    return {"compensation": comp, "follow-up": follow, "drift": drift}
 
 
 def sensor_pose_check(ps: ProductionStation) -> np.ndarray:

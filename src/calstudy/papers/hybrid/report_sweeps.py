@@ -1,0 +1,291 @@
+"""The hybrid study's sweeps and distributions: where each verdict changes.
+
+Notebook 01: the per-trial distribution of the hand-eye ratio (the paper's method over the
+Cramer-Rao RMS of the same poses) and its sweep over the ranges of the pure translations, with
+the ``hybrid.handeye`` verdict per value. Notebook 02: the whole deviation distribution of Table 1
+against the published one (Kolmogorov and chi-square distances), the sweep of the drift between
+compensation and follow-up with the ``hybrid.deviation`` verdict per value, and the sentence that
+says where a swept verdict changes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy.stats import chi2
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.stats import median_and_spread
+from calstudy.core.verdicts import judge, judge_controls, oracle_gate
+from calstudy.papers.hybrid.scenario import load_published
+
+#: "works" criterion of hybrid.handeye (stated, not fitted): the larger of the rotation and
+#: translation errors, each divided by the Cramer-Rao RMS of the same poses, at most this
+CRB_MULTIPLE = 3.0
+#: quantiles of the per-trial hand-eye ratio reported
+RATIO_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
+
+
+def handeye_ratios(trials: pd.DataFrame, keys=()) -> pd.DataFrame:
+    """Per trial (and per value of ``keys``): each method's rotation and translation errors over
+    the trial's Cramer-Rao RMS; ``<method>`` the larger of the two ratios (the claim's figure
+    for ``sphere``)."""
+    keys = list(keys)
+    index = keys + ["trial"]
+    rot = trials.pivot_table(index=index, columns="method", values="rotation_error_deg")
+    trans = trials.pivot_table(index=index, columns="method", values="translation_error_mm")
+    out = pd.DataFrame(index=rot.index)
+    for m in rot.columns.drop("CRB"):
+        out[m] = np.maximum(rot[m] / rot["CRB"], trans[m] / trans["CRB"])
+    return out.reset_index()
+
+
+def ratio_distribution(ratios: pd.DataFrame, column: str = "sphere", keys=()) -> pd.DataFrame:
+    """Quantiles of the per-trial ratio ``column`` (per value of ``keys``), the largest one and
+    the share of trials within :data:`calstudy.papers.hybrid.report.CRB_MULTIPLE`."""
+    groups = ratios.groupby(list(keys), sort=False) if keys else [((), ratios)]
+    rows = []
+    for key, sub in groups:
+        v = sub[column].to_numpy(float)
+        row = dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True))
+        row["trials"] = len(v)
+        row |= {f"q{int(round(100 * q)):02d}": float(np.quantile(v, q)) for q in RATIO_QUANTILES}
+        row["max"] = float(v.max())
+        row[f"within_{CRB_MULTIPLE:g}x_pct"] = 100.0 * float(np.mean(v <= CRB_MULTIPLE))
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _verdict_or_reason(make):
+    """``make()`` (a Verdict), or None when there are too few trials for an interval."""
+    try:
+        return make()
+    except CalibrationError as exc:
+        if "interval for the median" not in str(exc):
+            raise
+        return None
+
+
+def summarise_handeye_sweep(trials: pd.DataFrame, keys) -> pd.DataFrame:
+    """A hand-eye sweep (sensor noise only): per value of ``keys`` the median hand-eye ratio with
+    its 95 % confidence interval, the 95th percentile, the ML's median ratio and the
+    ``hybrid.handeye`` verdict by its rule on that value's trials."""
+    keys = list(keys)
+    ratios = handeye_ratios(trials, keys)
+    rows = []
+    for key, sub in ratios.groupby(keys, sort=True):
+        v = _verdict_or_reason(
+            lambda s=sub: judge(
+                s["sphere"], kind="bound", direction="lower", bound=CRB_MULTIPLE, min_trials=30
+            )
+        )
+        row = dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True))
+        rows.append(
+            row
+            | {
+                "trials": len(sub),
+                "median_ratio": float(np.median(sub["sphere"])),
+                "ci_low": np.nan if v is None else v.ci_low,
+                "ci_high": np.nan if v is None else v.ci_high,
+                "p95_ratio": float(np.quantile(sub["sphere"], 0.95)),
+                "ml_median_ratio": float(np.median(sub["ML"])),
+                "verdict": "too few trials" if v is None else v.verdict,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def summarise_ranges(trials: pd.DataFrame) -> pd.DataFrame:
+    """The move-range sweep (``handeye_ranges_experiment``): :func:`summarise_handeye_sweep` per
+    range and value (mm)."""
+    out = summarise_handeye_sweep(trials, ["parameter", "value"])
+    return out.rename(columns={"value": "value_mm"})
+
+
+#: "works" criterion of hybrid.stationary: the homography chain's field error at most this
+#: multiple of the PnP chain's (maximum likelihood for the pixel noise) on the same images
+ML_MULTIPLE = 1.5
+
+
+def stationary_ratios(stationary: pd.DataFrame, keys=()) -> pd.DataFrame:
+    """Per trial (and value of ``keys``): the RMS field error over the ten sensors of each
+    variant, the claim's ratio homography / PnP (images only), the same with the calibrated
+    hand-eye and reported poses (``ratio_full_chain``), the null control (design pose / PnP)
+    and the oracle control (both chains with an exact target)."""
+    keys = list(keys)
+    sub = stationary[stationary["step"] == "stationary"]
+    rms = sub.groupby(keys + ["trial", "variant"])["field_error_mm"].apply(
+        lambda v: float(np.sqrt(np.mean(v**2)))
+    )
+    wide = rms.unstack("variant")
+    wide["ratio"] = wide["images only, homography"] / wide["images only, pnp"]
+    wide["ratio_full_chain"] = wide["homography"] / wide["pnp"]
+    wide["null"] = wide["design pose"] / wide["images only, pnp"]
+    wide["oracle"] = wide["exact target, homography"] / wide["exact target, pnp"]
+    return wide.reset_index()
+
+
+def summarise_stationary_sweep(stationary: pd.DataFrame, key: str) -> pd.DataFrame:
+    """A stationary-sensor sweep: per value of ``key`` the median ratio of the claim with its
+    95 % confidence interval, the 95th percentile, the oracle's median ratio and the
+    ``hybrid.stationary`` verdict by its rule on that value's trials."""
+    ratios = stationary_ratios(stationary, [key])
+    rows = []
+    for value, sub in ratios.groupby(key, sort=True):
+        v = _verdict_or_reason(
+            lambda s=sub: judge(
+                s["ratio"], kind="bound", direction="lower", bound=ML_MULTIPLE, min_trials=30
+            )
+        )
+        rows.append(
+            {
+                key: float(value),
+                "trials": len(sub),
+                "median_ratio": float(np.median(sub["ratio"])),
+                "ci_low": np.nan if v is None else v.ci_low,
+                "ci_high": np.nan if v is None else v.ci_high,
+                "p95_ratio": float(np.quantile(sub["ratio"], 0.95)),
+                "oracle_median_ratio": float(np.median(sub["oracle"])),
+                "verdict": "too few trials" if v is None else v.verdict,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def where_verdict_changes(values, verdicts, default, what: str, unit: str = "") -> str:
+    """One sentence: the verdict at the default value of a swept assumption and the values
+    between which it changes (``values`` ascending, one verdict each)."""
+    values = [float(v) for v in values]
+    verdicts = list(verdicts)
+    if len(values) != len(verdicts) or not values:
+        raise CalibrationError(f"{len(values)} values but {len(verdicts)} verdicts")
+    order = np.argsort(values)
+    values = [values[i] for i in order]
+    verdicts = [verdicts[i] for i in order]
+    unit = f" {unit}" if unit else ""
+    changes = [
+        f"from {verdicts[i]} at {values[i]:g}{unit} to {verdicts[i + 1]} at {values[i + 1]:g}{unit}"
+        for i in range(len(values) - 1)
+        if verdicts[i] != verdicts[i + 1]
+    ]
+    span = f"{values[0]:g}-{values[-1]:g}{unit}"
+    at = [v for x, v in zip(values, verdicts, strict=True) if np.isclose(x, float(default))]
+    at_default = f", {at[0]} at the default {float(default):g}{unit}" if at else ""
+    if not changes:
+        return f"{what}: {verdicts[0]} at every value swept ({span})"
+    return f"{what}: the verdict changes " + "; ".join(changes) + f" (swept {span}{at_default})"
+
+
+# ---------------------------------------------------------------------------------------------
+# notebook 02: the deviation distribution and the drift
+
+
+def chi_square_distance(counts, published_percent) -> np.ndarray:
+    """Pearson chi-square of each row of bin ``counts (N, 5)`` against the published shares,
+    the last two bins merged (the published one beyond 0.5 mm is empty, so it has no expected
+    count of its own): 3 degrees of freedom."""
+    c = np.atleast_2d(np.asarray(counts, dtype=float))
+    p = np.asarray(published_percent, dtype=float)
+    c = np.column_stack([c[:, :3], c[:, 3:].sum(axis=1)])
+    p = np.r_[p[:3], p[3:].sum()]
+    expected = c.sum(axis=1, keepdims=True) * p / p.sum()
+    return ((c - expected) ** 2 / expected).sum(axis=1)
+
+
+#: 5 % critical value of :func:`chi_square_distance` (3 degrees of freedom)
+CHI2_CRITICAL = float(chi2.ppf(0.95, 3))
+
+
+def deviation_distribution(trials: pd.DataFrame, n_compensation: int) -> pd.DataFrame:
+    """The deviation half of Table 1 as a whole distribution at ``n_compensation``: per bin the
+    median simulated share and the published one, then the Kolmogorov distance and the
+    chi-square statistic over trials (median and 95 % spread) with their 5 % critical values."""
+    pub = load_published()
+    sub = trials[trials["n_compensation"] == n_compensation]
+    counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy(float)
+    n = counts.sum(axis=1, keepdims=True)
+    rows = [
+        {
+            "figure": f"share {label} mm (%)",
+            "simulated": float(np.median(100.0 * counts[:, k] / n[:, 0])),
+            "spread_low": float(np.quantile(100.0 * counts[:, k] / n[:, 0], 0.025)),
+            "spread_high": float(np.quantile(100.0 * counts[:, k] / n[:, 0], 0.975)),
+            "published": float(pub.deviation_percent[k]),
+        }
+        for k, label in enumerate(pub.deviation_bins)
+    ]
+    for name, values, critical in (
+        ("Kolmogorov distance", bin_distance(counts, pub.deviation_percent), None),
+        ("chi-square (3 dof)", chi_square_distance(counts, pub.deviation_percent), CHI2_CRITICAL),
+    ):
+        med, lo, hi = median_and_spread(values)
+        crit = kolmogorov_bound(int(n[0, 0])) if critical is None else critical
+        rows.append(
+            {
+                "figure": f"{name}, 5 % critical {crit:.3g}",
+                "simulated": med,
+                "spread_low": lo,
+                "spread_high": hi,
+                "published": 0.0,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def deviation_verdicts(sub: pd.DataFrame):
+    """``hybrid.deviation`` and its controls on the trials of ``sub`` (columns ``within_0p3``,
+    ``within_0p3_uncompensated``, ``within_0p3_oracle``), the verdict gated by the oracle."""
+    pub = load_published()
+    claim, null, oracle = judge_controls(
+        sub["within_0p3"],
+        sub["within_0p3_uncompensated"],
+        sub["within_0p3_oracle"],
+        published=pub.within_0p3_percent,
+        kind="percent",
+        direction="higher",
+        baseline=sub["within_0p3_uncompensated"],
+        min_trials=30,
+    )
+    return oracle_gate(claim, oracle, "a systematic error that an offset can remove"), null, oracle
+
+
+def summarise_drift(sweep: pd.DataFrame) -> pd.DataFrame:
+    """The drift rows of the sensitivity sweep: per drift sigma the share within +-0.3 mm with
+    the drift (claim) and without it (oracle), the Kolmogorov and chi-square distances of the
+    deviation bins to the published ones (medians over stations) and the ``hybrid.deviation``
+    verdict by its rule."""
+    pub = load_published()
+    drift = sweep[sweep["parameter"] == "drift_sigma_mm"]
+    rows = []
+    for value, sub in drift.groupby("value", sort=True):
+        counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy(float)
+        v = _verdict_or_reason(lambda s=sub: deviation_verdicts(s)[0])
+        rows.append(
+            {
+                "drift_sigma_mm": float(value),
+                "stations": len(sub),
+                "within_0p3_pct": float(np.median(sub["within_0p3"])),
+                "oracle_within_0p3_pct": float(np.median(sub["within_0p3_oracle"])),
+                "bin_le_0p1_pct": float(np.median(100.0 * counts[:, 0] / counts.sum(axis=1))),
+                "kolmogorov": float(np.median(bin_distance(counts, pub.deviation_percent))),
+                "chi_square": float(np.median(chi_square_distance(counts, pub.deviation_percent))),
+                "verdict": "too few trials" if v is None else v.verdict,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def bin_distance(counts: np.ndarray, published_percent) -> np.ndarray:
+    """Kolmogorov distance per row of ``counts (N, 5)``: the largest gap between the cumulative
+    shares of the bins and those of the published bins."""
+    c = np.asarray(counts, dtype=float)
+    share = np.cumsum(c, axis=1) / np.maximum(1.0, c.sum(axis=1, keepdims=True))
+    pub = np.asarray(published_percent, dtype=float)
+    return np.abs(share - np.cumsum(pub) / pub.sum()).max(axis=1)
+
+
+def kolmogorov_bound(n_vectors: int) -> float:
+    """5 % critical Kolmogorov distance for ``n_vectors`` values against a fixed distribution
+    (``1.36 / sqrt(n)``): a station drawn from the published distribution exceeds it in 5 % of
+    cases."""
+    return 1.36 / np.sqrt(n_vectors)
