@@ -10,7 +10,13 @@ from calstudy.core.errors import CalibrationError
 from calstudy.estimators import binocular as bino
 from calstudy.papers.binocular import experiments as ex
 from calstudy.papers.binocular.scenario import load_scenario
-from calstudy.papers.binocular.simulate import Imaging, World, draw_world, view_calibrator
+from calstudy.papers.binocular.simulate import (
+    Imaging,
+    World,
+    draw_world,
+    reimage,
+    view_calibrator,
+)
 
 
 @pytest.fixture(scope="module")
@@ -123,3 +129,51 @@ def test_a_scenario_without_the_lens_rim_is_refused_by_name(scenario):
     bare = dataclasses.replace(scenario, config=config)
     with pytest.raises(CalibrationError, match=r"sensor.toml: missing key 'optics.rim_radius_mm'"):
         ex.defocus_shift(bare, [800.0], tilts_deg=(0.0,))
+
+
+def _perfect_robot(scenario):
+    """The scenario with a robot whose true model is its nominal one (tolerances 0)."""
+    import copy
+    import dataclasses
+
+    robot = copy.copy(scenario.robot)
+    robot.tolerances = {k: 0.0 for k in scenario.robot.tolerances}
+    return dataclasses.replace(scenario, robot=robot)
+
+
+def _chain(scenario, imaging, seed=7):
+    rng = np.random.default_rng(seed)
+    world = draw_world(scenario, rng, imaging)
+    model = world.model(scenario, 0.0)
+    cal = view_calibrator(scenario, world, 6, rng, imaging, model)
+    sharp = reimage(scenario, cal, rng, Imaging(noise=False, defocus=False), model)
+    return ex.handeye_chain(scenario, world, cal, sharp, model, 0.5, rng)
+
+
+def test_handeye_chain_is_exact_without_defocus_noise_or_robot_error(scenario):
+    """Known answer: sharp, noise-free dots, exact cameras and a perfect robot: only the pixel
+    grid acts (Canny edges limit a rendered centre to a few hundredths of a pixel), so the
+    hand-eye matrix is right to a tenth of a millimetre, Fig. 13 to a few hundredths, and the
+    true matrix gives exactly the tracker's distance."""
+    row = _chain(_perfect_robot(scenario), Imaging(noise=False, defocus=False))
+    assert row["shift_px_rms"] < 0.1
+    assert row["point_err_normal_mm"] < 0.03 and row["point_err_inplane_mm"] < 0.03
+    assert row["pose_rot_err_mrad"] < 0.15
+    assert row["trans_err_preliminary_mm"] < 0.3 and row["rot_err_preliminary_mrad"] < 0.4
+    assert row["trans_err_preliminary_mm"] == row["trans_err_sharp_mm"]
+    assert row["fig13_exact_p7_true"] < 1e-9
+    assert row["fig13_exact_p7_preliminary"] < 0.05
+
+
+def test_handeye_chain_carries_the_defocus_error_to_fig13(scenario):
+    """With the defocus on (f/5.42, the calibrated aperture) and nothing else: the triangulated
+    points err more along the plate normal than across it, the calibrator poses tilt, and the
+    preliminary matrix is millimetres off while the same views without defocus give it exactly."""
+    sc = ex.with_optics(_perfect_robot(scenario), f_number=5.42)
+    row = _chain(sc, Imaging(noise=False, defocus=True))
+    assert row["shift_px_max"] > 1.0
+    assert row["point_err_normal_mm"] > row["point_err_inplane_mm"]
+    assert row["pose_rot_err_mrad"] > 0.5
+    assert row["trans_err_preliminary_mm"] > 1.0
+    assert row["trans_err_sharp_mm"] < 0.3
+    assert row["fig13_exact_p7_preliminary"] > 10 * row["fig13_exact_p7_sharp"]

@@ -3,6 +3,9 @@ the paper's estimators; the random world scales as documented."""
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -107,3 +110,55 @@ def test_calibration_scale_scales_the_camera_errors_only(scenario):
     np.testing.assert_allclose(world.robot(scenario, 0.0).fk(q), nom, atol=1e-9)
     with pytest.raises(CalibrationError, match="calibration scale"):
         world.model(scenario, -1.0)
+
+
+def _ray_traced_spot(scenario, point_cam, n=401):
+    """Independent thin-lens ray trace of one camera-frame object point: every ray through a
+    uniform grid on the entrance pupil (radius f / 2F at the lens) that passes the rim (radius R,
+    L in front of the pupil) is followed to the sensor (at the lens-to-sensor distance
+    ``fx * pitch``). Returns the landing points minus the chief ray's, in image px (u along the
+    camera's x, v along y: the sensor image is inverted), and the geometric blur radius, px."""
+    opt = scenario.config["sensor"]["optics"]
+    pitch = scenario.config["sensor"]["image"]["pixel_pitch_mm"]
+    f = scenario.focal_mm
+    a = f / (2.0 * opt["f_number"])
+    v = scenario.sensor.left.fx * pitch
+    x, y, z = point_cam
+    g = np.linspace(-a, a, n)
+    px, py = np.meshgrid(g, g)
+    inside = px**2 + py**2 <= a**2
+    lam = opt["rim_distance_mm"] / z  # the ray from the point to the pupil at the rim's plane
+    rim_x, rim_y = px + (x - px) * lam, py + (y - py) * lam
+    passes = inside & (rim_x**2 + rim_y**2 <= opt["rim_radius_mm"] ** 2)
+    v_img = 1.0 / (1.0 / f - 1.0 / z)  # where the point is imaged sharply
+    land_x = px + (-x * v_img / z - px) * v / v_img
+    land_y = py + (-y * v_img / z - py) * v / v_img
+    offsets = -np.column_stack([land_x[passes] + x * v / z, land_y[passes] + y * v / z]) / pitch
+    return offsets, a * abs(1.0 - v / v_img) / pitch
+
+
+@pytest.mark.parametrize("depth", [780.0, 940.0])
+def test_blur_spot_agrees_with_a_thin_lens_ray_trace(scenario, depth):
+    """The CoC radius (Eq. 4, px) is the ray-traced blur radius, and the centroid of the rim-cut
+    spot (:func:`blur_spots`, :func:`calstudy.models.optics.defocus_kernel`) points the way the
+    ray trace's does: outwards for a nearer point, inwards for a farther one. A wrong spot
+    inversion, rim side or depth fails here."""
+    from calstudy.models import optics
+
+    sc = dataclasses.replace(scenario, config=copy.deepcopy(scenario.config))
+    sc.config["sensor"]["optics"]["f_number"] = 4.0  # the rim cuts the pupil itself at 14 deg
+    field = np.array([0.2, 0.15])
+    point = depth * np.array([field[0], field[1], 1.0])
+    offsets, radius = _ray_traced_spot(sc, point)
+    deltas, sides, rims = sim.blur_spots(sc, point)
+    assert deltas[0] == pytest.approx(radius, rel=1e-9)
+    traced = offsets.mean(axis=0)
+    k = optics.defocus_kernel(float(deltas[0]), float(sides[0]), rims[0], sim.rim_radius(sc))
+    h = k.shape[0] // 2
+    jj, ii = np.mgrid[-h : h + 1, -h : h + 1]
+    model = np.array([(k * ii).sum(), (k * jj).sum()])
+    cos = traced @ model / np.linalg.norm(traced) / np.linalg.norm(model)
+    assert cos > 0.99
+    outward = traced @ field
+    assert (outward > 0) == (depth < sc.config["sensor"]["optics"]["focus_distance_mm"])
+    assert np.linalg.norm(traced) > 0.1 * radius  # the rim does cut the spot

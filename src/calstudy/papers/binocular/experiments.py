@@ -45,6 +45,7 @@ from calstudy.papers.binocular.simulate import (
     render_blurred_dot,
     tracker_p7_distance,
     view_calibrator,
+    viewpoints,
 )
 
 #: Table 2's rows: P1P7 ... P6P7 and P8P7 (indices of the targets measured to P7).
@@ -409,6 +410,78 @@ def optics_trial(
     for label, pts in (("without", raw), ("with", rect), ("oracle", sharp_raw)):
         d = bino.distances_to_p7(bino.with_virtual(pts)).mean(0)
         row[f"t2_{label}"] = rmse(d - std)
+    row.update(handeye_chain(scenario, world, cal, sharp, model, tol, rng))
+    return row
+
+
+def handeye_chain(scenario, world: World, cal: Views, sharp: Views, model, tol: float, rng):
+    """How the error of the calibration views reaches the preliminary hand-eye matrix and
+    Fig. 13, step by step, on one trial.
+
+    Columns: the detected minus the true image of each dot centre (``shift_px_rms``,
+    ``shift_px_max``, both cameras, unrectified), the dots' depths in the cameras
+    (``depth_min_mm``, ``depth_max_mm``), the RMS error of the unrectified triangulated points
+    along the plate normal and across the plate (``point_err_normal_mm``,
+    ``point_err_inplane_mm``), the RMS rotation error of the calibrator poses fitted to them
+    (``pose_rot_err_mrad``), the median rotation of the moves between the calibration poses
+    (``move_deg``), the error of the preliminary AX = XB matrix (``trans_err_preliminary_mm``,
+    ``rot_err_preliminary_mrad``; ``*_sharp``: from the same views exposed without defocus) and
+    the Fig. 13 RMSE it gives over ``n_validation`` new poses drawn after everything else
+    (``fig13_exact_p7_{preliminary,sharp,true}``: P7 taken exact in the sensor frame and
+    against its exact distance to the base origin, so that only the matrix and the robot act).
+    """
+    dots = geo.apply(scenario.calibrator2base, scenario.layout[:6] + world.dot_offsets)
+    normal = scenario.calibrator2base[:3, 2]
+    shifts, depths, e_normal, e_plane = [], [], [], []
+    raw, _ = cal.points(model, tol)
+    sharp_raw, _ = sharp.points(model, tol)
+    for s2b, obs, pts in zip(cal.sensor2base, cal.observations, raw, strict=True):
+        base2sensor = geo.invert(s2b)
+        truth = geo.apply(base2sensor, dots)
+        for c, (camera, s2c) in enumerate(scenario.sensor.cameras()):
+            in_cam = geo.apply(s2c, truth)
+            depths.append(in_cam[:, 2])
+            shifts.append(np.linalg.norm(obs.uv_raw[c] - camera.project(in_cam), axis=1))
+        err = pts - truth
+        n_s = base2sensor[:3, :3] @ normal
+        along = err @ n_s
+        e_normal.append(along)
+        e_plane.append(np.linalg.norm(err - np.outer(along, n_s), axis=1))
+    shifts, depths = np.concatenate(shifts), np.concatenate(depths)
+    true_poses = [geo.invert(s) @ scenario.calibrator2base for s in cal.sensor2base]
+    poses = {
+        label: np.array([bino.calibrator_pose(scenario.layout[:6], p) for p in pts])
+        for label, pts in (("preliminary", raw), ("sharp", sharp_raw))
+    }
+    pose_err = [
+        geo.rotation_error(p, t) for p, t in zip(poses["preliminary"], true_poses, strict=True)
+    ]
+    _, angles = bino.motion_axes(cal.flange2base)
+    row = {
+        "shift_px_rms": float(np.sqrt(np.mean(shifts**2))),
+        "shift_px_max": float(shifts.max()),
+        "depth_min_mm": float(depths.min()),
+        "depth_max_mm": float(depths.max()),
+        "point_err_normal_mm": rmse(np.concatenate(e_normal)),
+        "point_err_inplane_mm": rmse(np.concatenate(e_plane)),
+        "pose_rot_err_mrad": 1e3 * rmse(np.array(pose_err)),
+        "move_deg": float(np.degrees(np.median(angles))),
+    }
+    true = scenario.sensor2flange
+    matrices = {k: bino.preliminary_handeye(cal.flange2base, v) for k, v in poses.items()}
+    for label, h in matrices.items():
+        row[f"trans_err_{label}_mm"] = float(geo.translation_error(h, true))
+        row[f"rot_err_{label}_mrad"] = 1e3 * float(geo.rotation_error(h, true))
+    n_val = scenario.config["station"]["poses"]["n_validation"]
+    q, vflange = viewpoints(scenario, scenario.calibrator2base, n_val, rng)
+    true_robot = world.robot(scenario, 1.0)
+    p7_base = geo.apply(scenario.calibrator2base, scenario.layout[6])
+    p7_sensor = np.array([geo.apply(geo.invert(true_robot.fk(qi) @ true), p7_base) for qi in q])
+    for label, h in (*matrices.items(), ("true", true)):
+        d = np.array(
+            [np.linalg.norm(geo.apply(f @ h, p)) for f, p in zip(vflange, p7_sensor, strict=True)]
+        )
+        row[f"fig13_exact_p7_{label}"] = rmse(d - float(np.linalg.norm(p7_base)))
     return row
 
 

@@ -402,13 +402,15 @@ def draw_world(scenario: Scenario, rng, imaging: Imaging | None = None) -> World
 @dataclass
 class Views:
     """Views of one target: joint angles ``q`` (n, 6) the controller commanded, the flange poses
-    it reports ``flange2base`` (nominal model), the true flange poses ``true_flange2base`` and
-    the observations."""
+    it reports ``flange2base`` (nominal model), the true flange poses ``true_flange2base``, the
+    observations and the true sensor poses ``sensor2base`` (n, 4, 4) they were imaged from
+    (repeatability included)."""
 
     q: np.ndarray
     flange2base: np.ndarray
     true_flange2base: np.ndarray
     observations: list
+    sensor2base: np.ndarray | None = None
 
     def reported(self, scenario: Scenario, world: World, robot_scale: float) -> np.ndarray:
         """Reported flange poses ``(n, 4, 4)`` had the true robot's errors been ``robot_scale``
@@ -437,12 +439,13 @@ def view_target(scenario, world, target2base, dots, normal, n, rng, imaging, mod
     q, flange = viewpoints(scenario, target2base, n, rng)
     true1 = world.robot(scenario, 1.0)
     true_flange = np.array([true1.fk(qi) for qi in q])
-    obs = []
+    obs, sensors = [], []
     for t in true_flange:
         t = geo.perturb(t, 0.0, world.repeatability_mm, rng) if world.repeatability_mm else t
         sensor2base = t @ scenario.sensor2flange
         obs.append(observe(scenario, model, sensor2base, dots, normal, rng, imaging))
-    return Views(q, flange, true_flange, obs)
+        sensors.append(sensor2base)
+    return Views(q, flange, true_flange, obs, np.array(sensors))
 
 
 def view_calibrator(scenario, world, n, rng, imaging, model) -> Views:
@@ -461,7 +464,7 @@ def reimage(scenario, views: Views, rng, imaging, model) -> Views:
         observe(scenario, model, None, None, None, rng, imaging, rendered=o.rendered)
         for o in views.observations
     ]
-    return Views(views.q, views.flange2base, views.true_flange2base, obs)
+    return Views(views.q, views.flange2base, views.true_flange2base, obs, views.sensor2base)
 
 
 def tracker_p7_distance(scenario: Scenario, rng, imaging: Imaging) -> float:
