@@ -24,6 +24,7 @@ from calstudy.papers.hybrid.report_sweeps import (
     ML_MULTIPLE,
     bin_distance,
     chi_square_distance,
+    deviation_controls,
     deviation_verdicts,
     kolmogorov_bound,
     stationary_ratios,
@@ -424,7 +425,7 @@ def summarise_robot_error_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
         ):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
         row["systematic_verdict"] = _verdict_text(lambda s=sub: _systematic_verdict(s, pub)[0])
-        row["deviation_verdict"] = _verdict_text(lambda s=sub: _deviation_verdicts(s, pub)[0])
+        row["deviation_verdict"] = _verdict_text(lambda s=sub: deviation_controls(s, pub)[0])
         row["within_0p3_uncompensated"] = float(np.median(sub["within_0p3_uncompensated"]))
         rows.append(row)
     return pd.DataFrame(rows)
@@ -479,18 +480,6 @@ def _systematic_verdict(sub: pd.DataFrame, pub):
     )
 
 
-def _deviation_verdicts(sub: pd.DataFrame, pub):
-    return judge_controls(
-        sub["within_0p3"],
-        sub["within_0p3_uncompensated"],
-        sub["within_0p3_oracle"],
-        published=pub.within_0p3_percent,
-        kind="percent",
-        direction="higher",
-        baseline=sub["within_0p3_uncompensated"],
-    )
-
-
 def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     """Claim rows ``hybrid.systematic``, ``hybrid.deviation``, ``hybrid.correlation`` and the
     control rows, by the v2 rule, from the trial table of notebook 02 at ``n_compensation``.
@@ -532,7 +521,7 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
             f"significantly non-zero for {np.median(sub['mean_nonzero']):.3g} % (medians)",
         )
     ]
-    dev, null, oracle = _deviation_verdicts(sub, pub)
+    dev, null, oracle = deviation_controls(sub, pub)
     dev_final = oracle_gate(dev, oracle, "a systematic error that an offset can remove")
     dev_counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy()
     dist = bin_distance(dev_counts, pub.deviation_percent)

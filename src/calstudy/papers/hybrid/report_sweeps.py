@@ -232,11 +232,11 @@ def deviation_distribution(trials: pd.DataFrame, n_compensation: int) -> pd.Data
     return pd.DataFrame(rows)
 
 
-def deviation_verdicts(sub: pd.DataFrame):
-    """``hybrid.deviation`` and its controls on the trials of ``sub`` (columns ``within_0p3``,
-    ``within_0p3_uncompensated``, ``within_0p3_oracle``), the verdict gated by the oracle."""
-    pub = load_published()
-    claim, null, oracle = judge_controls(
+def deviation_controls(sub: pd.DataFrame, pub, **rule):
+    """``hybrid.deviation`` and its controls, ungated, on the trials of ``sub`` (columns
+    ``within_0p3``, ``within_0p3_uncompensated``, ``within_0p3_oracle``); ``rule``: further
+    keywords of :func:`calstudy.core.verdicts.judge` (``min_trials`` for a sweep point)."""
+    return judge_controls(
         sub["within_0p3"],
         sub["within_0p3_uncompensated"],
         sub["within_0p3_oracle"],
@@ -244,8 +244,14 @@ def deviation_verdicts(sub: pd.DataFrame):
         kind="percent",
         direction="higher",
         baseline=sub["within_0p3_uncompensated"],
-        min_trials=30,
+        **rule,
     )
+
+
+def deviation_verdicts(sub: pd.DataFrame):
+    """``hybrid.deviation`` and its controls at a sweep point (>= 30 trials), the verdict gated
+    by the oracle."""
+    claim, null, oracle = deviation_controls(sub, load_published(), min_trials=30)
     return oracle_gate(claim, oracle, "a systematic error that an offset can remove"), null, oracle
 
 
