@@ -24,7 +24,7 @@ from calstudy.papers.binocular.scenario import load_scenario
 
 BUDGET_S = 1.0
 TRIAL_BUDGET_S = 1.1
-REPEATS = 3
+REPEATS = 5
 CROP = 40
 
 
