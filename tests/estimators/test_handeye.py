@@ -331,3 +331,13 @@ def test_base_to_base_chains_two_robots():
     args[2] = args[2][:2]
     with pytest.raises(CalibrationError, match="3 flange poses but 2 camera poses"):
         he.base_to_base(*args)
+
+
+def test_rotation_check_refuses_bad_shapes_and_angles():
+    flange = np.repeat(np.eye(4)[None], 2, axis=0)
+    with pytest.raises(CalibrationError, match=r"shape \(2, 4, 4\).*N >= 3"):
+        he.check_rotation_diversity(flange, he.MIN_PAIR_ROTATION)
+    with pytest.raises(CalibrationError, match=r"shape \(4, 4\)"):
+        he.check_rotation_diversity(np.eye(4), he.MIN_PAIR_ROTATION)
+    with pytest.raises(CalibrationError, match="min_rotation must be a positive angle"):
+        he.check_rotation_diversity(np.repeat(np.eye(4)[None], 3, axis=0), 0.0)

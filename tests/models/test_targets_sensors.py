@@ -10,7 +10,7 @@ from calstudy import CalibrationError
 from calstudy.core import geometry as g
 from calstudy.estimators.fitting import fit_homography, homography_to_pose
 from calstudy.models.sensors import LineLaserSensor, PinholeCamera, stripe_offset_recommended
-from calstudy.models.targets import HoleTarget, Sphere
+from calstudy.models.targets import HoleTarget, Sphere, circle_image_centres
 
 CAMERA = PinholeCamera(fx=2000.0, fy=1990.0, cx=640.0, cy=512.0, width=1280, height=1024)
 
@@ -278,3 +278,28 @@ def test_circle_image_centre_is_the_centre_of_the_projected_outline():
     facing = circle_centre_bias(k, [[0.0, 0.0, 500.0]], [[0.0, 0.0, -1.0]], 5.0)
     np.testing.assert_allclose(facing, 0.0, atol=1e-9)
     assert not np.any(circle_centre_bias(k, centres, normals, 0.0))
+
+
+@pytest.mark.parametrize(
+    ("centre", "normal", "radius", "match"),
+    [
+        ([0.0, 0.0, 500.0], [0.0, 0.0, 0.0], 5.0, "circle normal 0 is zero"),
+        ([0.0, 0.0, -500.0], [0.0, 0.0, 1.0], 5.0, r"reaches depth -500 mm"),
+        ([0.0, 0.0, 3.0], [1.0, 0.0, 0.0], 5.0, r"reaches depth -2 mm"),
+        ([0.0, 0.0, 500.0], [1.0, 0.0, 0.0], 5.0, "seen edge-on"),
+        ([0.0, float("nan"), 500.0], [0.0, 0.0, 1.0], 5.0, "circle centres holds a non-finite"),
+        ([0.0, 0.0, 500.0], [0.0, 0.0, 1.0], -1.0, r"radius -1.0 mm must be finite and >= 0"),
+    ],
+)
+def test_circle_image_refuses_circles_it_cannot_image(centre, normal, radius, match):
+    k = np.array([[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(CalibrationError, match=match):
+        circle_image_centres(k, [centre], [normal], radius)
+
+
+def test_circle_image_refuses_mismatched_shapes():
+    k = np.eye(3)
+    with pytest.raises(CalibrationError, match=r"must both be \(N, 3\)"):
+        circle_image_centres(k, [[0.0, 0.0, 500.0]], [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]], 5.0)
+    with pytest.raises(CalibrationError, match="camera matrix"):
+        circle_image_centres(np.eye(4), [[0.0, 0.0, 500.0]], [[0.0, 0.0, 1.0]], 5.0)

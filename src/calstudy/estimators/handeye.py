@@ -407,7 +407,14 @@ def check_rotation_diversity(flange2base: np.ndarray, min_rotation: float) -> No
     motion's first flange, as the method uses it). The message says which condition fails and
     the number behind it.
     """
-    r = np.asarray(flange2base)[:, :3, :3]
+    poses = geo.check_transform("flange poses", flange2base)
+    if poses.ndim != 3 or poses.shape[0] < 3:
+        raise CalibrationError(
+            f"flange poses of shape {poses.shape}: the rotation check needs (N, 4, 4) with N >= 3"
+        )
+    if not (np.isfinite(min_rotation) and min_rotation > 0.0):
+        raise CalibrationError(f"min_rotation must be a positive angle in rad, got {min_rotation}")
+    r = poses[:, :3, :3]
     i, j = np.triu_indices(len(r), 1)
     rotvec = geo.matrix_to_rotvec(np.swapaxes(r[i], -1, -2) @ r[j])
     angles = np.linalg.norm(rotvec, axis=1)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core import geometry as geo
 from calstudy.core.geometry import check_shape, invert, make_transform
 
 #: Rotation by pi about x: the back frame's axes in the front frame (x kept, y and z reversed).
@@ -199,10 +200,7 @@ def circle_image_centres(k_matrix, centres_cam, normals_cam, radius: float) -> n
     ellipse (or takes the centroid of its edge) is biased by the difference, which grows with
     ``radius^2`` and the tilt of the circle, and vanishes for a circle facing the camera.
     """
-    k = np.asarray(k_matrix, dtype=float)
-    c = np.atleast_2d(np.asarray(centres_cam, dtype=float))
-    n = np.atleast_2d(np.asarray(normals_cam, dtype=float))
-    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    k, c, n = _check_circles(k_matrix, centres_cam, normals_cam, radius)
     helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     e1 = np.cross(n, helper)
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
@@ -211,7 +209,48 @@ def circle_image_centres(k_matrix, centres_cam, normals_cam, radius: float) -> n
     h_inv = np.linalg.inv(h)
     conic = np.swapaxes(h_inv, 1, 2) @ np.diag([1.0, 1.0, -(float(radius) ** 2)]) @ h_inv
     a, b = conic[:, :2, :2], conic[:, :2, 2]
+    det = np.linalg.det(a)
+    if not np.all(det * a[:, 0, 0] > 0.0) and radius > 0.0:
+        bad = int(np.flatnonzero(~(det * a[:, 0, 0] > 0.0))[0])
+        raise CalibrationError(
+            f"circle {bad} does not image as an ellipse (its conic is degenerate or a "
+            "hyperbola): part of it lies at or behind the camera's plane"
+        )
     return -np.linalg.solve(a, b[..., None])[..., 0]
+
+
+def _check_circles(k_matrix, centres_cam, normals_cam, radius: float):
+    """The checked inputs of :func:`circle_image_centres`: ``K`` (3, 3), centres and unit
+    normals ``(N, 3)``, every circle wholly in front of the camera and not seen edge-on."""
+    k = geo.check_finite("camera matrix", geo.check_shape("camera matrix", k_matrix, (3, 3)))
+    c = geo.check_finite("circle centres", np.atleast_2d(np.asarray(centres_cam, dtype=float)))
+    n = geo.check_finite("circle normals", np.atleast_2d(np.asarray(normals_cam, dtype=float)))
+    if c.ndim != 2 or c.shape[1] != 3 or n.shape != c.shape:
+        raise CalibrationError(
+            f"circle centres {c.shape} and normals {n.shape} must both be (N, 3)"
+        )
+    if not (np.isfinite(radius) and radius >= 0.0):
+        raise CalibrationError(f"circle radius {radius} mm must be finite and >= 0")
+    norm = np.linalg.norm(n, axis=1)
+    if np.any(norm < 1e-12):
+        raise CalibrationError(f"circle normal {int(np.argmin(norm))} is zero")
+    n = n / norm[:, None]
+    # the lowest depth on the circle: its centre's depth less the radius times the in-plane
+    # reach along the optical axis
+    nearest = c[:, 2] - radius * np.sqrt(np.clip(1.0 - n[:, 2] ** 2, 0.0, 1.0))
+    if np.any(nearest <= 0.0):
+        bad = int(np.argmin(nearest))
+        raise CalibrationError(
+            f"circle {bad} reaches depth {nearest[bad]:.4g} mm: a circle must lie wholly in "
+            "front of the camera"
+        )
+    edge_on = np.abs(np.sum(n * c, axis=1)) <= 1e-9 * np.linalg.norm(c, axis=1)
+    if np.any(edge_on):
+        raise CalibrationError(
+            f"circle {int(np.flatnonzero(edge_on)[0])} is seen edge-on (its plane passes "
+            "through the camera centre): it images as a line"
+        )
+    return k, c, n
 
 
 def circle_centre_bias(k_matrix, centres_cam, normals_cam, radius: float) -> np.ndarray:

@@ -134,6 +134,8 @@ def test_whole_deviation_distribution_distances_and_where_a_verdict_changes():
     assert report_sweeps.CHI2_CRITICAL == pytest.approx(7.815, abs=1e-3)
     all_first = np.array([[174, 0, 0, 0, 0]])
     assert report_sweeps.chi_square_distance(all_first, published)[0] > 100
+    with pytest.raises(CalibrationError, match="needs counts in every row"):
+        report_sweeps.chi_square_distance(np.zeros((1, 5)), published)
     text = report_sweeps.where_verdict_changes(
         [0.3, 0.0, 0.1], ["not reproduced", "reproduced", "reproduced"], 0.1, "x", "mm"
     )

@@ -188,6 +188,11 @@ def chi_square_distance(counts, published_percent) -> np.ndarray:
     p = np.asarray(published_percent, dtype=float)
     c = np.column_stack([c[:, :3], c[:, 3:].sum(axis=1)])
     p = np.r_[p[:3], p[3:].sum()]
+    if np.any(c.sum(axis=1) <= 0.0) or np.any(p <= 0.0):
+        raise CalibrationError(
+            "a chi-square distance needs counts in every row and a positive published share "
+            f"in every merged bin; row totals {c.sum(axis=1).min():g} (smallest), shares {p}"
+        )
     expected = c.sum(axis=1, keepdims=True) * p / p.sum()
     return ((c - expected) ** 2 / expected).sum(axis=1)
 

@@ -230,7 +230,14 @@ class HybridStation:
             return front2base @ geo.invert(front2flange), back2statcam
 
         design = self.statcam2base_design[index]
-        key = (index, design.tobytes())
+        key = (
+            index,
+            design.tobytes(),
+            float(self.standoff),
+            front2flange.tobytes(),
+            self.target.back2front().tobytes(),
+            self.nominal.parameters().tobytes(),
+        )
         if key not in _STATIONARY_SEEDS:
             for yaw in np.deg2rad(np.arange(0.0, 360.0, 15.0)):
                 pose, _ = flange_for(yaw, self.target.back2front(), design)
@@ -248,7 +255,8 @@ class HybridStation:
         return self.solve_ik(self.true, pose, seed), back2statcam
 
 
-#: IK seeds of the stationary-sensor poses on the nominal robot, by sensor (pure geometry cache)
+#: IK seeds of the stationary-sensor poses on the nominal robot, by sensor and every input of the
+#: search (pure geometry cache)
 _STATIONARY_SEEDS: dict = {}
 
 
