@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calstudy.core.errors import CalibrationError
 from calstudy.core import geometry as geo
+from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import check_shape, invert, make_transform
 
 #: Rotation by pi about x: the back frame's axes in the front frame (x kept, y and z reversed).
