@@ -109,6 +109,12 @@ doing nothing and must come out not reproduced; the *oracle control* removes the
 the method targets and must reach significance. Claims without a published figure ("none in
 the paper") are judged against a reference method on the same trials (the statement and the
 note name it).
+
+**Inputs the paper does not state** (rule 11 of the register, the *nuisance rule*) are either
+calibrated by code in the notebook so that a *baseline* figure the paper reports is matched (the
+uncorrected error, a competing method's error; never the claimed figure), with the target named
+in `data/`, or kept as a documented assumption that the notebook sweeps, showing where the
+verdict changes.
 """
 
 def _cell(text: object) -> str:
