@@ -103,4 +103,7 @@ def test_calibrated_f_number_interpolates_log_log_between_bracketing_points():
     assert text == "Over the F-number sweep (f/4 to f/11) binocular.coc stays reproduced."
     table.loc[2, "verdict_coc"] = "not testable"
     text = report.verdict_changes(table, "f_number", "binocular.coc", "F-number", "")
-    assert text.endswith("reproduced at f/4, not testable from f/11.")
+    assert text.endswith("is reproduced at f/4 to f/5.6, not testable at f/11.")
+    table.loc[0, "verdict_coc"] = "not reproduced"
+    text = report.verdict_changes(table, "f_number", "binocular.coc", "F-number", "")
+    assert text.endswith("not reproduced at f/4, reproduced at f/5.6, not testable at f/11.")

@@ -580,10 +580,13 @@ def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit:
             f"Over the {label} sweep ({fmt(vals[0])} to {fmt(vals[-1])}) {claim} stays "
             f"{verdicts[0]}."
         )
-    parts = [f"{verdicts[0]} at {fmt(vals[0])}"]
-    for i in range(1, len(vals)):
-        if verdicts[i] != verdicts[i - 1]:
-            parts.append(f"{verdicts[i]} from {fmt(vals[i])}")
+    parts, start = [], 0
+    for i in range(1, len(vals) + 1):  # one part per run of equal verdicts, with its values
+        if i == len(vals) or verdicts[i] != verdicts[start]:
+            last = fmt(vals[i - 1])
+            where = last if i - 1 == start else f"{fmt(vals[start])} to {last}"
+            parts.append(f"{verdicts[start]} at {where}")
+            start = i
     return f"Along the {label} sweep {claim} is " + ", ".join(parts) + "."
 
 
