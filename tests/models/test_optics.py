@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 from support import disk_image
@@ -50,39 +51,118 @@ def test_rim_shadow_geometry():
     np.testing.assert_array_equal(centre, [0.0, 0.0])
     centre, _ = optics.rim_shadow([0.2, -0.1], 4.0, 50.0, 12.0, 40.0)
     np.testing.assert_allclose(centre, [-40.0 * 0.2 / 6.25, 40.0 * 0.1 / 6.25])
-    with pytest.raises(CalibrationError, match="must be positive"):
-        optics.rim_shadow([0.0, 0.0], 0.0, 50.0, 12.0, 40.0)
+    # at depth Z the ray through pupil point p crosses the rim's plane at a p (1 - L/Z) + L t
+    centre, radius = optics.rim_shadow([[0.2, -0.1]], 4.0, 50.0, 12.0, 40.0, [400.0])
+    scale = 6.25 * (1.0 - 40.0 / 400.0)
+    np.testing.assert_allclose(centre, [[-40.0 * 0.2 / scale, 40.0 * 0.1 / scale]])
+    np.testing.assert_allclose(radius, [12.0 / scale])
+    # a ray through the transmitted disc's edge grazes the rim
+    p = centre[0] + radius[0] * np.array([0.6, 0.8])
+    t, a = np.array([0.2, -0.1]), 6.25
+    at_rim = a * p * (1.0 - 40.0 / 400.0) + 40.0 * t
+    assert np.hypot(*at_rim) == pytest.approx(12.0, rel=1e-12)
 
 
-def test_uncut_blur_spot_is_the_gaussian_of_eq7():
-    img = np.zeros((61, 61), np.float32)
-    img[20:40, 25:45] = 1.0
-    # a rim far outside the spot cuts nothing: the result is the symmetric Gaussian blur
-    got = optics.defocus_vignetted(img, 2.5, 1.0, (0.5, 0.0), 10.0)
-    np.testing.assert_array_equal(got, optics.defocus(img, 2.5))
-    k = optics.defocus_kernel(2.5)
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (([0.0, 0.0], 0.0, 50.0, 12.0, 40.0), "must be finite and positive"),
+        (([0.0, 0.0], 4.0, np.inf, 12.0, 40.0), "must be finite and positive"),
+        (([0.0, 0.0], 4.0, 50.0, 12.0, np.nan), "rim distance nan mm finite"),
+        (([np.nan, 0.0], 4.0, 50.0, 12.0, 40.0), "must be finite"),
+        (([0.0, 0.0, 1.0], 4.0, 50.0, 12.0, 40.0), r"shape \(3,\)"),
+        (([0.0, 0.0], 4.0, 50.0, 12.0, 40.0, 30.0), "must lie beyond the rim"),
+    ],
+)
+def test_rim_shadow_refuses_bad_inputs(args, match):
+    with pytest.raises(CalibrationError, match=match):
+        optics.rim_shadow(*args)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"delta_px": np.nan}, "radius nan px must be finite"),
+        ({"delta_px": 5000.0}, r"radius 5000\.0 px must be .* <= 200"),
+        ({"side": 0.5}, r"side of the focus 0\.5 must be \+1"),
+        ({"rim_centre": (0.0, 0.0, 0.0)}, "rim centre"),
+        ({"rim_centre": (np.nan, 0.0)}, "rim centre"),
+        ({"rim_radius": -1.0}, "rim radius -1.0"),
+        ({"rim_radius": np.nan}, "rim radius nan"),
+    ],
+)
+def test_blur_spot_refuses_bad_inputs(kwargs, match):
+    args = {"delta_px": 3.0, "side": 1.0, "rim_centre": (0.5, 0.0), "rim_radius": 1.2} | kwargs
+    with pytest.raises(CalibrationError, match=match):
+        optics.defocus_kernel(**args)
+    img = np.zeros((21, 21), np.float32)
+    with pytest.raises(CalibrationError, match=match):
+        optics.defocus_vignetted(img, *args.values())
+
+
+def test_blur_spot_refuses_a_nan_image_and_a_rim_that_blocks_every_ray():
+    img = np.zeros((21, 21), np.float32)
+    img[3, 4] = np.nan
+    with pytest.raises(CalibrationError, match="NaN or inf pixels"):
+        optics.defocus_vignetted(img, 3.0, 1.0, (0.5, 0.0), 1.2)
+    with pytest.raises(CalibrationError, match="blocks every ray"):
+        optics.defocus_kernel(6.0, 1.0, (5.0, 0.0), 1.0)
+
+
+@pytest.mark.parametrize("delta", [0.3, 1.0, 2.5, 7.3])
+def test_uncut_blur_spot_is_the_gaussian_of_eq7(delta):
+    rng = np.random.default_rng(1)
+    img = rng.random((61, 67)).astype(np.float32)
+    # the kernel path without a cut is cv2.GaussianBlur's kernel, same reach (4 sigma)
+    k = optics.defocus_kernel(delta)
+    flipped = k[::-1, ::-1].copy()
+    kernel_path = cv2.filter2D(img, cv2.CV_32F, flipped, borderType=cv2.BORDER_REPLICATE)
+    np.testing.assert_allclose(kernel_path, optics.defocus(img, delta), rtol=0, atol=2e-6)
     y, x = np.mgrid[: k.shape[0], : k.shape[1]] - k.shape[0] // 2
     assert abs(float((k * x).sum())) < 1e-6 and abs(float((k * y).sum())) < 1e-6
+    # a rim that clears the pupil takes the defocus shortcut; one that just touches it takes
+    # the kernel path: both give the same image (no jump at the switch)
+    edge = 1.0 + 1.0 / delta
+    far = optics.defocus_vignetted(img, delta, 1.0, (0.3 - 1e-6, 0.0), edge + 0.3)
+    np.testing.assert_array_equal(far, optics.defocus(img, delta))
+    cut = optics.defocus_vignetted(img, delta, 1.0, (0.3 + 1e-6, 0.0), edge + 0.3)
+    np.testing.assert_allclose(cut, far, rtol=0, atol=2e-6)
+
+
+def _pupil_centroid(centre, radius, n=2001):
+    """Centroid of the unit disc inside the disc (centre, radius), and its area share."""
+    g = np.linspace(-1.0, 1.0, n)
+    x, y = np.meshgrid(g, g)
+    disc = x**2 + y**2 <= 1.0
+    keep = disc & ((x - centre[0]) ** 2 + (y - centre[1]) ** 2 <= radius**2)
+    return np.array([x[keep].mean(), y[keep].mean()]), keep.sum() / disc.sum()
 
 
 @pytest.mark.parametrize("side", [1.0, -1.0])
-def test_half_cut_blur_spot_centroid_is_the_half_gaussian_mean(side):
-    # a rim whose edge passes through the pupil centre keeps the half x >= 0 of the pupil: the
-    # spot's centroid is the mean of a half-Gaussian, delta sqrt(2 / pi), upright beyond the
-    # focus (side +1) and inverted nearer (side -1)
-    delta, big = 12.0, 1e5
-    k = optics.defocus_kernel(delta, side, (big, 0.0), big)
+@pytest.mark.parametrize(
+    ("centre", "radius"),
+    [((1e5, 0.0), 1e5), ((1.5, 0.0), 1.0), ((0.0, -2.5), 2.0), ((1.27, 1.27), 1.0)],
+)
+def test_cut_blur_spot_centroid_is_the_transmitted_pupils(side, centre, radius):
+    # the centroid of the cut spot is delta times the centroid of the transmitted pupil (half
+    # disc: 4 / (3 pi); a thin sliver: near its edge), upright beyond the focus (side +1) and
+    # inverted nearer (side -1): the Gaussian's tail is not cut as rays
+    delta = 12.0
+    k = optics.defocus_kernel(delta, side, centre, radius)
     y, x = np.mgrid[: k.shape[0], : k.shape[1]] - k.shape[0] // 2
-    assert float((k * x).sum()) == pytest.approx(side * delta * np.sqrt(2 / np.pi), rel=0.01)
-    assert abs(float((k * y).sum())) < 1e-6
+    got = np.array([(k * x).sum(), (k * y).sum()])
+    want, share = _pupil_centroid(centre, radius)
+    assert share < 0.6
+    np.testing.assert_allclose(got, side * delta * want, rtol=0, atol=0.01 * delta)
+    if centre == (1e5, 0.0):
+        assert want[0] == pytest.approx(4.0 / (3.0 * np.pi), rel=1e-3)
     # the blurred image of a point moves by the same amount
     img = np.zeros((121, 121), np.float32)
     img[60, 60] = 1.0
-    out = optics.defocus_vignetted(img, delta, side, (big, 0.0), big)
+    out = optics.defocus_vignetted(img, delta, side, centre, radius)
     yy, xx = np.mgrid[:121, :121]
-    assert float((out * xx).sum() / out.sum()) - 60 == pytest.approx(
-        side * delta * np.sqrt(2 / np.pi), rel=0.01
-    )
+    moved = np.array([(out * xx).sum(), (out * yy).sum()]) / out.sum() - 60
+    np.testing.assert_allclose(moved, got, atol=1e-3)
 
 
 def _conic_centre(k, centre, normal, radius):

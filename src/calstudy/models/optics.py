@@ -275,16 +275,23 @@ def defocus(image, delta_px: float) -> np.ndarray:
 
 
 def rim_shadow(
-    field_tan, f_number: float, focal_mm: float, rim_radius_mm: float, rim_distance_mm: float
+    field_tan,
+    f_number: float,
+    focal_mm: float,
+    rim_radius_mm: float,
+    rim_distance_mm: float,
+    depth_mm=math.inf,
 ):
     """Where a lens rim cuts the entrance pupil for an off-axis object point, in pupil radii.
 
     The entrance pupil has radius ``a = f / (2 F)``. A rim of radius ``R`` at ``L`` in front of
     the pupil (towards the object; a rim behind it has ``L < 0``) lets through, from an object
-    point in the direction ``t = (X/Z, Y/Z)``, the rays whose pupil point ``p`` satisfies
-    ``|p + L t| <= R``: the transmitted pupil is the unit disc intersected with the disc of
-    radius ``R / a`` centred at ``-L t / a`` (the "cat's eye" of mechanical vignetting). On the
-    axis, or with a rim wider than ``a + L |t|``, nothing is cut.
+    point at depth ``Z`` in the direction ``t = (X/Z, Y/Z)``, the rays whose pupil point ``p``
+    (in pupil radii) satisfies ``|a p (1 - L/Z) + L t| <= R`` (the ray from the point to ``a p``
+    crosses the rim's plane there): the transmitted pupil is the unit disc intersected with the
+    disc of radius ``R / (a (1 - L/Z))`` centred at ``-L t / (a (1 - L/Z))`` (the "cat's eye" of
+    mechanical vignetting). On the axis, or with a rim wider than ``a |1 - L/Z| + |L t|``,
+    nothing is cut.
 
     Parameters
     ----------
@@ -294,21 +301,68 @@ def rim_shadow(
         Aperture number and focal length (mm), > 0.
     rim_radius_mm, rim_distance_mm : float
         The rim's radius (> 0) and its axial distance in front of the entrance pupil, mm.
+    depth_mm : float or (...,) array_like
+        Depth ``Z`` of the object point(s), mm, beyond the rim (``Z > L``); ``inf``: far field.
 
     Returns
     -------
     centre : (..., 2) array
         Centre of the rim's disc in pupil radii.
-    radius : float
+    radius : float or (...,) array
         Its radius in pupil radii.
     """
-    if not (f_number > 0 and focal_mm > 0 and rim_radius_mm > 0 and math.isfinite(rim_distance_mm)):
+    values = (f_number, focal_mm, rim_radius_mm)
+    if not all(math.isfinite(v) and v > 0 for v in values) or not math.isfinite(rim_distance_mm):
         raise CalibrationError(
             f"F {f_number}, focal length {focal_mm} mm and rim radius {rim_radius_mm} mm must be "
-            f"positive and the rim distance {rim_distance_mm} mm finite"
+            f"finite and positive and the rim distance {rim_distance_mm} mm finite"
+        )
+    t = np.asarray(field_tan, dtype=float)
+    if t.shape[-1:] != (2,) or not np.all(np.isfinite(t)):
+        raise CalibrationError(f"field direction of shape {t.shape} must be finite (..., 2)")
+    z = np.asarray(depth_mm, dtype=float)
+    if np.any(np.isnan(z)) or np.any(z <= max(rim_distance_mm, 0.0)):
+        raise CalibrationError(
+            f"object depth {depth_mm} mm must lie beyond the rim ({rim_distance_mm} mm) and the "
+            "pupil"
         )
     a = focal_mm / (2.0 * f_number)
-    return -rim_distance_mm * np.asarray(field_tan, dtype=float) / a, rim_radius_mm / a
+    scale = a * (1.0 - rim_distance_mm / z)
+    centre = -rim_distance_mm * t / np.asarray(scale)[..., None]
+    return centre, rim_radius_mm / scale
+
+
+MAX_DELTA_PX = 200.0
+"""Largest circle-of-confusion radius a blur spot is built for, px (a kernel of ~1600 px)."""
+
+
+def _check_delta(delta_px) -> float:
+    if not (np.isfinite(delta_px) and 0 <= delta_px <= MAX_DELTA_PX):
+        raise CalibrationError(
+            f"circle-of-confusion radius {delta_px} px must be finite, >= 0 and <= {MAX_DELTA_PX}"
+        )
+    return float(delta_px)
+
+
+def _check_rim(side, rim_centre, rim_radius) -> tuple[float, np.ndarray, float]:
+    if side not in (1.0, -1.0):
+        raise CalibrationError(f"side of the focus {side} must be +1 (beyond) or -1 (nearer)")
+    c = np.asarray(rim_centre, dtype=float)
+    if c.shape != (2,) or not np.all(np.isfinite(c)):
+        raise CalibrationError(f"rim centre {rim_centre} must be two finite pupil coordinates")
+    if not (rim_radius > 0) or math.isnan(rim_radius):
+        raise CalibrationError(f"rim radius {rim_radius} (pupil radii) must be > 0")
+    return float(side), c, float(rim_radius)
+
+
+def _gaussian_size(delta_px: float) -> int:
+    """Width of :func:`cv2.GaussianBlur`'s float kernel for ``sigma = delta`` (4 sigma a side)."""
+    return int(round(delta_px * 4 * 2 + 1)) | 1
+
+
+def _rim_clears(delta_px: float, rim_centre, rim_radius: float) -> bool:
+    """True when the rim's disc contains the whole pupil (with the one-pixel soft edge)."""
+    return float(np.hypot(*rim_centre)) + 1.0 + 1.0 / delta_px <= rim_radius
 
 
 def defocus_kernel(
@@ -316,45 +370,75 @@ def defocus_kernel(
 ):
     """Blur spot of a defocused point (Eq. 7), cut by a lens rim (:func:`rim_shadow`).
 
-    A defocused point is imaged as the pupil scaled by the CoC radius ``delta`` px (a ray through
-    pupil point ``p``, in pupil radii, lands ``delta p`` from the chief ray), upright for a point
-    beyond the focused distance (``side = +1``) and inverted for a nearer one (``side = -1``);
-    the energy over the spot is the Gaussian of Eq. 7 (``sigma = delta``, the paper's model,
-    whose tail reaches beyond the geometric disc). Points of the spot whose pupil point lies
-    outside the rim's disc (centre ``rim_centre``, ``rim_radius`` in pupil radii) get no light.
-    Without a rim the kernel is the symmetric Gaussian of :func:`defocus`.
+    Geometrically a defocused point is imaged as the pupil scaled by the CoC radius ``delta`` px
+    (a ray through pupil point ``p``, ``|p| <= 1`` in pupil radii, lands ``delta p`` from the
+    chief ray), upright for a point beyond the focused distance (``side = +1``) and inverted for
+    a nearer one (``side = -1``). The paper's energy model of the uncut spot is the Gaussian of
+    Eq. 7, ``G_delta`` (``sigma = delta``), whose tail reaches beyond the geometric disc; it is
+    read as the geometric disc ``D`` (uniform, area ``|D|``) spread by a Gaussian ``G_s``,
+    ``s = delta / sqrt 2`` (the spread that gives the convolution Eq. 7's second moment). Only
+    rays through the pupil carry light, so the rim keeps the transmitted pupil ``T`` (the unit
+    disc inside the rim's disc, centre ``rim_centre`` and radius ``rim_radius`` in pupil radii),
+    spread by ``G_s``, plus the transmitted share of the fixed difference between Eq. 7 and the
+    spread disc::
+
+        k = G_s * 1_T / |D| + (|T| / |D|) (G_delta - G_s * 1_D / |D|)   (clipped at 0, normalised)
+
+    The difference term has no mass and no first moment, so the spot's centroid is the
+    transmitted pupil's, ``delta`` times the centroid of ``T``, as a ray trace gives; the
+    Gaussian's tail is spread light, not rays, and is never cut as if it were; and without a
+    cut (``T = D``) the kernel is ``G_delta`` itself, the kernel :func:`cv2.GaussianBlur` (used
+    by :func:`defocus`) builds. The pupil is sampled on the pixel grid with a one-pixel soft
+    edge; the clipping of the few negative values left by a thin sliver of pupil moves the
+    centroid by under 1 % of ``delta`` at ``delta >= 8`` px.
 
     Returns
     -------
-    (n, n) float32 array, n = 2 ceil(3 delta) + 1, summing to 1
+    (n, n) float32 array, n the width of ``cv2.GaussianBlur``'s kernel (about 8 delta + 1),
+    summing to 1
         ``k[j, i]``: the share of a point's energy landing ``(i - n//2, j - n//2)`` px from it.
     """
-    if not (np.isfinite(delta_px) and delta_px > 0):
-        raise CalibrationError(f"circle-of-confusion radius {delta_px} px must be finite, > 0")
-    h = int(math.ceil(3.0 * delta_px))
-    y, x = np.mgrid[-h : h + 1, -h : h + 1].astype(np.float64)
-    k = np.exp(-(x * x + y * y) / (2.0 * delta_px**2))
-    if math.isfinite(rim_radius):
-        cx, cy = rim_centre
-        dist = np.hypot(side * x / delta_px - cx, side * y / delta_px - cy)
-        k *= np.clip(0.5 + (rim_radius - dist) * delta_px, 0.0, 1.0)  # one-pixel soft edge
-    total = k.sum()
-    if not total > 0:
-        raise CalibrationError("the rim blocks every ray of the blur spot")
-    return (k / total).astype(np.float32)
+    delta_px = _check_delta(delta_px)
+    if not delta_px > 0:
+        raise CalibrationError(f"circle-of-confusion radius {delta_px} px must be > 0")
+    side, c, r = _check_rim(side, rim_centre, rim_radius)
+    n = _gaussian_size(delta_px)
+    g1 = cv2.getGaussianKernel(n, delta_px, cv2.CV_64F)[:, 0]
+    k = np.outer(g1, g1)
+    if not _rim_clears(delta_px, c, r):
+        h = n // 2
+        y, x = np.mgrid[-h : h + 1, -h : h + 1].astype(np.float64)
+        px, py = side * x / delta_px, side * y / delta_px  # pupil point of each landing pixel
+        pupil = np.clip(0.5 + (1.0 - np.hypot(px, py)) * delta_px, 0.0, 1.0)
+        through = np.clip(0.5 + (r - np.hypot(px - c[0], py - c[1])) * delta_px, 0.0, 1.0)
+        passed = pupil * through
+        share = float(passed.sum() / pupil.sum())  # |T| / |D|
+        if not share > 0:
+            raise CalibrationError("the rim blocks every ray of the blur spot")
+        s = delta_px / math.sqrt(2.0)
+
+        def spread(a):
+            return cv2.GaussianBlur(a, (0, 0), sigmaX=s, borderType=cv2.BORDER_CONSTANT)
+
+        # G_s * 1_T / |D| + (|T| / |D|) (G_delta - G_s * 1_D / |D|)
+        k = np.clip((spread(passed) + share * (k * pupil.sum() - spread(pupil))), 0.0, None)
+    return (k / k.sum()).astype(np.float32)
 
 
 def defocus_vignetted(image, delta_px: float, side: float, rim_centre, rim_radius: float):
     """Blur an image by :func:`defocus_kernel` (a convolution); below 0.05 px the image is left
-    as it is, and without a cut the result is that of :func:`defocus`."""
+    as it is, and when the rim clears the pupil the result is that of :func:`defocus` (the
+    kernel is then the same Gaussian)."""
     img = np.asarray(image, dtype=np.float32)
-    if not np.isfinite(delta_px) or delta_px < 0:
-        raise CalibrationError(f"circle-of-confusion radius {delta_px} px must be finite, >= 0")
+    delta_px = _check_delta(delta_px)
+    side, c, r = _check_rim(side, rim_centre, rim_radius)
+    if not np.all(np.isfinite(img)):
+        raise CalibrationError(f"the {img.shape} image to blur has NaN or inf pixels")
     if delta_px < 0.05:
         return img.copy()
-    if float(np.hypot(*rim_centre)) + 3.0 <= rim_radius:  # the rim clears the whole spot
+    if _rim_clears(delta_px, c, r):  # the rim passes every ray: Eq. 7's Gaussian
         return defocus(img, delta_px)
-    k = defocus_kernel(delta_px, side, rim_centre, rim_radius)
+    k = defocus_kernel(delta_px, side, c, r)
     # filter2D correlates: flip the kernel to convolve
     return cv2.filter2D(img, cv2.CV_32F, k[::-1, ::-1].copy(), borderType=cv2.BORDER_REPLICATE)
 

@@ -166,10 +166,10 @@ def test_handeye_chain_is_exact_without_defocus_noise_or_robot_error(scenario):
 
 
 def test_handeye_chain_carries_the_defocus_error_to_fig13(scenario):
-    """With the defocus on (f/5.42, the calibrated aperture) and nothing else: the triangulated
+    """With the defocus on (f/3.53, the calibrated aperture) and nothing else: the triangulated
     points err more along the plate normal than across it, the calibrator poses tilt, and the
     preliminary matrix is millimetres off while the same views without defocus give it exactly."""
-    sc = ex.with_optics(_perfect_robot(scenario), f_number=5.42)
+    sc = ex.with_optics(_perfect_robot(scenario), f_number=3.53)
     row = _chain(sc, Imaging(noise=False, defocus=True))
     assert row["shift_px_max"] > 1.0
     assert row["point_err_normal_mm"] > row["point_err_inplane_mm"]

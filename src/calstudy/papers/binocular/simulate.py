@@ -125,18 +125,19 @@ class Imaging:
 
 def blur_spots(scenario: Scenario, centres_cam) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The blur spot of each dot (camera frame, ``(m, 3)`` mm): CoC radius (Eq. 4, px), the side
-    of the focused distance (+1 beyond, -1 nearer) and the centre of the lens rim's shadow on the
-    pupil (:func:`calstudy.models.optics.rim_shadow`, ``sensor.toml [optics]``), and its radius.
+    of the focused distance (+1 beyond, -1 nearer) and the lens rim's disc on the pupil at the
+    dot's direction and depth (:func:`calstudy.models.optics.rim_shadow`, ``sensor.toml
+    [optics]``).
 
-    Returns ``(deltas (m,), sides (m,), rim_centres (m, 2))``; the rim radius is
-    :func:`rim_radius`.
+    Returns ``(deltas (m,), sides (m,), rims (m, 3))``, a rim row being the disc's centre and
+    radius in pupil radii.
     """
     c = np.asarray(centres_cam, dtype=float).reshape(-1, 3)
     opt = scenario.config["sensor"]["optics"]
     deltas = np.asarray(scenario.coc_radius_px(c[:, 2]), dtype=float).reshape(-1)
     sides = np.where(c[:, 2] >= opt["focus_distance_mm"], 1.0, -1.0)
-    centres, _ = optics.rim_shadow(c[:, :2] / c[:, 2:3], *_rim_inputs(scenario))
-    return deltas, sides, centres
+    centres, radii = optics.rim_shadow(c[:, :2] / c[:, 2:3], *_rim_inputs(scenario), c[:, 2])
+    return deltas, sides, np.column_stack([centres, radii])
 
 
 def _rim_inputs(scenario: Scenario) -> tuple[float, float, float, float]:
@@ -150,20 +151,14 @@ def _rim_inputs(scenario: Scenario) -> tuple[float, float, float, float]:
     )
 
 
-def rim_radius(scenario: Scenario) -> float:
-    """Radius of the lens rim's shadow on the entrance pupil, in pupil radii."""
-    _, r = optics.rim_shadow(np.zeros(2), *_rim_inputs(scenario))
-    return float(r)
-
-
-def blur(scenario: Scenario, sharp, deltas, sides, rim_centres) -> np.ndarray:
+def blur(scenario: Scenario, sharp, deltas, sides, rims) -> np.ndarray:
     """Defocus ``m`` sharp ROIs ``(m, rows, cols)``, each by its own blur spot (Eq. 7 with the
-    rim's cut, :func:`calstudy.models.optics.defocus_vignetted`)."""
-    r = rim_radius(scenario)
+    rim's cut, :func:`calstudy.models.optics.defocus_vignetted`; ``rims`` as :func:`blur_spots`
+    returns them)."""
     return np.stack(
         [
-            optics.defocus_vignetted(img, d, s, c, r)
-            for img, d, s, c in zip(sharp, deltas, sides, rim_centres, strict=True)
+            optics.defocus_vignetted(img, d, s, rim[:2], float(rim[2]))
+            for img, d, s, rim in zip(sharp, deltas, sides, rims, strict=True)
         ]
     )
 
@@ -217,7 +212,7 @@ def render_rois(scenario, camera: PinholeCamera, centres_cam, normals_cam):
     with the margin its circle of confusion (Eq. 4) needs.
 
     Returns ``(sharp, origins, spots)``: the ``(m, rows, cols)`` ROIs, their top-left pixels
-    ``(m, 2)`` and the true blur spots of :func:`blur_spots` (CoC radii, sides, rim centres).
+    ``(m, 2)`` and the true blur spots of :func:`blur_spots` (CoC radii, sides, rim discs).
     """
     centres = np.asarray(centres_cam, dtype=float)
     depth = centres[:, 2]
