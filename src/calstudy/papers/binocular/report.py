@@ -548,20 +548,25 @@ def optics_sweep_table(sweep: pd.DataFrame, key: str) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def loglog_crossing(x, y, goal: float) -> float | None:
+    """``x`` at which ``y`` meets ``goal`` by log-log interpolation between the first bracketing
+    pair of points (in the order given); None if no pair brackets it."""
+    lx, ly, lg = np.log(np.asarray(x)), np.log(np.asarray(y)), math.log(goal)
+    for i in range(len(lx) - 1):
+        lo, hi = sorted((ly[i], ly[i + 1]))
+        if lo <= lg <= hi and ly[i] != ly[i + 1]:
+            w = (lg - ly[i]) / (ly[i + 1] - ly[i])
+            return float(math.exp(lx[i] + w * (lx[i + 1] - lx[i])))
+    return None
+
+
 def calibrated_f_number(table: pd.DataFrame, target_mm: float) -> float | None:
     """The F-number at which the median Table 2 RMSE without rectification meets ``target_mm``
     (the paper's baseline), by log-log interpolation between the two points of the F-number
-    sweep ``table`` (:func:`optics_sweep_table`) that bracket it; None if none do."""
+    sweep ``table`` (:func:`optics_sweep_table`) that bracket it, to 0.01; None if none do."""
     t = table.sort_values("f_number")
-    f = np.log(t["f_number"].to_numpy())
-    y = np.log(t["t2_without_mm"].to_numpy())
-    goal = math.log(target_mm)
-    for i in range(len(t) - 1):
-        lo, hi = sorted((y[i], y[i + 1]))
-        if lo <= goal <= hi and y[i] != y[i + 1]:
-            w = (goal - y[i]) / (y[i + 1] - y[i])
-            return float(round(math.exp(f[i] + w * (f[i + 1] - f[i])), 2))
-    return None
+    f = loglog_crossing(t["f_number"].to_numpy(), t["t2_without_mm"].to_numpy(), target_mm)
+    return None if f is None else float(round(f, 2))
 
 
 def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit: str) -> str:

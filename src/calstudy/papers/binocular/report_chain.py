@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.papers.binocular.report import OPTICS
+from calstudy.papers.binocular.report import loglog_crossing as _crossing
 from calstudy.papers.binocular.scenario import paper_table, published
 
 #: Columns of :func:`chain_table` taken as medians over the trials of a sweep point.
@@ -54,18 +55,6 @@ def chain_table(sweep: pd.DataFrame) -> pd.DataFrame:
         row["mm_per_mrad"] = float(per_mrad.median())
         rows.append(row)
     return pd.DataFrame(rows)
-
-
-def _crossing(x, y, goal: float) -> float | None:
-    """``x`` at which ``y`` meets ``goal`` by log-log interpolation between the first bracketing
-    pair of points; None if no pair brackets it."""
-    lx, ly, lg = np.log(np.asarray(x)), np.log(np.asarray(y)), math.log(goal)
-    for i in range(len(lx) - 1):
-        lo, hi = sorted((ly[i], ly[i + 1]))
-        if lo <= lg <= hi and ly[i] != ly[i + 1]:
-            w = (lg - ly[i]) / (ly[i + 1] - ly[i])
-            return float(math.exp(lx[i] + w * (lx[i + 1] - lx[i])))
-    return None
 
 
 def chain_text(table: pd.DataFrame, trials_default: pd.DataFrame, f_number: float) -> str:
