@@ -259,6 +259,18 @@ def region_distances(region, pre, upd) -> dict:
     return out
 
 
+def _calibration_views(scenario, rng):
+    """One draw of the world at the default errors and its calibration views (steps (a)-(c)):
+    ``(imaging, world, model, ray tolerance, views)``."""
+    imaging = Imaging()
+    world = draw_world(scenario, rng, imaging)
+    model = world.model(scenario, 1.0)
+    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    n_cal = scenario.config["station"]["poses"]["n_calibration"]
+    cal = view_calibrator(scenario, world, n_cal, rng, imaging, model)
+    return imaging, world, model, tol, cal
+
+
 def field_trial(setup: Setup, rng) -> dict:
     """The field check of Section 4.3 on one draw: the calibration of (a)-(n) at the default
     errors, then three regions of six SBRs from six poses each (Table 5). Columns: per region
@@ -266,12 +278,7 @@ def field_trial(setup: Setup, rng) -> dict:
     updated matrix, in the flange frame and in the base frame
     (``field{k}_{preliminary,updated}_{flange,base}``, ``field_*`` over all 15)."""
     scenario = setup.scenario
-    imaging = Imaging()
-    world = draw_world(scenario, rng, imaging)
-    model = world.model(scenario, 1.0)
-    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
-    n_cal = scenario.config["station"]["poses"]["n_calibration"]
-    cal = view_calibrator(scenario, world, n_cal, rng, imaging, model)
+    imaging, world, model, tol, cal = _calibration_views(scenario, rng)
     raw, rect = cal.points(model, tol)
     rect8 = bino.with_virtual(rect)
     state = {"raw8": bino.with_virtual(raw), "rect8": rect8, "mod8": _modify(world, rect8)}
@@ -396,12 +403,7 @@ def optics_trial(
         focus_distance_mm=focus_distance_mm or None,
         dot_diameter_mm=dot_diameter_mm or None,
     )
-    imaging = Imaging()
-    world = draw_world(scenario, rng, imaging)
-    model = world.model(scenario, 1.0)
-    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
-    n_cal = scenario.config["station"]["poses"]["n_calibration"]
-    cal = view_calibrator(scenario, world, n_cal, rng, imaging, model)
+    imaging, world, model, tol, cal = _calibration_views(scenario, rng)
     sharp = reimage(scenario, cal, rng, Imaging(defocus=False), model)
     std = standard_to_p7(world)
     raw, rect = cal.points(model, tol)
