@@ -74,25 +74,28 @@ def summarise_handeye_sweep(trials: pd.DataFrame, keys) -> pd.DataFrame:
     ratios = handeye_ratios(trials, keys)
     rows = []
     for key, sub in ratios.groupby(keys, sort=True):
-        v = _verdict_or_reason(
-            lambda s=sub: judge(
-                s["sphere"], kind="bound", direction="lower", bound=CRB_MULTIPLE, min_trials=30
-            )
-        )
         row = dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True))
-        rows.append(
-            row
-            | {
-                "trials": len(sub),
-                "median_ratio": float(np.median(sub["sphere"])),
-                "ci_low": np.nan if v is None else v.ci_low,
-                "ci_high": np.nan if v is None else v.ci_high,
-                "p95_ratio": float(np.quantile(sub["sphere"], 0.95)),
-                "ml_median_ratio": float(np.median(sub["ML"])),
-                "verdict": "too few trials" if v is None else v.verdict,
-            }
-        )
+        extra = {"ml_median_ratio": float(np.median(sub["ML"]))}
+        rows.append(row | _bound_summary(sub["sphere"], CRB_MULTIPLE, extra))
     return pd.DataFrame(rows)
+
+
+def _bound_summary(ratios: pd.Series, bound: float, extra: dict) -> dict:
+    """The columns of a sweep point judged as a bound on ``ratios`` (its trials): count, median
+    with its 95 % confidence interval, 95th percentile, ``extra`` and the verdict by the rule
+    (at least 30 trials)."""
+    v = _verdict_or_reason(
+        lambda: judge(ratios, kind="bound", direction="lower", bound=bound, min_trials=30)
+    )
+    return {
+        "trials": len(ratios),
+        "median_ratio": float(np.median(ratios)),
+        "ci_low": np.nan if v is None else v.ci_low,
+        "ci_high": np.nan if v is None else v.ci_high,
+        "p95_ratio": float(np.quantile(ratios, 0.95)),
+        **extra,
+        "verdict": "too few trials" if v is None else v.verdict,
+    }
 
 
 def summarise_ranges(trials: pd.DataFrame) -> pd.DataFrame:
@@ -132,23 +135,8 @@ def summarise_stationary_sweep(stationary: pd.DataFrame, key: str) -> pd.DataFra
     ratios = stationary_ratios(stationary, [key])
     rows = []
     for value, sub in ratios.groupby(key, sort=True):
-        v = _verdict_or_reason(
-            lambda s=sub: judge(
-                s["ratio"], kind="bound", direction="lower", bound=ML_MULTIPLE, min_trials=30
-            )
-        )
-        rows.append(
-            {
-                key: float(value),
-                "trials": len(sub),
-                "median_ratio": float(np.median(sub["ratio"])),
-                "ci_low": np.nan if v is None else v.ci_low,
-                "ci_high": np.nan if v is None else v.ci_high,
-                "p95_ratio": float(np.quantile(sub["ratio"], 0.95)),
-                "oracle_median_ratio": float(np.median(sub["oracle"])),
-                "verdict": "too few trials" if v is None else v.verdict,
-            }
-        )
+        extra = {"oracle_median_ratio": float(np.median(sub["oracle"]))}
+        rows.append({key: float(value)} | _bound_summary(sub["ratio"], ML_MULTIPLE, extra))
     return pd.DataFrame(rows)
 
 
