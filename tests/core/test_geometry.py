@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from calstudy import CalibrationError
 from calstudy.core import geometry as geo
@@ -28,3 +30,48 @@ def test_mean_transform_rejects_non_rigid():
     bad[1, 0, 0] = 2.0
     with pytest.raises(CalibrationError, match="not orthonormal"):
         geo.mean_transform(bad)
+
+
+def _full_check_passes(t: np.ndarray, tol: float) -> bool:
+    # the array path of check_transform, without the single-matrix shortcut
+    try:
+        geo.check_transform("t", t[None], tol)
+    except CalibrationError:
+        return False
+    return True
+
+
+@given(
+    rotvec=st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3),
+    scale=st.floats(1e-9, 1e-5),
+    entry=st.integers(0, 15),
+    sign=st.sampled_from([-1.0, 1.0]),
+)
+@settings(max_examples=300, deadline=None)
+def test_single_transform_shortcut_agrees_with_the_full_check(rotvec, scale, entry, sign):
+    tol = geo.ORTHONORMAL_TOL
+    t = geo.make_transform(geo.rotvec_to_matrix(np.array(rotvec)), [10.0, -5.0, 3.0])
+    t.flat[entry] += sign * scale  # around the tolerance: some pass, some fail
+    fast = geo._is_rigid_4x4(t, tol)
+    assert fast == _full_check_passes(t, tol) or abs(scale - tol) < 1e-9
+    if fast:
+        assert geo.check_transform("t", t) is t
+    else:
+        with pytest.raises(CalibrationError, match="bottom row|not orthonormal|reflection"):
+            geo.check_transform("t", t)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda t: t.__setitem__((0, 0), np.nan), "non-finite"),
+        (lambda t: t.__setitem__((2, slice(None, 3)), -t[2, :3]), "reflection"),
+        (lambda t: t.__setitem__((3, 0), 0.5), "bottom row"),
+    ],
+)
+def test_single_transform_errors_are_those_of_the_full_check(change, message):
+    t = geo.make_transform(geo.rotvec_to_matrix(np.array([0.2, -0.1, 0.4])), [1, 2, 3])
+    change(t)
+    assert not geo._is_rigid_4x4(t, geo.ORTHONORMAL_TOL)
+    with pytest.raises(CalibrationError, match=message):
+        geo.check_transform("t", t)

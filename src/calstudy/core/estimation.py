@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, leastsq
 from scipy.stats import chi2 as _chi2
 
 from calstudy.core.errors import CalibrationError, CalibrationWarning
@@ -251,6 +251,44 @@ def covariance_from_jacobian(
     inv_s2[keep] = 1.0 / s[keep] ** 2
     cov = (vt.T * inv_s2) @ vt * sigma**2
     return cov, cond
+
+
+def minpack_lm(
+    fun: Callable[..., np.ndarray],
+    x0: np.ndarray,
+    jac: Callable[..., np.ndarray],
+    args: tuple = (),
+    *,
+    xtol: float = 1e-12,
+    ftol: float = 1e-12,
+    gtol: float = 1e-12,
+    max_nfev: int | None = None,
+) -> np.ndarray:
+    """The minimiser of ``sum fun(x, *args)^2`` by MINPACK's ``lmder``, the solution vector only.
+
+    The same computation as ``scipy.optimize.least_squares(fun, x0, jac=jac, args=args,
+    method="lm", ...)`` with its defaults (``x_scale="jac"``, step bound factor 100, at most
+    ``100 n`` evaluations): the same MINPACK call with the same inputs, hence the same bytes, a
+    test checks it. It goes through :func:`scipy.optimize.leastsq`, whose thinner wrapper costs
+    about half as much per call: that matters for the many small fits of a Monte Carlo trial
+    (a homography of 20 points: 0.34 ms against 0.64 ms).
+    """
+    x = np.asarray(x0, dtype=float)
+    n = x.size
+    sol = leastsq(
+        fun,
+        x.copy(),
+        args=args,
+        Dfun=jac,
+        full_output=True,  # also: no warning on a stop at the tolerances, as least_squares
+        ftol=ftol,
+        xtol=xtol,
+        gtol=gtol,
+        maxfev=100 * n if max_nfev is None else max_nfev,
+        factor=100.0,
+        diag=None,
+    )
+    return np.asarray(sol[0], dtype=float)
 
 
 def levenberg_marquardt(

@@ -8,6 +8,8 @@ with :mod:`pinocchio` where a library already does the job.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
@@ -92,8 +94,37 @@ def check_rotation(name: str, rotation, tol: float = ORTHONORMAL_TOL) -> np.ndar
     return r
 
 
+def _is_rigid_4x4(t: np.ndarray, tol: float) -> bool:
+    """True if the single ``(4, 4)`` float array ``t`` is finite, has the bottom row
+    ``[0 0 0 1]`` and a rotation block with ``|R^T R - I| <= tol`` and ``|det R - 1| <= tol``.
+
+    The same tests as :func:`check_transform`, on Python floats: a dozen numpy calls on a 4 x 4
+    array cost several times more than the arithmetic, and a Monte Carlo trial checks hundreds of
+    transforms. False sends the caller to the full check, which says what is wrong.
+    """
+    v = t.ravel().tolist()
+    if not all(math.isfinite(x) for x in v):
+        return False
+    if max(abs(v[12]), abs(v[13]), abs(v[14]), abs(v[15] - 1.0)) > tol:
+        return False
+    cols = ((v[0], v[4], v[8]), (v[1], v[5], v[9]), (v[2], v[6], v[10]))
+    for i in range(3):
+        a = cols[i]
+        for j in range(i, 3):
+            b = cols[j]
+            dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+            if abs(dot - (1.0 if i == j else 0.0)) > tol:
+                return False
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = cols
+    det = a0 * (b1 * c2 - b2 * c1) - b0 * (a1 * c2 - a2 * c1) + c0 * (a1 * b2 - a2 * b1)
+    return abs(det - 1.0) <= tol
+
+
 def check_transform(name: str, transform, tol: float = ORTHONORMAL_TOL) -> np.ndarray:
     """Return ``transform`` (4 x 4 or N x 4 x 4) after checking shape, bottom row and rotation."""
+    single = isinstance(transform, np.ndarray) and transform.shape == (4, 4)
+    if single and transform.dtype == np.float64 and _is_rigid_4x4(transform, tol):
+        return transform
     t = np.asarray(transform, dtype=float)
     if t.shape[-2:] != (4, 4):
         raise CalibrationError(f"{name} has shape {t.shape}; expected (4, 4) or (N, 4, 4)")

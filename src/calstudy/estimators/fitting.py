@@ -14,10 +14,9 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.estimation import condition_number
+from calstudy.core.estimation import condition_number, minpack_lm
 from calstudy.core.geometry import (
     check_not_collinear,
     check_points,
@@ -248,8 +247,9 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
     Computed by ``cv2.findHomography(method=0)`` (normalised DLT over all points, then OpenCV's
     Levenberg-Marquardt on the reprojection error). OpenCV stops that refinement after 10
     iterations at single-precision tolerances (noise-free reprojection error about 1e-5 px), so
-    with ``refine=True`` :func:`scipy.optimize.least_squares` continues the same minimisation (sum
-    of squared pixel reprojection errors, ``H[2, 2] = 1``) to double precision. This is the
+    with ``refine=True`` MINPACK's Levenberg-Marquardt
+    (:func:`calstudy.core.estimation.minpack_lm`) continues the same minimisation (sum of squared
+    pixel reprojection errors, ``H[2, 2] = 1``) to double precision. This is the
     maximum-likelihood homography for i.i.d. Gaussian pixel noise (hybrid Eq. 18, 20).
 
     Parameters
@@ -294,17 +294,16 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
         )
     h = h / h[2, 2]
     if refine:
-        res = least_squares(
+        x = minpack_lm(
             _homography_residuals,
             h.ravel()[:8],
-            jac=_homography_jacobian,
-            args=(xy, uv),
-            method="lm",
+            _homography_jacobian,
+            (xy, uv),
             xtol=1e-15,
             ftol=1e-15,
             gtol=1e-15,
         )
-        h = np.append(res.x, 1.0).reshape(3, 3)
+        h = np.append(x, 1.0).reshape(3, 3)
     if not np.all(np.isfinite(h)):
         raise CalibrationError(f"the homography of the {xy.shape[0]} points is not finite")
     return h
