@@ -75,3 +75,11 @@ def test_single_transform_errors_are_those_of_the_full_check(change, message):
     assert not geo._is_rigid_4x4(t, geo.ORTHONORMAL_TOL)
     with pytest.raises(CalibrationError, match=message):
         geo.check_transform("t", t)
+
+
+@given(st.lists(st.floats(-1e3, 1e3), min_size=6, max_size=6))
+@settings(max_examples=200, deadline=None)
+def test_cross3_is_numpy_cross_byte_for_byte(v):
+    a, b = np.array(v[:3]), np.array(v[3:])
+    assert geo._cross3(a, b).tobytes() == np.cross(a, b).tobytes()
+    assert geo._cross3(a, list(v[3:])).tobytes() == np.cross(a, b).tobytes()

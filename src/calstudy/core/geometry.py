@@ -324,6 +324,14 @@ def perturb(transform, sigma_rot: float, sigma_trans: float, rng: np.random.Gene
     return t @ d
 
 
+def _cross3(a: np.ndarray, b) -> np.ndarray:
+    """``np.cross`` of two 3-vectors with the same products and differences (the same bytes),
+    without its axis handling, which costs some 20 times the arithmetic on 3 numbers."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = (b.tolist() if isinstance(b, np.ndarray) else b)
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     """Camera-to-world transform of a camera at ``eye`` with its optical (+z) axis on ``target``.
 
@@ -336,11 +344,11 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     if norm == 0:
         raise CalibrationError("look_at: eye and target coincide (distance 0 mm)")
     z = z / norm
-    x = np.cross(z, np.asarray(up, dtype=float))
+    x = _cross3(z, np.asarray(up, dtype=float))
     if np.linalg.norm(x) < 1e-9:
-        x = np.cross(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.cross(z, [0.0, 1.0, 0.0])
+        x = _cross3(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else _cross3(z, [0.0, 1.0, 0.0])
     x /= np.linalg.norm(x)
-    y = np.cross(z, x)
+    y = _cross3(z, x)
     return make_transform(np.stack([x, y, z], axis=1), eye)
 
 
