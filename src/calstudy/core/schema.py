@@ -30,6 +30,7 @@ A paper's ``scenario.py`` uses it as::
 
 from __future__ import annotations
 
+import copy
 import csv
 import io
 import math
@@ -233,13 +234,27 @@ def read_toml(path: str | Path, what: str) -> dict:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file (the {what})")
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key in _PARSED:
+        return copy.deepcopy(_PARSED[key])
     try:
         with path.open("rb") as handle:
-            return tomllib.load(handle)
+            table = tomllib.load(handle)
     except tomllib.TOMLDecodeError as exc:
         raise CalibrationError(f"{path}: not valid TOML ({exc})") from exc
     except UnicodeDecodeError as exc:
         raise CalibrationError(f"{path}: not a UTF-8 text file ({exc.reason})") from exc
+    if len(_PARSED) >= 64:
+        _PARSED.clear()
+    _PARSED[key] = table
+    return copy.deepcopy(table)
+
+
+#: parsed TOML tables by (resolved path, modification time, size): a Monte Carlo trial builds its
+#: scenario from the same few files again and again, and parsing them costs more than the copy
+#: handed out (an edited file has a new key, so it is read again)
+_PARSED: dict[tuple[str, int, int], dict] = {}
 
 
 def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
