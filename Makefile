@@ -49,7 +49,14 @@ $(STAMP): environment.txt pyproject.toml
 	$(BIN)/pip install --no-compile --no-deps -e .
 	touch $@
 
-reproduce: $(BOOK_STAMP) ## run every notebook, aggregate results/claims.csv, build the book
+# Notebooks run NOTEBOOK_JOBS at a time (each spreads its trials over all cores; a second one
+# fills the cores while the first starts its kernel, writes its tables and draws its figures).
+# With more than one at a time, each prints a line when it starts and ends instead of a bar.
+NOTEBOOK_JOBS ?= 2
+
+reproduce: $(STAMP) ## run every notebook (two at a time), aggregate results/claims.csv, build the book
+	@$(MAKE) --no-print-directory -j$(NOTEBOOK_JOBS) \
+		NOTEBOOK_LINES=$(if $(filter 1,$(NOTEBOOK_JOBS)),,1) $(BOOK_STAMP)
 	@echo "reproduce: $(words $(EXECUTED)) notebook(s) up to date; book in book/_build/html"
 
 notebooks: $(EXECUTED) ## run the notebooks whose inputs changed (writes results/<notebook>/)
@@ -59,7 +66,14 @@ notebooks: $(EXECUTED) ## run the notebooks whose inputs changed (writes results
 # no executed copy and is retried next time.
 book/notebooks/%.ipynb: notebooks/%.ipynb $(LIBRARY) $(DATA) $(STAMP)
 	@mkdir -p $(@D)
+ifeq ($(NOTEBOOK_LINES),)
 	$(BIN)/papermill --cwd notebooks --progress-bar $< $(@D)/.tmp-$*.ipynb
+else
+	@echo "$*: running"; start=$$SECONDS; \
+	$(BIN)/papermill --cwd notebooks --no-progress-bar $< $(@D)/.tmp-$*.ipynb 2>$(@D)/.tmp-$*.log \
+		|| { cat $(@D)/.tmp-$*.log; exit 1; }; \
+	echo "$*: done in $$((SECONDS - start)) s"; rm -f $(@D)/.tmp-$*.log
+endif
 	mv $(@D)/.tmp-$*.ipynb $@
 
 results/claims.csv: $(EXECUTED) src/calstudy/io/results.py | $(STAMP)
