@@ -125,3 +125,16 @@ def test_icp_refuses_bad_settings():
     cloud = sphere_cloud(np.random.default_rng(19))
     with pytest.raises(CalibrationError, match=r"z_weight -1.*must be > 0"):
         icp.weighted_icp(cloud, cloud, z_weight=-1.0)
+
+
+def test_shift_shortcut_agrees_with_mapping_the_cloud():
+    """The stop test decides from the step's translation at the pairs' centroid when it can;
+    its answer is the one of mapping every point, on both sides of the tolerance."""
+    rng = np.random.default_rng(20)
+    cloud = sphere_cloud(rng) + [0.0, 0.0, 500.0]
+    for scale in (1e-9, 3e-8, 1e-7, 5e-7, 1e-6, 2e-6, 1e-5, 1e-3):
+        for _ in range(20):
+            step = geo.perturb(np.eye(4), scale * 1e-3, scale, rng)
+            keep = rng.random(len(cloud)) < 0.7
+            direct = float(np.abs(geo.apply(step, cloud) - cloud).max()) < 1e-6
+            assert icp._moves_less_than(step, cloud, cloud[keep], 1e-6) == direct
