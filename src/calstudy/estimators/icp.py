@@ -153,6 +153,68 @@ def _moves_less_than(step: np.ndarray, cur: np.ndarray, paired: np.ndarray, tol:
     return float(np.abs(geo.apply(step, cur) - cur).max()) < tol
 
 
+class _Pairs:
+    """Nearest neighbours in the reference of a moving cloud, kept from one correspondence
+    update to the next and asked of the tree again only where they may have changed.
+
+    At some position ``x`` of a point the tree gives its ``K`` nearest reference points within
+    ``max_pair_mm``: the first ``K - 1`` are its candidates, the ``K``-th lies at ``d_K`` (the
+    bound if there is none), so every other reference point lies at least ``d_K`` from ``x``.
+    Moved since by ``D = |x' - x|``, every non-candidate lies at least ``d_K - D`` from ``x'``
+    (triangle inequality): while the nearest candidate, measured at ``x'``, is closer than that
+    (by a margin above rounding, and clear of the next candidate by that margin), it is the
+    point's nearest neighbour, within the bound. Only the other points are queried again. The
+    pairs are those of a fresh query of the whole cloud: the same indices, the same points left
+    without a pair.
+    """
+
+    #: neighbours asked of the tree per point: K - 1 candidates and the K-th as the bound
+    K = 4
+    #: margin (mm) that keeps the tests strict beyond the rounding of the distances
+    MARGIN = 1e-9
+
+    def __init__(self, kd: cKDTree, reference: np.ndarray, bound: float, workers: int):
+        self.kd, self.bound, self.workers = kd, bound, workers
+        # the reference by coordinate, with a row after it for a missing neighbour (the tree's
+        # index n) so far away that no test passes on it
+        self.ref = np.vstack([reference, np.full((1, 3), 1e150)]).T.copy()
+        self.at = None  # (N, 3) where each point was last queried
+
+    def _query(self, x: np.ndarray):
+        d, i = self.kd.query(x, k=self.K, distance_upper_bound=self.bound, workers=self.workers)
+        limit = np.minimum(d[:, -1], self.bound)
+        return i[:, : self.K - 1].T, limit, np.isfinite(d[:, 0]), i[:, 0]
+
+    def update(self, cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(paired (N,) bool, index (N,) of the nearest reference point; the tree's n where
+        none lies within the bound)`` of the cloud at ``cur``."""
+        if self.at is None:
+            self.at = cur.copy()
+            self.cand, self.limit, self.paired, self.idx = self._query(cur)
+            self.cand = self.cand.copy()
+            return self.paired, self.idx
+        x, y, z = cur.T
+        rx, ry, rz = self.ref
+        # distances at ``cur`` of the candidates, the nearest and the next
+        e = [np.sqrt((x - rx[c]) ** 2 + (y - ry[c]) ** 2 + (z - rz[c]) ** 2) for c in self.cand]
+        first, best, second = e[0], self.cand[0].copy(), np.full(len(cur), np.inf)
+        for c, d in zip(self.cand[1:], e[1:], strict=True):
+            closer = d < first
+            second = np.where(closer, first, np.minimum(second, d))
+            best = np.where(closer, c, best)
+            first = np.minimum(first, d)
+        moved = np.sqrt(np.sum((cur - self.at) ** 2, axis=1))
+        ok = (first + self.MARGIN < self.limit - moved) & (first + self.MARGIN < second)
+        self.idx[ok] = best[ok]
+        self.paired[ok] = True
+        stale = ~ok
+        if stale.any():
+            self.at[stale] = cur[stale]
+            cand, self.limit[stale], self.paired[stale], self.idx[stale] = self._query(cur[stale])
+            self.cand[:, stale] = cand
+        return self.paired, self.idx
+
+
 def weighted_icp(
     moving,
     reference,
@@ -217,15 +279,16 @@ def weighted_icp(
     # the reference with one row of NaN after it: the index of a point without a pair (the
     # tree's ``n``) then picks NaN, whose z error no threshold keeps
     q_pad = np.vstack([q, np.full((1, 3), np.nan)])
+    nearest = _Pairs(kd, q, max_pair_mm, workers)
     total = np.eye(4)
     it, stage, converged, n_pairs, last = 0, 0, False, 0, None
     while it < max_iterations:
         cur = geo.apply(total, p0)
-        dist, idx = kd.query(cur, distance_upper_bound=max_pair_mm, workers=workers)
+        paired, idx = nearest.update(cur)
         if stage == 1:
             keep = np.abs(cur[:, 2] - q_pad[idx, 2]) <= z_threshold_mm
         else:
-            keep = np.isfinite(dist)
+            keep = paired
         n_pairs = int(np.count_nonzero(keep))
         if n_pairs < MIN_PAIRS:
             if it == 0:
