@@ -195,14 +195,16 @@ class _Pairs:
             return self.paired, self.idx
         x, y, z = cur.T
         rx, ry, rz = self.ref
-        # distances at ``cur`` of the candidates, the nearest and the next
-        e = [np.sqrt((x - rx[c]) ** 2 + (y - ry[c]) ** 2 + (z - rz[c]) ** 2) for c in self.cand]
-        first, best, second = e[0], self.cand[0].copy(), np.full(len(cur), np.inf)
-        for c, d in zip(self.cand[1:], e[1:], strict=True):
-            closer = d < first
-            second = np.where(closer, first, np.minimum(second, d))
+        # squared distances at ``cur`` of the candidates: the nearest, its index, and the next
+        first = second = np.full(len(cur), np.inf)
+        best = self.idx
+        for c in self.cand:
+            d2 = (x - rx[c]) ** 2 + (y - ry[c]) ** 2 + (z - rz[c]) ** 2
+            closer = d2 < first
+            second = np.minimum(second, np.where(closer, first, d2))
             best = np.where(closer, c, best)
-            first = np.minimum(first, d)
+            first = np.minimum(first, d2)
+        first, second = np.sqrt(first), np.sqrt(second)
         moved = np.sqrt(np.sum((cur - self.at) ** 2, axis=1))
         ok = (first + self.MARGIN < self.limit - moved) & (first + self.MARGIN < second)
         self.idx[ok] = best[ok]
@@ -255,6 +257,10 @@ def weighted_icp(
         residual they leave (for 1,000-point sphere caps: tangential offsets of about half the
         point spacing) makes later updates a random walk of that size, not a convergence: such
         updates cannot be told from noise, and iterating them to ``max_iterations`` adds nothing.
+        The threshold is the 1-sigma ellipsoid of the 6-parameter update: an update of pure
+        noise has ``delta^T H delta / s^2`` distributed as chi-square with 6 degrees of freedom
+        (mean 6) and falls below 1 with probability 0.014 only, so a stage ends at the first such
+        rare update, tens of updates into the random walk.
     tree : scipy.spatial.cKDTree, optional
         A prebuilt tree of ``reference``.
     workers : int, default 1
