@@ -125,3 +125,41 @@ def test_icp_refuses_bad_settings():
     cloud = sphere_cloud(np.random.default_rng(19))
     with pytest.raises(CalibrationError, match=r"z_weight -1.*must be > 0"):
         icp.weighted_icp(cloud, cloud, z_weight=-1.0)
+
+
+def test_shift_shortcut_agrees_with_mapping_the_cloud():
+    """The stop test decides from the step's translation at the pairs' centroid when it can;
+    its answer is the one of mapping every point, on both sides of the tolerance."""
+    rng = np.random.default_rng(20)
+    cloud = sphere_cloud(rng) + [0.0, 0.0, 500.0]
+    for scale in (1e-9, 3e-8, 1e-7, 5e-7, 1e-6, 2e-6, 1e-5, 1e-3):
+        for _ in range(20):
+            step = geo.perturb(np.eye(4), scale * 1e-3, scale, rng)
+            keep = rng.random(len(cloud)) < 0.7
+            direct = float(np.abs(geo.apply(step, cloud) - cloud).max()) < 1e-6
+            assert icp._moves_less_than(step, cloud, cloud[keep], 1e-6) == direct
+
+
+def test_kept_pairs_are_those_of_a_fresh_query():
+    """The nearest neighbours kept between updates (the tree asked again only where they may
+    have changed) are, update after update, those of a fresh query of the whole cloud: small
+    steps, large jumps, points leaving and re-entering the pairing distance."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(21)
+    ref = sphere_cloud(rng, n=1000)
+    cloud = sphere_cloud(rng, n=1000)
+    tree = cKDTree(ref)
+    pairs = icp._Pairs(tree, ref, 2.0, 1)
+    requeried = 0
+    for k, (angle, shift) in enumerate([(0.0, 0.0)] + [(1e-4, 0.02)] * 20 + [(0.05, 3.0)] * 3):
+        cloud = geo.apply(geo.perturb(np.eye(4), angle, shift, rng), cloud)
+        at_before = None if pairs.at is None else pairs.at.copy()
+        paired, idx = pairs.update(cloud)
+        dist, fresh = tree.query(cloud, distance_upper_bound=2.0)
+        np.testing.assert_array_equal(idx, fresh)
+        np.testing.assert_array_equal(paired, np.isfinite(dist))
+        if at_before is not None and k <= 20:
+            requeried += int(np.any(pairs.at != at_before, axis=1).sum())
+    assert not paired.all()  # the jumps took points out of reach
+    assert requeried < 0.5 * 20 * len(cloud)  # small steps: most pairs kept without a query

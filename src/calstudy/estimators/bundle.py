@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
@@ -28,6 +29,9 @@ from calstudy.models.stereo import StereoRig
 
 #: default largest RMS reprojection error (px) a converged bundle adjustment may leave
 MAX_RMS_PX = 2.0
+#: Marquardt damping (relative to the diagonal of ``J^T J``) of the first step, and the least
+#: damping after a rejected step
+MU0, MU_REJECTED = 1e-9, 1e-4
 
 
 @dataclass
@@ -227,12 +231,85 @@ def _objective(rig: StereoRig, obs, layout: _Layout, sigma_px: float, sigma_obs:
     return fun, jac, (rows_k, cols_k, shape)
 
 
+@dataclass
+class _Solution:
+    """What :func:`_result` reads of a finished solve (as of ``scipy.optimize.OptimizeResult``):
+    ``status`` > 0 converged (1 gradient, 2 cost, 3 step, 4 cost and step), 0 budget spent."""
+
+    x: np.ndarray
+    status: int
+    nfev: int
+    message: str
+
+
+def _normal_lm(fun, jac, x0: np.ndarray, max_nfev: int, tol: float = 1e-10) -> _Solution:
+    """Levenberg-Marquardt on the normal equations of the sparse Jacobian.
+
+    Each step solves ``(J^T J + mu diag(J^T J)) dx = -J^T f`` by Cholesky: Marquardt's damping
+    scaled by the columns' norms (the scaling of ``least_squares(x_scale="jac")``), ``mu``
+    starting at :data:`MU0` (a Gauss-Newton step: a survey's ``J`` has a condition number near
+    1e6, and a damping of 1e-3 held its weakest directions back for a dozen steps) and updated by
+    the gain ratio of actual to predicted reduction (Nielsen's rule: shrunk after a good step,
+    raised to at least :data:`MU_REJECTED` and then doubled, doubled again, after each rejected
+    one). ``J^T J`` has the size of the parameters (6 per view, 3 per marker), far
+    smaller than ``J``: one step costs a small dense Cholesky factorisation, where the trust
+    region of ``least_squares`` takes a singular value decomposition of the whole ``J``. It
+    stops as ``least_squares`` with ``xtol = ftol = gtol = tol``: a step shorter than ``tol (tol
+    + |x|)``, a cost reduction below ``tol`` of the cost in a step that the model predicted well
+    (gain ratio > 0.25), or a gradient whose largest cosine with a column of ``J`` is below
+    ``tol``.
+    """
+    x = np.array(x0, dtype=float)
+    f = fun(x)
+    nfev, cost = 1, 0.5 * float(f @ f)
+    mu, nu = MU0, 2.0
+    while True:
+        j = jac(x)
+        a = (j.T @ j).toarray()
+        g = j.T @ f
+        d = np.diag(a).copy()
+        d = np.maximum(d, 1e-30 * max(float(d.max()), 1e-300))
+        if float(np.max(np.abs(g) / np.sqrt(d))) <= tol * np.sqrt(2.0 * cost):
+            return _Solution(x, 1, nfev, "the gradient is orthogonal to the Jacobian's columns")
+        while True:
+            if nfev >= max_nfev:
+                return _Solution(x, 0, nfev, f"the budget of {max_nfev} evaluations is spent")
+            try:
+                dx = -cho_solve(cho_factor(a + np.diag(mu * d)), g)
+            except np.linalg.LinAlgError:
+                mu, nu = max(mu * nu, MU_REJECTED), 2.0 * nu
+                continue
+            f_new = fun(x + dx)
+            nfev += 1
+            cost_new = 0.5 * float(f_new @ f_new)
+            predicted = -float(g @ dx + 0.5 * dx @ (a @ dx))
+            actual = cost - cost_new
+            ratio = actual / predicted if predicted > 0 and np.isfinite(cost_new) else -1.0
+            small_x = float(np.linalg.norm(dx)) <= tol * (tol + float(np.linalg.norm(x)))
+            small_f = ratio > 0.25 and actual < tol * cost
+            if ratio > 0:
+                x, f, cost = x + dx, f_new, cost_new
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
+                nu = 2.0
+            else:
+                mu, nu = max(mu * nu, MU_REJECTED), 2.0 * nu
+            if small_f or small_x:
+                status = 2 * small_f + 3 * small_x - (small_f and small_x)
+                return _Solution(x, int(status), nfev, "the cost or the step is below tol")
+            if ratio > 0:
+                break
+
+
 def _solve(fun, jac, x0: np.ndarray, pattern, jacobian: str, max_nfev: int):
-    """``scipy.optimize.least_squares`` from ``x0``, with the analytic Jacobian (solved densely)
-    or finite differences on its sparsity ``pattern`` ``(rows, cols, shape)`` (LSMR
-    trust-region solver)."""
+    """The least-squares solve from ``x0``: with the analytic Jacobian by
+    :func:`_normal_lm` (``"analytic"``) or by ``scipy.optimize.least_squares`` solving it densely
+    (``"analytic-dense"``, a singular value decomposition of ``J`` per step), or by
+    ``least_squares`` with finite differences on its sparsity ``pattern`` ``(rows, cols, shape)``
+    (``"sparse-fd"``, LSMR trust-region solver). All stop at ``xtol = ftol = gtol = 1e-10``."""
     tols = {"xtol": 1e-10, "ftol": 1e-10, "gtol": 1e-10, "max_nfev": max_nfev}
     if jacobian == "analytic":
+        return _normal_lm(fun, jac, x0, max_nfev)
+    if jacobian == "analytic-dense":
         return least_squares(
             fun, x0, jac=lambda x: jac(x).toarray(), method="trf", x_scale="jac", **tols
         )
@@ -249,7 +326,9 @@ def _solve(fun, jac, x0: np.ndarray, pattern, jacobian: str, max_nfev: int):
             tr_options={"atol": 1e-14, "btol": 1e-14},
             **tols,
         )
-    raise CalibrationError(f"jacobian is {jacobian!r}; expected 'analytic' or 'sparse-fd'")
+    raise CalibrationError(
+        f"jacobian is {jacobian!r}; expected 'analytic', 'analytic-dense' or 'sparse-fd'"
+    )
 
 
 def _result(rig: StereoRig, obs, layout: _Layout, res, max_rms_px: float) -> BundleResult:
@@ -289,12 +368,13 @@ def bundle_adjust(
     (Eq. 10) divided by the 3-D noise of that triangulation: ``sigma_mm``, or with
     ``depth_ref_mm`` ``sigma_mm (Z / depth_ref_mm)^2`` at the marker's depth ``Z`` in the view,
     since a stereo depth error grows with the square of the depth. ``fixed_view``'s pose is
-    held; the scale comes from the stereo baseline. ``scipy.optimize.least_squares``
-    (trust region reflective, a Levenberg-Marquardt-type method) minimises the sum of squares.
-    Each observation touches only its view's 6 and its marker's 3 parameters: the Jacobian is
-    sparse, assembled analytically as a ``scipy.sparse`` matrix (``jacobian="analytic"``, solved
-    densely: the problem is small), or estimated by finite differences grouped by that pattern
-    (``jacobian="sparse-fd"``, ``jac_sparsity``, LSMR solver; slower, the same minimum).
+    held; the scale comes from the stereo baseline. Levenberg-Marquardt minimises the sum of
+    squares. Each observation touches only its view's 6 and its marker's 3 parameters: the
+    Jacobian is sparse, assembled analytically as a ``scipy.sparse`` matrix and solved through
+    its normal equations (``jacobian="analytic"``, :func:`_normal_lm`), or, reaching the same
+    minimum more slowly, handed to ``scipy.optimize.least_squares`` (trust region reflective)
+    as a dense matrix (``jacobian="analytic-dense"``) or estimated there by finite differences
+    grouped by that pattern (``jacobian="sparse-fd"``, ``jac_sparsity``, LSMR solver).
 
     Parameters
     ----------
@@ -310,7 +390,7 @@ def bundle_adjust(
         Detection noise (px) and 3-D noise of a triangulated marker (mm), both > 0.
     max_nfev, max_rms_px : int, float
         Evaluation budget; largest RMS reprojection error (px) of a converged adjustment.
-    jacobian : {"analytic", "sparse-fd"}
+    jacobian : {"analytic", "analytic-dense", "sparse-fd"}
     depth_ref_mm : float or None
         Depth (mm) of the noise ``sigma_mm``; None: the same noise at every depth.
 
@@ -340,7 +420,8 @@ def refine_camera_pose(
     depth_ref_mm: float | None = None,
 ) -> np.ndarray:
     """One view's ``world2cam`` refined on Eq. 9-10 with the marker positions held fixed (the
-    weights as in :func:`bundle_adjust`)."""
+    weights as in :func:`bundle_adjust`), by Levenberg-Marquardt (MINPACK) with the analytic
+    Jacobian of :func:`bundle_adjust` (the pose columns of each observation's block)."""
     pts = geo.check_shape("points", points, (None, 3))
     init = geo.check_transform("world2cam", world2cam)
     view_idx, marker_idx, uv_l, uv_r, p_cam = _observations(rig, [view])
@@ -355,8 +436,25 @@ def refine_camera_pose(
         )
         return np.concatenate([reproj.ravel() / sigma_px, (euclid / sigma_obs).ravel()])
 
+    def jac(x):
+        rv = x[None, :3]
+        blocks = _jacobian_blocks(
+            rig,
+            Rotation.from_rotvec(rv).as_matrix(),
+            x[None, 3:],
+            geo.so3_left_jacobian(rv),
+            pts,
+            view_idx,
+            marker_idx,
+            p_cam,
+        )[:, :, :6]
+        reproj = (blocks[:, :4] / sigma_px).reshape(-1, 6)
+        return np.concatenate([reproj, (blocks[:, 4:] / sigma_obs[:, :, None]).reshape(-1, 6)])
+
     x0 = np.concatenate([geo.matrix_to_rotvec(init[:3, :3]), init[:3, 3]])
-    res = least_squares(fun, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=400)
+    res = least_squares(
+        fun, x0, jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=400
+    )
     if res.status <= 0:
         raise CalibrationError(f"camera pose refinement did not converge ({res.message})")
     return geo.make_transform(Rotation.from_rotvec(res.x[:3]).as_matrix(), res.x[3:])

@@ -89,31 +89,42 @@ def _weighted_rigid_step(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[n
     of the pairs (``3 N - 6`` degrees of freedom): below 1, the step is smaller than its
     standard error.
     """
-    c = p.mean(axis=0)
+    n = p.shape[0]
+    c = p.sum(axis=0) / n
     x = p - c
     r = p - q
-    n = p.shape[0]
     # the Jacobian of axis j is a_j = [x_k x e_j, e_j] per pair; with sum_k x_k = 0 the normal
     # equations need only the moments M = x^T x and C = x^T r:
     #   H_rot = sum_j w_j [e_j]_x M [e_j]_x^T,  H_rot,t = 0,  H_t = n diag(w),
     #   g_rot = -sum_j w_j [e_j]_x C[:, j],      g_t = w * sum_k r_k
-    m = x.T @ x
-    cm = x.T @ r
-    h = np.zeros((6, 6))
-    g = np.zeros(6)
-    for j in range(3):
-        e = _SKEW[j]
-        h[:3, :3] += w[j] * (e @ m @ e.T)
-        g[:3] -= w[j] * (e @ cm[:, j])
-    h[3:, 3:] = n * np.diag(w)
-    g[3:] = w * r.sum(axis=0)
+    # each [e_j]_x M [e_j]_x^T only moves entries of M and flips signs, so the sums are written
+    # out term by term (in the order of j, as scalars: the same floating-point operations)
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = (x.T @ x).tolist()
+    (_, c01, c02), (c10, _, c12), (c20, c21, _) = (x.T @ r).tolist()
+    w0, w1, w2 = w.tolist()
+    st = (w * r.sum(axis=0)).tolist()
+    h = np.array(
+        [
+            [w1 * m22 + w2 * m11, -(w2 * m10), -(w1 * m20), 0.0, 0.0, 0.0],
+            [-(w2 * m01), w0 * m22 + w2 * m00, -(w0 * m21), 0.0, 0.0, 0.0],
+            [-(w1 * m02), -(w0 * m12), w0 * m11 + w1 * m00, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, n * w0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0, n * w1, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 0.0, n * w2],
+        ]
+    )
+    g = np.array(
+        [-(w1 * c21) + w2 * c12, w0 * c20 - w2 * c02, -(w0 * c10) + w1 * c01, *st]
+    )
     delta = -np.linalg.solve(h, g)
     s2 = float(np.sum(r**2 @ w)) / max(3 * n - 6, 1)
     rot = _rodrigues(delta[:3])
     # rotation about the centroid, then the translation
-    return geo.make_transform(rot, c - rot @ c + delta[3:]), float(delta @ h @ delta) / max(
-        s2, 1e-300
-    )
+    step = np.zeros((4, 4))
+    step[:3, :3] = rot
+    step[:3, 3] = c - rot @ c + delta[3:]
+    step[3, 3] = 1.0
+    return step, float(delta @ h @ delta) / max(s2, 1e-300)
 
 
 def _check_cloud(name: str, cloud) -> np.ndarray:
@@ -123,6 +134,87 @@ def _check_cloud(name: str, cloud) -> np.ndarray:
     if a.shape[0] == 0:
         raise CalibrationError(f"{name} is empty (0 points)")
     return geo.check_finite(name, a)
+
+
+def _moves_less_than(step: np.ndarray, cur: np.ndarray, paired: np.ndarray, tol: float) -> bool:
+    """Whether ``step`` moves every point of ``cur`` by less than ``tol`` (max norm).
+
+    The step's mean displacement over the ``paired`` points it was fitted to is its translation
+    at their centroid, and no point moves less than that mean in every axis; a step whose
+    translation there exceeds ``tol`` (with a margin far above rounding) moves some point by
+    more, and the cloud need not be mapped to see it. The margin covers the rounding of both
+    displacements (a few ulps of the largest coordinate).
+    """
+    c = paired.sum(axis=0) / paired.shape[0]
+    at_centroid = step[:3, :3] @ c + step[:3, 3] - c
+    margin = 1e-9 + 1e-13 * float(np.abs(paired).max())
+    if float(np.abs(at_centroid).max()) > tol + margin:
+        return False
+    return float(np.abs(geo.apply(step, cur) - cur).max()) < tol
+
+
+class _Pairs:
+    """Nearest neighbours in the reference of a moving cloud, kept from one correspondence
+    update to the next and asked of the tree again only where they may have changed.
+
+    At some position ``x`` of a point the tree gives its ``K`` nearest reference points within
+    ``max_pair_mm``: the first ``K - 1`` are its candidates, the ``K``-th lies at ``d_K`` (the
+    bound if there is none), so every other reference point lies at least ``d_K`` from ``x``.
+    Moved since by ``D = |x' - x|``, every non-candidate lies at least ``d_K - D`` from ``x'``
+    (triangle inequality): while the nearest candidate, measured at ``x'``, is closer than that
+    (by a margin above rounding, and clear of the next candidate by that margin), it is the
+    point's nearest neighbour, within the bound. Only the other points are queried again. The
+    pairs are those of a fresh query of the whole cloud: the same indices, the same points left
+    without a pair.
+    """
+
+    #: neighbours asked of the tree per point: K - 1 candidates and the K-th as the bound
+    K = 4
+    #: margin (mm) that keeps the tests strict beyond the rounding of the distances
+    MARGIN = 1e-9
+
+    def __init__(self, kd: cKDTree, reference: np.ndarray, bound: float, workers: int):
+        self.kd, self.bound, self.workers = kd, bound, workers
+        # the reference by coordinate, with a row after it for a missing neighbour (the tree's
+        # index n) so far away that no test passes on it
+        self.ref = np.vstack([reference, np.full((1, 3), 1e150)]).T.copy()
+        self.at = None  # (N, 3) where each point was last queried
+
+    def _query(self, x: np.ndarray):
+        d, i = self.kd.query(x, k=self.K, distance_upper_bound=self.bound, workers=self.workers)
+        limit = np.minimum(d[:, -1], self.bound)
+        return i[:, : self.K - 1].T, limit, np.isfinite(d[:, 0]), i[:, 0]
+
+    def update(self, cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(paired (N,) bool, index (N,) of the nearest reference point; the tree's n where
+        none lies within the bound)`` of the cloud at ``cur``."""
+        if self.at is None:
+            self.at = cur.copy()
+            self.cand, self.limit, self.paired, self.idx = self._query(cur)
+            self.cand = self.cand.copy()
+            return self.paired, self.idx
+        x, y, z = cur.T
+        rx, ry, rz = self.ref
+        # squared distances at ``cur`` of the candidates: the nearest, its index, and the next
+        first = second = np.full(len(cur), np.inf)
+        best = self.idx
+        for c in self.cand:
+            d2 = (x - rx[c]) ** 2 + (y - ry[c]) ** 2 + (z - rz[c]) ** 2
+            closer = d2 < first
+            second = np.minimum(second, np.where(closer, first, d2))
+            best = np.where(closer, c, best)
+            first = np.minimum(first, d2)
+        first, second = np.sqrt(first), np.sqrt(second)
+        moved = np.sqrt(np.sum((cur - self.at) ** 2, axis=1))
+        ok = (first + self.MARGIN < self.limit - moved) & (first + self.MARGIN < second)
+        self.idx[ok] = best[ok]
+        self.paired[ok] = True
+        stale = ~ok
+        if stale.any():
+            self.at[stale] = cur[stale]
+            cand, self.limit[stale], self.paired[stale], self.idx[stale] = self._query(cur[stale])
+            self.cand[:, stale] = cand
+        return self.paired, self.idx
 
 
 def weighted_icp(
@@ -165,6 +257,10 @@ def weighted_icp(
         residual they leave (for 1,000-point sphere caps: tangential offsets of about half the
         point spacing) makes later updates a random walk of that size, not a convergence: such
         updates cannot be told from noise, and iterating them to ``max_iterations`` adds nothing.
+        The threshold is the 1-sigma ellipsoid of the 6-parameter update: an update of pure
+        noise has ``delta^T H delta / s^2`` distributed as chi-square with 6 degrees of freedom
+        (mean 6) and falls below 1 with probability 0.014 only, so a stage ends at the first such
+        rare update, tens of updates into the random walk.
     tree : scipy.spatial.cKDTree, optional
         A prebuilt tree of ``reference``.
     workers : int, default 1
@@ -186,17 +282,20 @@ def weighted_icp(
         )
     kd = cKDTree(q) if tree is None else tree
     w = np.array([1.0, 1.0, z_weight])
+    # the reference with one row of NaN after it: the index of a point without a pair (the
+    # tree's ``n``) then picks NaN, whose z error no threshold keeps
+    q_pad = np.vstack([q, np.full((1, 3), np.nan)])
+    nearest = _Pairs(kd, q, max_pair_mm, workers)
     total = np.eye(4)
-    it, stage, converged, n_pairs, rms = 0, 0, False, 0, float("nan")
+    it, stage, converged, n_pairs, last = 0, 0, False, 0, None
     while it < max_iterations:
         cur = geo.apply(total, p0)
-        dist, idx = kd.query(cur, distance_upper_bound=max_pair_mm, workers=workers)
-        keep = np.isfinite(dist)
+        paired, idx = nearest.update(cur)
         if stage == 1:
-            dz = np.zeros_like(dist)
-            dz[keep] = np.abs(cur[keep, 2] - q[idx[keep], 2])
-            keep &= dz <= z_threshold_mm
-        n_pairs = int(keep.sum())
+            keep = np.abs(cur[:, 2] - q_pad[idx, 2]) <= z_threshold_mm
+        else:
+            keep = paired
+        n_pairs = int(np.count_nonzero(keep))
         if n_pairs < MIN_PAIRS:
             if it == 0:
                 nearest = float(kd.query(cur, k=1)[0].min())
@@ -209,17 +308,19 @@ def weighted_icp(
                 f"ICP lost its pairs: {n_pairs} pairs left at iteration {it} (need {MIN_PAIRS})"
             )
         it += 1
-        step, size = _weighted_rigid_step(cur[keep], q[idx[keep]], w)
+        pairs = (cur[keep], q[idx[keep]])
+        step, size = _weighted_rigid_step(*pairs, w)
         total = step @ total
-        moved = geo.apply(step, cur[keep]) - q[idx[keep]]
-        rms = float(np.sqrt(np.mean(np.sum(moved**2, axis=1))))
-        shift = float(np.abs(geo.apply(step, cur) - cur).max())
-        if shift < tol or (stop_below_noise and size < NOISE_STEP):
+        last = (step, pairs)
+        if (stop_below_noise and size < NOISE_STEP) or _moves_less_than(step, cur, pairs[0], tol):
             if stage == 0 and np.isfinite(z_threshold_mm):
                 stage = 1
                 continue
             converged = True
             break
+    step, (a, b) = last
+    moved = geo.apply(step, a) - b
+    rms = float(np.sqrt(np.mean(np.sum(moved**2, axis=1))))
     return IcpResult(total, it, n_pairs, rms, converged)
 
 
