@@ -10,7 +10,9 @@ are :mod:`calstudy.estimators.coc`):
   :func:`defocus_vignetted` (the same blur spot cut off axis by a lens rim: :func:`rim_shadow`,
   :func:`defocus_kernel`) and
   :func:`expose` (exposure time, saturation, shot and read noise, 8-bit quantisation);
-- :func:`fuse_exposures`: exposure fusion with contrast and well-exposedness weights (Eq. 3).
+- :func:`fuse_exposures`: exposure fusion with contrast and well-exposedness weights (Eq. 3);
+  :func:`expose_and_fuse` does both in one pass (these three live in
+  :mod:`calstudy.models.exposure` and are re-exported here).
 
 Images are float arrays with values in [0, 1] (or uint8 for raw exposures); coordinates are in px
 with pixel centres at integers (OpenCV's convention); a region of interest (ROI) is given by the
@@ -25,6 +27,11 @@ import cv2
 import numpy as np
 
 from calstudy.core.errors import CalibrationError
+from calstudy.models.exposure import (  # noqa: F401  (re-exported: the model's last steps)
+    expose,
+    expose_and_fuse,
+    fuse_exposures,
+)
 from calstudy.models.sensors import UNDISTORT_CRITERIA
 
 # ----------------------------------------------------------------------------------------------
@@ -185,6 +192,9 @@ def render_dots(k, dist, centres, normals, radius_mm: float, origins, shape) -> 
     # per-pixel work is on small numbers (float32 keeps ~1e-3 px): with dx = x - xc,
     # dy = y - yc, t = dx nx + dy ny and r.n = dn_c + t, s = cz dn_c / (r.n) and
     # s r - c = (s dx - xc cz t / (r.n), s dy - yc cz t / (r.n), -cz t / (r.n)).
+    # Every step writes into one of a few buffers (the ROIs are mostly background and the
+    # stack is large: temporaries cost more than the arithmetic); the operations and their
+    # order are those of the formulas, so the float32 result does not depend on the buffering.
     cz = c[:, 2]
     xc, yc = c[:, 0] / cz, c[:, 1] / cz
     dn_c = xc * n[:, 0] + yc * n[:, 1] + n[:, 2]
@@ -195,23 +205,40 @@ def render_dots(k, dist, centres, normals, radius_mm: float, origins, shape) -> 
 
     dx = x - col(xc)
     dy = y - col(yc)
-    t = dx * col(n[:, 0]) + dy * col(n[:, 1])
-    dn = t + col(dn_c)
-    if np.any(np.abs(dn) < 1e-9):
+    t = dx * col(n[:, 0])
+    tmp = np.multiply(dy, col(n[:, 1]))
+    t += tmp
+    dn = t + col(dn_c)  # r.n
+    abs_dn = np.abs(dn)
+    if np.any(abs_dn < 1e-9):
         raise CalibrationError("the dot is seen edge-on (its plane contains a viewing ray)")
-    inv = f32(1.0) / dn
+    inv = np.divide(f32(1.0), dn, out=dn)
     s = col(cz * dn_c) * inv
-    q = col(cz) * t * inv  # cz t / (r.n)
-    px = s * dx - col(xc) * q
-    py = s * dy - col(yc) * q
-    rho = np.sqrt(px * px + py * py + q * q)
-    len2 = x * x + y * y + f32(1.0)
-    ray_len = np.sqrt(len2)
-    cos_tilt = np.abs(dn) / ray_len
+    q = np.multiply(col(cz), t, out=t)
+    q *= inv  # cz t / (r.n)
+    px = np.multiply(s, dx, out=dx)
+    px -= np.multiply(col(xc), q, out=tmp)
+    py = np.multiply(s, dy, out=dy)
+    py -= np.multiply(col(yc), q, out=tmp)
+    rho = np.multiply(px, px, out=px)
+    rho += np.multiply(py, py, out=py)
+    rho += np.multiply(q, q, out=q)
+    np.sqrt(rho, out=rho)
+    len2 = np.multiply(x, x, out=x)
+    len2 += np.multiply(y, y, out=y)
+    len2 += f32(1.0)
+    ray_len = np.sqrt(len2, out=y)
+    cos_tilt = np.divide(abs_dn, ray_len, out=abs_dn)
     focal = f32(0.5 * (k[0, 0] + k[1, 1]))
-    footprint = s * ray_len / (focal * np.sqrt(cos_tilt))
-    coverage = np.clip(f32(0.5) - (rho - f32(radius_mm)) / footprint, f32(0.0), f32(1.0))
-    return (coverage / (len2 * len2)).reshape(-1, rows, cols)
+    footprint = np.multiply(s, ray_len, out=s)
+    root = np.sqrt(cos_tilt, out=cos_tilt)
+    footprint /= np.multiply(focal, root, out=root)
+    coverage = np.subtract(rho, f32(radius_mm), out=rho)
+    coverage /= footprint
+    np.subtract(f32(0.5), coverage, out=coverage)
+    np.clip(coverage, f32(0.0), f32(1.0), out=coverage)
+    coverage /= np.multiply(len2, len2, out=len2)
+    return coverage.reshape(-1, rows, cols)
 
 
 def _undistorted_grid(k, dist, origin, shape, step: int = 8) -> np.ndarray:
@@ -441,104 +468,3 @@ def defocus_vignetted(image, delta_px: float, side: float, rim_centre, rim_radiu
     k = defocus_kernel(delta_px, side, c, r)
     # filter2D correlates: flip the kernel to convolve
     return cv2.filter2D(img, cv2.CV_32F, k[::-1, ::-1].copy(), borderType=cv2.BORDER_REPLICATE)
-
-
-def expose(
-    radiance,
-    exposure_ms: float,
-    peak_at_100ms: float,
-    background_at_100ms: float,
-    read_noise_dn: float,
-    electrons_per_dn: float,
-    rng: np.random.Generator,
-    bits: int = 8,
-) -> np.ndarray:
-    """One exposure of a dot image: scale with time, add shot and read noise, saturate, quantise.
-
-    Parameters
-    ----------
-    radiance : array
-        Defocused dot image in [0, 1] (1 = the dot's peak brightness).
-    exposure_ms : float
-        Exposure time; the signal scales with ``exposure_ms / 100``.
-    peak_at_100ms, background_at_100ms : float
-        Dot peak and background at 100 ms, in units of full scale.
-    read_noise_dn, electrons_per_dn : float
-        Read noise (DN) and conversion gain; shot noise is ``sqrt(DN / electrons_per_dn)`` DN.
-    rng : numpy.random.Generator
-        Noise source.
-    bits : int, default 8
-        Output bit depth.
-
-    Returns
-    -------
-    uint8 or uint16 array
-    """
-    full = 2**bits - 1
-    scale = exposure_ms / 100.0
-    rad = np.asarray(radiance, dtype=np.float32)
-    dn = np.float32(full * scale * (peak_at_100ms - background_at_100ms)) * rad
-    dn += np.float32(full * scale * background_at_100ms)
-    sigma = np.sqrt(np.float32(read_noise_dn**2) + np.maximum(dn, 0) / np.float32(electrons_per_dn))
-    noisy = np.rint(dn + sigma * rng.standard_normal(dn.shape, dtype=np.float32))
-    return np.clip(noisy, 0, full).astype(np.uint8 if bits <= 8 else np.uint16)
-
-
-# ----------------------------------------------------------------------------------------------
-# fusion (Eq. 3)
-
-
-def fuse_exposures(
-    images,
-    weight_contrast: float = 1.0,
-    weight_exposure: float = 1.0,
-    sigma: float = 0.2,
-) -> np.ndarray:
-    """Fuse exposures by contrast and well-exposedness weights (Eq. 3).
-
-    ``W_s = C_s^wc * E_s^we`` with ``C_s = |Laplacian(I_s)|`` and
-    ``E_s = exp(-(I_s - 0.5)^2 / (2 sigma^2))``; ``R = sum_s W_s I_s / sum_s W_s``. The pixel
-    positions are unchanged (the paper's remark under Eq. 3).
-
-    Parameters
-    ----------
-    images : sequence of arrays, same shape
-        Raw exposures (uint8/uint16 or float in [0, 1]): images ``(rows, cols)`` or stacks
-        ``(m, rows, cols)`` of ROIs, each fused on its own.
-
-    Returns
-    -------
-    float32 array in [0, 1]
-    """
-    stack = []
-    for img in images:
-        a = np.asarray(img)
-        full = float(np.iinfo(a.dtype).max) if np.issubdtype(a.dtype, np.integer) else 1.0
-        stack.append(a.astype(np.float32) / full)
-    if len(stack) < 1 or any(s.shape != stack[0].shape for s in stack):
-        raise CalibrationError(f"fusion needs >= 1 images of one shape, got {len(stack)}")
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise CalibrationError(f"well-exposedness sigma = {sigma} must be a finite number > 0")
-    if not all(np.isfinite(w) and w >= 0 for w in (weight_contrast, weight_exposure)):
-        raise CalibrationError(
-            f"fusion weights {weight_contrast}, {weight_exposure} must be finite numbers >= 0"
-        )
-    num = np.zeros_like(stack[0])
-    den = np.zeros_like(stack[0])
-    for img in stack:
-        contrast = np.abs(_laplacian(img))
-        exposure = np.exp(-((img - 0.5) ** 2) / (2.0 * sigma**2))
-        w = contrast**weight_contrast * exposure**weight_exposure + 1e-12
-        num += w * img
-        den += w
-    return num / den
-
-
-def _laplacian(img: np.ndarray) -> np.ndarray:
-    """``cv2.Laplacian`` (3 x 3 aperture, replicated border) of an image or of each image of an
-    ``(m, rows, cols)`` stack (as the channels of one call)."""
-    if img.ndim == 2:
-        return cv2.Laplacian(img, cv2.CV_32F, borderType=cv2.BORDER_REPLICATE)
-    chans = np.ascontiguousarray(np.moveaxis(img, 0, -1))
-    out = cv2.Laplacian(chans, cv2.CV_32F, borderType=cv2.BORDER_REPLICATE)
-    return np.moveaxis(out.reshape(chans.shape), -1, 0)

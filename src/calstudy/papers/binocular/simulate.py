@@ -20,7 +20,13 @@ from calstudy.core import geometry as geo
 from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators import binocular as bino
-from calstudy.estimators.coc import detect_centre, rectify_coc
+from calstudy.estimators.coc import (
+    detect_centre,
+    detect_centres,
+    image_gradients,
+    rectify_coc,
+    rectify_cocs,
+)
 from calstudy.models import optics
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import perturb_robot
@@ -189,21 +195,18 @@ def expose_and_fuse(
 ) -> np.ndarray:
     """The exposures of ``sensor.toml [exposure]`` of a blurred ROI, fused (Eq. 3)."""
     exp = scenario.config["sensor"]["exposure"]
-    shots = [
-        optics.expose(
-            blurred,
-            t,
-            exp["dot_peak_at_100ms"],
-            exp["background_at_100ms"],
-            read_noise_dn,
-            electrons_per_dn,
-            rng,
-            exp["bits"],
-        )
-        for t in exp["times_ms"]
-    ]
-    return optics.fuse_exposures(
-        shots, exp["weight_contrast"], exp["weight_exposure"], exp["well_exposed_sigma"]
+    return optics.expose_and_fuse(
+        blurred,
+        exp["times_ms"],
+        exp["dot_peak_at_100ms"],
+        exp["background_at_100ms"],
+        read_noise_dn,
+        electrons_per_dn,
+        rng,
+        exp["bits"],
+        exp["weight_contrast"],
+        exp["weight_exposure"],
+        exp["well_exposed_sigma"],
     )
 
 
@@ -308,22 +311,25 @@ def observe(
             rois.append(image_dots(scenario, camera, geo.apply(s2c, dots_s), n, rng, imaging))
     kept = tuple(r[3] for r in rois)
     kwargs = scenario.detection
+    grads = [[image_gradients(img) for img in f] for f, _, _, _ in rois]
     uv_raw = np.array(
         [
-            [detect_centre(img, o, **kwargs) for img, o in zip(f, org, strict=True)]
-            for f, org, _, _ in rois
+            detect_centres(f, org, **kwargs, gradients=g)
+            for (f, org, _, _), g in zip(rois, grads, strict=True)
         ]
     )
     if not imaging.defocus:
         return Observation(uv_raw, uv_raw, kept)
     tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
     raw = bino.triangulate(model, uv_raw[0], uv_raw[1], tol)
-    uv_rect = np.empty_like(uv_raw)
+    uv_rect = uv_raw.copy()  # below 1/3 px the image is used as it is (rectified_centre)
     for c, (_, s2c) in enumerate(model.cameras()):
         est = np.atleast_1d(scenario.coc_radius_px(geo.apply(s2c, raw)[:, 2]))
         fused, origins, _, _ = rois[c]
-        for i in range(len(raw)):
-            uv_rect[c, i] = rectified_centre(scenario, fused[i], origins[i], est[i])
+        todo = np.flatnonzero(est >= 1.0 / 3.0)
+        if todo.size:
+            fixed = rectify_cocs(fused[todo], est[todo], [grads[c][i] for i in todo])
+            uv_rect[c, todo] = detect_centres(fixed, origins[todo], **kwargs)
     return Observation(uv_raw, uv_rect, kept)
 
 
@@ -424,9 +430,21 @@ class Views:
         return np.array(out)
 
     def points(self, model: StereoRig, tol_mm: float) -> tuple[np.ndarray, np.ndarray]:
-        """Triangulated points ``(n, m, 3)`` of all views with ``model``: raw and rectified."""
-        pts = [o.points(model, tol_mm) for o in self.observations]
-        return np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
+        """Triangulated points ``(n, m, 3)`` of all views with ``model``: raw and rectified
+        (:meth:`Observation.points` of each view, triangulated as one batch)."""
+        obs = self.observations
+        sets = []  # (raw, rect) of each view in turn: the order Observation.points takes them
+        for o in obs:
+            sets.append(o.uv_raw)
+            if o.uv_rect is not o.uv_raw:
+                sets.append(o.uv_rect)
+        uv = np.array(sets)  # (sets, 2 cameras, m, 2)
+        pts = iter(bino.triangulate_sets(model, uv[:, 0], uv[:, 1], tol_mm))
+        raw, rect = [], []
+        for o in obs:
+            raw.append(next(pts))
+            rect.append(next(pts) if o.uv_rect is not o.uv_raw else raw[-1].copy())
+        return np.array(raw), np.array(rect)
 
 
 def view_target(scenario, world, target2base, dots, normal, n, rng, imaging, model) -> Views:
