@@ -108,7 +108,7 @@ def test_batched_detection_and_rectification_equal_roi_by_roi():
     np.testing.assert_array_equal(coc.detect_centres(rois, origins), want)
     np.testing.assert_array_equal(coc.detect_centres(rois, origins, gradients=grads), want)
     # rectify_coc computes its own Sobel derivatives strip by strip: the reused ones must agree
-    fixed = coc.rectify_cocs(np.array(rois), deltas, grads, strip_rows=16)
+    fixed = coc.rectify_cocs(rois, deltas, grads, strip_rows=16)
     for r, d, f in zip(rois, deltas, fixed, strict=True):
         np.testing.assert_array_equal(f, coc.rectify_coc(r, d, 16))
     with pytest.raises(CalibrationError, match="2 radii given for 3 ROIs"):

@@ -30,8 +30,8 @@ from calstudy.core.errors import CalibrationError
 
 def _disk(radius: float) -> np.ndarray:
     r = int(math.floor(radius))
-    y, x = np.mgrid[-r : r + 1, -r : r + 1]
-    return (x**2 + y**2 <= radius**2).astype(np.float32)
+    a = np.arange(-r, r + 1)
+    return (a[None, :] ** 2 + a[:, None] ** 2 <= radius**2).astype(np.float32)
 
 
 def _check_rectify(image, delta_px: float) -> np.ndarray:
@@ -116,10 +116,12 @@ def rectify_coc(
     return out
 
 
-def rectify_cocs(images, deltas_px, gradients=None, strip_rows: int = 128) -> np.ndarray:
-    """:func:`rectify_coc` of each ROI of a stack ``(m, rows, cols)`` with its own radius.
+def rectify_cocs(images, deltas_px, gradients=None, strip_rows: int | None = None) -> list:
+    """:func:`rectify_coc` of each of ``m`` ROIs (a list or a stack) with its own radius: the
+    list of rectified ROIs.
 
-    The same numbers as :func:`rectify_coc` ROI by ROI (the same strips, one thread);
+    The same numbers as :func:`rectify_coc` ROI by ROI with the same ``strip_rows`` (one
+    thread); by default each ROI is one strip (a region of interest fits in cache).
     ``gradients``, the ROIs' :func:`image_gradients` when the caller has them (the centre
     detection computes them), spares computing the Sobel derivatives again.
 
@@ -131,7 +133,7 @@ def rectify_cocs(images, deltas_px, gradients=None, strip_rows: int = 128) -> np
     deltas = np.asarray(deltas_px, dtype=float).reshape(-1)
     if deltas.shape != (len(images),):
         raise CalibrationError(f"{deltas.size} radii given for {len(images)} ROIs")
-    if int(strip_rows) < 1:
+    if strip_rows is not None and int(strip_rows) < 1:
         raise CalibrationError(f"strip_rows must be at least 1, got {strip_rows}")
     stack = [_check_rectify(img, delta) for img, delta in zip(images, deltas, strict=True)]
     out = []
@@ -139,11 +141,12 @@ def rectify_cocs(images, deltas_px, gradients=None, strip_rows: int = 128) -> np
         gx, gy = image_gradients(img) if gradients is None else gradients[i]
         setup = _rectify_setup(float(delta))
         fixed = np.empty_like(img)
-        for y0 in range(0, img.shape[0], int(strip_rows)):
-            y1 = min(img.shape[0], y0 + int(strip_rows))
+        step = img.shape[0] if strip_rows is None else int(strip_rows)
+        for y0 in range(0, img.shape[0], step):
+            y1 = min(img.shape[0], y0 + step)
             _rectify_strip(img, y0, y1, setup, fixed, gx[y0:y1], gy[y0:y1])
         out.append(fixed)
-    return np.array(out)
+    return out
 
 
 def _rectify_setup(delta_px: float) -> tuple:
@@ -165,7 +168,8 @@ def _rectify_strip(img, y0: int, y1: int, setup, out, gx=None, gy=None) -> None:
     src = img[a:b]
     keep = slice(y0 - a, y1 - a)
     mean = cv2.filter2D(src, cv2.CV_32F, kernel, borderType=cv2.BORDER_REPLICATE)[keep]
-    if gx is None:
+    own = gx is None  # derivatives of this strip, free to be overwritten
+    if own:
         gx = cv2.Sobel(src, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
         gy = cv2.Sobel(src, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
     here = src[keep]
@@ -181,8 +185,8 @@ def _rectify_strip(img, y0: int, y1: int, setup, out, gx=None, gy=None) -> None:
     norm = cv2.magnitude(gx, gy)
     norm += np.float32(1e-12)
     step /= norm
-    map_x = np.multiply(gx, step)
-    map_y = np.multiply(gy, step, out=step)
+    map_x = np.multiply(gx, step, out=gx if own else None)
+    map_y = np.multiply(gy, step, out=gy if own else step)
     np.subtract(np.arange(cols, dtype=np.float32)[None, :], map_x, out=map_x)
     np.subtract(np.arange(y0, y1, dtype=np.float32)[:, None], map_y, out=map_y)
     out[y0:y1] = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)

@@ -157,16 +157,14 @@ def _rim_inputs(scenario: Scenario) -> tuple[float, float, float, float]:
     )
 
 
-def blur(scenario: Scenario, sharp, deltas, sides, rims) -> np.ndarray:
-    """Defocus ``m`` sharp ROIs ``(m, rows, cols)``, each by its own blur spot (Eq. 7 with the
-    rim's cut, :func:`calstudy.models.optics.defocus_vignetted`; ``rims`` as :func:`blur_spots`
-    returns them)."""
-    return np.stack(
-        [
-            optics.defocus_vignetted(img, d, s, rim[:2], float(rim[2]))
-            for img, d, s, rim in zip(sharp, deltas, sides, rims, strict=True)
-        ]
-    )
+def blur(scenario: Scenario, sharp, deltas, sides, rims) -> list:
+    """Defocus ``m`` sharp ROIs (a list of 2-D arrays, or a stack), each by its own blur spot
+    (Eq. 7 with the rim's cut, :func:`calstudy.models.optics.defocus_vignetted`; ``rims`` as
+    :func:`blur_spots` returns them): the list of blurred ROIs."""
+    return [
+        optics.defocus_vignetted(img, d, s, rim[:2], float(rim[2]))
+        for img, d, s, rim in zip(sharp, deltas, sides, rims, strict=True)
+    ]
 
 
 def render_blurred_dot(scenario: Scenario, camera: PinholeCamera, centre, normal, delta_px=None):
@@ -184,10 +182,10 @@ def render_blurred_dot(scenario: Scenario, camera: PinholeCamera, centre, normal
         deltas = np.array([float(delta_px)])
     radius = scenario.dot_radius_mm
     r_px = radius * camera.fx / centre[2]
-    margin = 4.0 * float(deltas[0]) + 10.0
+    margin = 4.0 * float(deltas[0]) + ROI_MARGIN_PX
     origin, shape = optics.roi_around(uv, r_px, margin, camera.width, camera.height)
     sharp = optics.render_dot(camera.K, camera.dist_coeffs, centre, normal, radius, origin, shape)
-    return uv, origin, blur(scenario, sharp[None], deltas, sides, rims)[0]
+    return uv, origin, blur(scenario, [sharp], deltas, sides, rims)[0]
 
 
 def expose_and_fuse(
@@ -210,55 +208,78 @@ def expose_and_fuse(
     )
 
 
-def render_rois(scenario, camera: PinholeCamera, centres_cam, normals_cam):
-    """Sharp ROIs of ``m`` dots in one camera, one ROI shape for all, large enough for each dot
-    with the margin its circle of confusion (Eq. 4) needs.
+#: Margin of an ROI beyond the dot's edge besides the blur's reach (4 CoC radii), px: room for
+#: the edge detection (:func:`render_rois`).
+ROI_MARGIN_PX = 10.0
 
-    Returns ``(sharp, origins, spots)``: the ``(m, rows, cols)`` ROIs, their top-left pixels
-    ``(m, 2)`` and the true blur spots of :func:`blur_spots` (CoC radii, sides, rim discs).
+
+def render_rois(scenario, camera: PinholeCamera, centres_cam, normals_cam):
+    """Sharp ROIs of ``m`` dots in one camera, each large enough for its dot with the margin its
+    circle of confusion (Eq. 4) needs: ``4 delta + ROI_MARGIN_PX`` px beyond the dot's edge, as
+    :func:`render_blurred_dot` (the blur spot reaches 4 delta; each ROI is sized by its own
+    dot, so a dot near focus is not processed in the ROI of a blurred neighbour).
+
+    Returns ``(sharp, origins, spots, radii)``: the list of ``m`` ROIs, their top-left pixels
+    ``(m, 2)``, the true blur spots of :func:`blur_spots` (CoC radii, sides, rim discs) and the
+    dots' radii in the image ``(m,)`` px.
     """
     centres = np.asarray(centres_cam, dtype=float)
-    depth = centres[:, 2]
+    normals = np.asarray(normals_cam, dtype=float)
     deltas, sides, rims = blur_spots(scenario, centres)
     uv = camera.project(centres)
-    r_px = float(np.max(scenario.dot_radius_mm * camera.fx / depth))
-    margin = float(np.max(4.0 * deltas)) + 10.0
-    rois = [optics.roi_around(p, r_px, margin, camera.width, camera.height) for p in uv]
-    origins = np.array([o for o, _ in rois])
-    sharp = optics.render_dots(
-        camera.K,
-        camera.dist_coeffs,
-        centres,
-        normals_cam,
-        scenario.dot_radius_mm,
-        origins,
-        rois[0][1],
+    radii = scenario.dot_radius_mm * camera.fx / centres[:, 2]
+    origins, shapes = [], []
+    for i in range(len(centres)):
+        margin = 4.0 * float(deltas[i]) + ROI_MARGIN_PX
+        origin, shape = optics.roi_around(uv[i], radii[i], margin, camera.width, camera.height)
+        origins.append(origin)
+        shapes.append(shape)
+    sharp = optics.render_rois(
+        camera.K, camera.dist_coeffs, centres, normals, scenario.dot_radius_mm, origins, shapes
     )
-    return sharp, origins, (deltas, sides, rims)
+    return sharp, np.array(origins), (deltas, sides, rims), radii
+
+
+def _in_focus_rois(sharp, origins, radii) -> tuple[list, np.ndarray]:
+    """The ROIs of :func:`render_rois` cut to what an in-focus dot needs (the margin
+    ``ROI_MARGIN_PX``, no blur), around the same centre pixel."""
+    cut, starts = [], []
+    for img, origin, r in zip(sharp, origins, radii, strict=True):
+        half = (img.shape[0] - 1) // 2
+        keep = int(math.ceil(r + ROI_MARGIN_PX))  # roi_around's half size without blur
+        off = half - keep
+        cut.append(img[off : off + 2 * keep + 1, off : off + 2 * keep + 1])
+        starts.append(origin + off)
+    return cut, np.array(starts)
 
 
 def image_dots(
     scenario, camera: PinholeCamera, centres_cam, normals_cam, rng, imaging: Imaging, rendered=None
 ):
     """Fused ROIs of ``m`` dots in one camera: render (:func:`render_rois`, or the given
-    ``rendered`` triple of it), defocus (Eq. 4, 7), two exposures, fuse (Eq. 3), batched over
-    the dots.
+    ``rendered`` result of it), defocus (Eq. 4, 7), two exposures, fuse (Eq. 3), dot by dot.
+    Without defocus the ROIs are those an in-focus dot needs (:func:`_in_focus_rois`).
 
-    Returns ``(fused, origins, deltas, rendered)``: the ``(m, rows, cols)`` ROIs, their top-left
-    pixels ``(m, 2)``, the CoC radii ``(m,)`` applied (zeros without defocus) and the
-    :func:`render_rois` triple.
+    Returns ``(fused, origins, deltas, rendered)``: the list of ROIs, their top-left pixels
+    ``(m, 2)``, the CoC radii ``(m,)`` applied (zeros without defocus) and the
+    :func:`render_rois` result.
     """
     if rendered is None:
         rendered = render_rois(scenario, camera, centres_cam, normals_cam)
-    sharp, origins, (true_deltas, sides, rims) = rendered
-    deltas = true_deltas if imaging.defocus else np.zeros(len(true_deltas))
+    sharp, origins, (true_deltas, sides, rims), radii = rendered
+    if imaging.defocus:
+        deltas = true_deltas
+    else:
+        deltas = np.zeros(len(true_deltas))
+        sharp, origins = _in_focus_rois(sharp, origins, radii)
     blurred = blur(scenario, sharp, deltas, sides, rims)
     if not imaging.noise:
         return blurred, origins, deltas, rendered
     noise = scenario.config["sensor"]["noise"]
-    fused = expose_and_fuse(
-        scenario, blurred, rng, noise["read_noise_dn"], noise["electrons_per_dn"]
-    )
+    fused = [
+        expose_and_fuse(scenario, b, rng, noise["read_noise_dn"], noise["electrons_per_dn"])
+        for b in blurred
+    ]
     return fused, origins, deltas, rendered
 
 
@@ -276,7 +297,7 @@ class Observation:
 
     uv_raw: np.ndarray
     uv_rect: np.ndarray
-    rendered: tuple = ()  # per camera, the sharp ROIs of :func:`render_rois` (oracle re-imaging)
+    rendered: tuple = ()  # per camera, the :func:`render_rois` result (oracle re-imaging)
 
     def points(self, sensor: StereoRig, tol_mm: float) -> tuple[np.ndarray, np.ndarray]:
         """Sensor-frame points ``(m, 3)`` triangulated with the calibrated ``sensor`` (Eq. 1):
@@ -328,7 +349,7 @@ def observe(
         fused, origins, _, _ = rois[c]
         todo = np.flatnonzero(est >= 1.0 / 3.0)
         if todo.size:
-            fixed = rectify_cocs(fused[todo], est[todo], [grads[c][i] for i in todo])
+            fixed = rectify_cocs([fused[i] for i in todo], est[todo], [grads[c][i] for i in todo])
             uv_rect[c, todo] = detect_centres(fixed, origins[todo], **kwargs)
     return Observation(uv_raw, uv_rect, kept)
 
