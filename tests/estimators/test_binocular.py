@@ -95,3 +95,33 @@ def test_axx_b_needs_two_rotation_axes():
         bino.preliminary_handeye(poses, targets)
     with pytest.raises(CalibrationError, match="at least 2 rotations"):
         bino.check_rotation_axes(geo.make_transform(np.eye(3)[None].repeat(3, 0), np.eye(3)))
+
+
+def test_batched_modification_and_triangulation_equal_one_by_one(calibrator, sensor):
+    pts, _ = bino.solve_calibrator_layout(
+        calibrator["standard"]["distance_mm"], calibrator["standard"]["start_angle_deg"]
+    )
+    rng = np.random.default_rng(1)
+    sets = bino.with_virtual(pts[:6] + rng.normal(0, 0.02, (4, 6, 3)))
+    pairs = bino.all_pairs(8)
+    standard = np.linalg.norm(pts[pairs[:, 0]] - pts[pairs[:, 1]], axis=1)
+    w = bino.virtual_weights()
+    for combine in (None, w):
+        got, delta = bino.modify_observed_errors(sets, pairs, standard, combine=combine)
+        for s, g, d in zip(sets, got, delta, strict=True):
+            one, one_delta = bino.modify_observed_error(s, pairs, standard, combine=combine)
+            np.testing.assert_array_equal(g, one)
+            np.testing.assert_array_equal(d, one_delta)
+    with pytest.raises(CalibrationError, match="standard distance #3 is -1 mm"):
+        bad = np.tile(standard, (4, 1))
+        bad[2, 2] = -1.0
+        bino.modify_observed_errors(sets, np.tile(pairs, (4, 1, 1)), bad)
+    world = sets[:, :6] + np.array([0.0, 0.0, 850.0])
+    uv = np.array([sensor.project(p) for p in world])  # (4, 2 cameras, 6, 2)
+    uv += rng.normal(0, 0.05, uv.shape)
+    got = bino.triangulate_sets(sensor, uv[:, 0], uv[:, 1], 0.5)
+    for g, u in zip(got, uv, strict=True):
+        np.testing.assert_array_equal(g, bino.triangulate(sensor, u[0], u[1], 0.5))
+    uv[2, 1, 4, 1] += 40.0  # the third set's fifth point misses
+    with pytest.raises(CalibrationError, match="rays of point 4 miss each other"):
+        bino.triangulate_sets(sensor, uv[:, 0], uv[:, 1], 0.5)

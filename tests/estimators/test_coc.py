@@ -94,3 +94,25 @@ def test_ellipse_from_too_few_edge_points():
     img = disk_image(size=21, radius=1.2, centre=(10.0, 10.0))
     with pytest.raises(CalibrationError, match="edge points"):
         coc.detect_centre(img, min_points=20)
+
+
+def test_batched_detection_and_rectification_equal_roi_by_roi():
+    rng = np.random.default_rng(5)
+    centres = [(20.3, 19.6), (21.0, 20.2), (19.4, 20.9)]
+    rois = [disk_image(centre=c, blur=b) for c, b in zip(centres, (1.0, 2.0, 3.0), strict=True)]
+    rois = [np.clip(r + rng.normal(0, 0.01, r.shape), 0, 1).astype(np.float32) for r in rois]
+    origins = np.array([[100, 200], [300, 50], [7, 9]])
+    deltas = np.array([1.0, 2.0, 3.0])
+    grads = [coc.image_gradients(r) for r in rois]
+    want = np.array([coc.detect_centre(r, o) for r, o in zip(rois, origins, strict=True)])
+    np.testing.assert_array_equal(coc.detect_centres(rois, origins), want)
+    np.testing.assert_array_equal(coc.detect_centres(rois, origins, gradients=grads), want)
+    # rectify_coc computes its own Sobel derivatives strip by strip: the reused ones must agree
+    fixed = coc.rectify_cocs(rois, deltas, grads, strip_rows=16)
+    for r, d, f in zip(rois, deltas, fixed, strict=True):
+        np.testing.assert_array_equal(f, coc.rectify_coc(r, d, 16))
+    with pytest.raises(CalibrationError, match="2 radii given for 3 ROIs"):
+        coc.rectify_cocs(np.array(rois), deltas[:2])
+    flat = [rois[0], np.full((41, 41), 0.4, np.float32)]
+    with pytest.raises(CalibrationError, match=r"no dot found .* at \(300, 50\)"):
+        coc.detect_centres(flat, origins[:2])

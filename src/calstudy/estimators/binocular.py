@@ -72,17 +72,32 @@ def triangulate(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.nd
     b = geo.check_finite("right image points", uv_right).reshape(-1, 2)
     if a.shape != b.shape or a.shape[0] == 0:
         raise CalibrationError(f"left {a.shape} and right {b.shape} points must match, N >= 1")
-    xl, xr = rig.normalise(a, "left"), rig.normalise(b, "right")
+    return triangulate_sets(rig, a[None], b[None], tol_mm)[0]
+
+
+def triangulate_sets(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.ndarray:
+    """:func:`triangulate` of ``k`` sets of matched image points ``(k, N, 2)`` in one pass:
+    points ``(k, N, 3)``, each the number :func:`triangulate` gives it alone (every step is per
+    point). Raises as :func:`triangulate` for the first set (in order) whose rays miss."""
+    if not (math.isfinite(tol_mm) and tol_mm > 0):
+        raise CalibrationError(f"ray tolerance tol_mm = {tol_mm} must be a finite number > 0")
+    a = geo.check_finite("left image points", uv_left)
+    b = geo.check_finite("right image points", uv_right)
+    if a.shape != b.shape or a.ndim != 3 or a.shape[2] != 2 or a.shape[1] == 0:
+        raise CalibrationError(f"left {a.shape} and right {b.shape} points must match, N >= 1")
+    k, n = a.shape[:2]
+    xl, xr = rig.normalise(a.reshape(-1, 2), "left"), rig.normalise(b.reshape(-1, 2), "right")
     rotation, translation = rig.rotation, rig.translation
     p1 = np.hstack([np.eye(3), np.zeros((3, 1))])
     p2 = np.hstack([rotation, translation[:, None]])
     hom = cv2.triangulatePoints(p1, p2, xl.T.copy(), xr.T.copy())
-    points = (hom[:3] / hom[3]).T
-    gap = ray_gap(xl, xr, rotation, translation)
-    worst = int(np.argmax(gap))
-    if gap[worst] > tol_mm:
+    points = (hom[:3] / hom[3]).T.reshape(k, n, 3)
+    gap = ray_gap(xl, xr, rotation, translation).reshape(k, n)
+    missed = np.flatnonzero(gap.max(axis=1) > tol_mm)
+    if missed.size:
+        worst = int(np.argmax(gap[missed[0]]))
         raise CalibrationError(
-            f"rays of point {worst} miss each other by {gap[worst]:.3g} mm "
+            f"rays of point {worst} miss each other by {gap[missed[0], worst]:.3g} mm "
             f"(tolerance {tol_mm:g} mm): wrong match or calibration"
         )
     return points
@@ -296,41 +311,68 @@ def modify_observed_error(
         indexes a missing one, or two targets coincide.
     """
     p = geo.check_finite("points", points)
-    pr = np.asarray(pairs, dtype=int)
-    std = geo.check_finite("standard distances", standard_mm)
     if p.ndim != 2 or p.shape[1] != 3:
         raise CalibrationError(f"points must be (m, 3), got {p.shape}")
-    if pr.ndim != 2 or pr.shape[1] != 2 or std.shape != (pr.shape[0],):
-        raise CalibrationError(f"pairs {pr.shape} and distances {std.shape} must be (M, 2), (M,)")
-    if pr.shape[0] < 8:
+    modified, delta = modify_observed_errors(p[None], pairs, standard_mm, rcond, combine)
+    return modified[0], delta[0]
+
+
+def modify_observed_errors(
+    points, pairs, standard_mm, rcond: float = 1e-3, combine=None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`modify_observed_error` of ``k`` sets of measured points ``(k, m, 3)`` at once.
+
+    ``pairs`` ``(M, 2)`` and ``standard_mm`` ``(M,)`` are shared by the sets, or given per set,
+    ``(k, M, 2)`` and ``(k, M)``. The pseudo-inverses are computed as one stack; each set's
+    result is the number :func:`modify_observed_error` gives it alone.
+
+    Returns ``(modified, delta)``, ``(k, m, 3)`` each; raises as :func:`modify_observed_error`.
+    """
+    p = geo.check_finite("points", points)
+    if p.ndim != 3 or p.shape[2] != 3:
+        raise CalibrationError(f"points must be (k, m, 3), got {p.shape}")
+    k, m = p.shape[:2]
+    pr = np.asarray(pairs, dtype=int)
+    std = geo.check_finite("standard distances", standard_mm)
+    if pr.ndim == 2 and std.ndim == 1:
+        pr, std = np.broadcast_to(pr, (k, *pr.shape)), np.broadcast_to(std, (k, *std.shape))
+    if pr.ndim != 3 or pr.shape[0] != k or pr.shape[2] != 2 or std.shape != pr.shape[:2]:
         raise CalibrationError(
-            f"{pr.shape[0]} calibrator distances given; Eq. 25 needs at least 8 for redundancy"
+            f"pairs {np.shape(pairs)} and distances {np.shape(standard_mm)} must be (M, 2), (M,)"
+        )
+    if pr.shape[1] < 8:
+        raise CalibrationError(
+            f"{pr.shape[1]} calibrator distances given; Eq. 25 needs at least 8 for redundancy"
         )
     if np.any(std <= 0):
-        k = int(np.argmax(std <= 0))
-        raise CalibrationError(f"standard distance #{k + 1} is {std[k]:g} mm; distances are > 0")
+        bad = int(np.argmax((std <= 0).any(axis=0)))
+        value = std[:, bad][std[:, bad] <= 0][0]
+        raise CalibrationError(f"standard distance #{bad + 1} is {value:g} mm; distances are > 0")
     if not (math.isfinite(rcond) and 0 <= rcond < 1):
         raise CalibrationError(f"rcond = {rcond} must lie in [0, 1)")
-    if np.any(pr[:, 0] == pr[:, 1]) or pr.min() < 0 or pr.max() >= p.shape[0]:
-        raise CalibrationError(f"pairs must join two different targets among {p.shape[0]}")
-    diff = p[pr[:, 0]] - p[pr[:, 1]]
-    length = np.linalg.norm(diff, axis=1)
+    if np.any(pr[..., 0] == pr[..., 1]) or pr.min() < 0 or pr.max() >= m:
+        raise CalibrationError(f"pairs must join two different targets among {m}")
+    sets = np.arange(k)[:, None]
+    diff = p[sets, pr[..., 0]] - p[sets, pr[..., 1]]
+    length = np.linalg.norm(diff, axis=-1)
     if np.any(length < 1e-9):
         raise CalibrationError("two targets of a pair coincide (distance 0 mm)")
-    cosines = diff / length[:, None]
-    a = np.zeros((pr.shape[0], p.size))
-    rows = np.arange(pr.shape[0])
+    cosines = diff / length[..., None]
+    a = np.zeros((k, pr.shape[1], 3 * m))
+    rows = np.arange(pr.shape[1])[None, :]
     for axis in range(3):
-        a[rows, 3 * pr[:, 0] + axis] = cosines[:, axis]
-        a[rows, 3 * pr[:, 1] + axis] = -cosines[:, axis]
+        a[sets, rows, 3 * pr[..., 0] + axis] = cosines[..., axis]
+        a[sets, rows, 3 * pr[..., 1] + axis] = -cosines[..., axis]
     if combine is None:
-        delta = (np.linalg.pinv(a, rcond=rcond) @ (std - length)).reshape(p.shape)
+        solve = np.linalg.pinv(a, rcond=rcond)
+        delta = (solve @ (std - length)[..., None]).reshape(p.shape)
         return p + delta, delta
     w = np.asarray(combine, dtype=float)
-    if w.ndim != 2 or w.shape[0] != p.shape[0]:
-        raise CalibrationError(f"combine must be ({p.shape[0]}, n), got {w.shape}")
+    if w.ndim != 2 or w.shape[0] != m:
+        raise CalibrationError(f"combine must be ({m}, n), got {w.shape}")
     a = a @ np.kron(w, np.eye(3))
-    delta_free = (np.linalg.pinv(a, rcond=rcond) @ (std - length)).reshape(-1, 3)
+    solve = np.linalg.pinv(a, rcond=rcond)
+    delta_free = (solve @ (std - length)[..., None]).reshape(k, -1, 3)
     delta = w @ delta_free
     return p + delta, delta
 

@@ -30,8 +30,8 @@ from calstudy.core.errors import CalibrationError
 
 def _disk(radius: float) -> np.ndarray:
     r = int(math.floor(radius))
-    y, x = np.mgrid[-r : r + 1, -r : r + 1]
-    return (x**2 + y**2 <= radius**2).astype(np.float32)
+    a = np.arange(-r, r + 1)
+    return (a[None, :] ** 2 + a[:, None] ** 2 <= radius**2).astype(np.float32)
 
 
 def _check_rectify(image, delta_px: float) -> np.ndarray:
@@ -100,40 +100,11 @@ def rectify_coc(
         workers = (os.cpu_count() or 1) if len(starts) > 4 else 1
     if int(workers) < 1:
         raise CalibrationError(f"workers must be at least 1, got {workers}")
-    kernel = _disk(3.0 * delta_px)
-    halo = kernel.shape[0] // 2 + 1
-    t = float(kernel.sum())
-    kernel /= t
-    coef = np.float32(2.0 * math.pi * delta_px**4 / t)
+    setup = _rectify_setup(delta_px)
     out = np.empty_like(img)
-    u = np.arange(cols, dtype=np.float32)[None, :]
 
     def strip(y0: int) -> None:
-        y1 = min(rows, y0 + strip_rows)
-        a, b = max(0, y0 - halo), min(rows, y1 + halo)
-        src = img[a:b]
-        keep = slice(y0 - a, y1 - a)
-        mean = cv2.filter2D(src, cv2.CV_32F, kernel, borderType=cv2.BORDER_REPLICATE)[keep]
-        gx = cv2.Sobel(src, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
-        gy = cv2.Sobel(src, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
-        here = src[keep]
-        # X = 2 pi delta^4 (E_u0 - E_u) / (t E_u0); step = sign(X) sqrt(2 |X|) / |grad|
-        x = np.subtract(mean, here)
-        x *= coef
-        np.maximum(mean, np.float32(1e-6), out=mean)
-        x /= mean
-        step = np.abs(x, out=mean)
-        step *= 2.0
-        np.sqrt(step, out=step)
-        np.copysign(step, x, out=step)
-        norm = cv2.magnitude(gx, gy)
-        norm += np.float32(1e-12)
-        step /= norm
-        gx *= step
-        gy *= step
-        np.subtract(u, gx, out=gx)
-        np.subtract(np.arange(y0, y1, dtype=np.float32)[:, None], gy, out=gy)
-        out[y0:y1] = cv2.remap(img, gx, gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        _rectify_strip(img, y0, min(rows, y0 + strip_rows), setup, out)
 
     if workers == 1:
         for y0 in starts:
@@ -143,6 +114,82 @@ def rectify_coc(
             for done in pool.map(strip, starts):  # re-raises a strip's error here
                 del done
     return out
+
+
+def rectify_cocs(images, deltas_px, gradients=None, strip_rows: int | None = None) -> list:
+    """:func:`rectify_coc` of each of ``m`` ROIs (a list or a stack) with its own radius: the
+    list of rectified ROIs.
+
+    The same numbers as :func:`rectify_coc` ROI by ROI with the same ``strip_rows`` (one
+    thread); by default each ROI is one strip (a region of interest fits in cache).
+    ``gradients``, the ROIs' :func:`image_gradients` when the caller has them (the centre
+    detection computes them), spares computing the Sobel derivatives again.
+
+    Raises
+    ------
+    CalibrationError
+        As :func:`rectify_coc`, for the first ROI (in order) that cannot be rectified.
+    """
+    deltas = np.asarray(deltas_px, dtype=float).reshape(-1)
+    if deltas.shape != (len(images),):
+        raise CalibrationError(f"{deltas.size} radii given for {len(images)} ROIs")
+    if strip_rows is not None and int(strip_rows) < 1:
+        raise CalibrationError(f"strip_rows must be at least 1, got {strip_rows}")
+    stack = [_check_rectify(img, delta) for img, delta in zip(images, deltas, strict=True)]
+    out = []
+    for i, (img, delta) in enumerate(zip(stack, deltas, strict=True)):
+        gx, gy = image_gradients(img) if gradients is None else gradients[i]
+        setup = _rectify_setup(float(delta))
+        fixed = np.empty_like(img)
+        step = img.shape[0] if strip_rows is None else int(strip_rows)
+        for y0 in range(0, img.shape[0], step):
+            y1 = min(img.shape[0], y0 + step)
+            _rectify_strip(img, y0, y1, setup, fixed, gx[y0:y1], gy[y0:y1])
+        out.append(fixed)
+    return out
+
+
+def _rectify_setup(delta_px: float) -> tuple:
+    """The normalised ``3 delta`` disc, its halo (rows) and Eq. 9-11's ``2 pi delta^4 / t``."""
+    kernel = _disk(3.0 * delta_px)
+    halo = kernel.shape[0] // 2 + 1
+    t = float(kernel.sum())
+    kernel /= t
+    return kernel, halo, np.float32(2.0 * math.pi * delta_px**4 / t)
+
+
+def _rectify_strip(img, y0: int, y1: int, setup, out, gx=None, gy=None) -> None:
+    """Rows ``y0:y1`` of :func:`rectify_coc` into ``out``; ``gx, gy``: the image's Sobel
+    derivatives on those rows if known (the strip's own are the same numbers: a 3 x 3 aperture
+    inside the halo)."""
+    kernel, halo, coef = setup
+    rows, cols = img.shape
+    a, b = max(0, y0 - halo), min(rows, y1 + halo)
+    src = img[a:b]
+    keep = slice(y0 - a, y1 - a)
+    mean = cv2.filter2D(src, cv2.CV_32F, kernel, borderType=cv2.BORDER_REPLICATE)[keep]
+    own = gx is None  # derivatives of this strip, free to be overwritten
+    if own:
+        gx = cv2.Sobel(src, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
+        gy = cv2.Sobel(src, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
+    here = src[keep]
+    # X = 2 pi delta^4 (E_u0 - E_u) / (t E_u0); step = sign(X) sqrt(2 |X|) / |grad|
+    x = np.subtract(mean, here)
+    x *= coef
+    np.maximum(mean, np.float32(1e-6), out=mean)
+    x /= mean
+    step = np.abs(x, out=mean)
+    step *= 2.0
+    np.sqrt(step, out=step)
+    np.copysign(step, x, out=step)
+    norm = cv2.magnitude(gx, gy)
+    norm += np.float32(1e-12)
+    step /= norm
+    map_x = np.multiply(gx, step, out=gx if own else None)
+    map_y = np.multiply(gy, step, out=gy if own else step)
+    np.subtract(np.arange(cols, dtype=np.float32)[None, :], map_x, out=map_x)
+    np.subtract(np.arange(y0, y1, dtype=np.float32)[:, None], map_y, out=map_y)
+    out[y0:y1] = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
 def rectify_coc_reference(image, delta_px: float) -> np.ndarray:
@@ -196,7 +243,12 @@ def _bilinear(img: np.ndarray, y: float, x: float) -> float:
 
 
 def detect_centre(
-    image, origin=(0, 0), low: float = 0.25, high: float = 0.5, min_points: int = 20
+    image,
+    origin=(0, 0),
+    low: float = 0.25,
+    high: float = 0.5,
+    min_points: int = 20,
+    gradients=None,
 ) -> np.ndarray:
     """Centre of a bright dot in an ROI: Canny boundary, then a direct ellipse fit (Eq. 12).
 
@@ -215,6 +267,8 @@ def detect_centre(
         Canny thresholds as fractions of the largest gradient magnitude.
     min_points : int
         Fewest edge pixels accepted for the ellipse fit (>= 5).
+    gradients : (gx, gy), optional
+        The image's :func:`image_gradients`, if the caller has them.
 
     Returns
     -------
@@ -236,14 +290,14 @@ def detect_centre(
         raise CalibrationError(
             f"Canny thresholds low = {low}, high = {high}: need 0 < low < high <= 1"
         )
+    where = tuple(np.asarray(origin).tolist())
     span = float(img.max() - img.min())
     if not np.isfinite(span) or span < 0.02:
         raise CalibrationError(
-            f"no dot found in the {img.shape[1]} x {img.shape[0]} px ROI at {tuple(origin)}: "
+            f"no dot found in the {img.shape[1]} x {img.shape[0]} px ROI at {where}: "
             f"intensity range {span:.3g} of full scale"
         )
-    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    gx, gy = image_gradients(img) if gradients is None else gradients
     scale = 16000.0 / float(cv2.magnitude(gx, gy).max())
     edges = cv2.Canny(
         (gx * scale).astype(np.int16),
@@ -252,10 +306,12 @@ def detect_centre(
         high * 16000.0,
         L2gradient=True,
     )
-    rows, cols = np.nonzero(edges)
+    found = cv2.findNonZero(edges)  # (x, y) of the edge pixels, row by row
+    pts = np.zeros((0, 2), np.int32) if found is None else found.reshape(-1, 2)
+    cols, rows = pts[:, 0], pts[:, 1]
     if rows.size < min_points:
         raise CalibrationError(
-            f"ellipse fit from {rows.size} edge points in the ROI at {tuple(origin)}; "
+            f"ellipse fit from {rows.size} edge points in the ROI at {where}; "
             f"at least {min_points} are needed"
         )
     if (
@@ -266,10 +322,36 @@ def detect_centre(
     ):
         raise CalibrationError(
             f"the dot's boundary touches the border of the {img.shape[1]} x {img.shape[0]} px ROI "
-            f"at {tuple(origin)}: the dot is cut off"
+            f"at {where}: the dot is cut off"
         )
-    pts = np.column_stack([cols, rows]).astype(np.float32)
-    (cu, cv), axes, _ = cv2.fitEllipseDirect(pts)
+    (cu, cv), axes, _ = cv2.fitEllipseDirect(pts.astype(np.float32))
     if not (np.isfinite(cu) and np.isfinite(cv) and min(axes) > 0):
-        raise CalibrationError(f"ellipse fit failed on {rows.size} edge points at {tuple(origin)}")
+        raise CalibrationError(f"ellipse fit failed on {rows.size} edge points at {where}")
     return np.array([cu + origin[0], cv + origin[1]], dtype=float)
+
+
+def detect_centres(
+    images, origins, low: float = 0.25, high: float = 0.5, min_points: int = 20, gradients=None
+) -> np.ndarray:
+    """:func:`detect_centre` of each ROI of a stack ``(m, rows, cols)``, ``origins (m, 2)``;
+    ``gradients``: their :func:`image_gradients`, if the caller has them.
+
+    Returns ``(m, 2)`` centres ``(u, v)`` in image px; raises as :func:`detect_centre` for the
+    first ROI (in order) whose dot is not found.
+    """
+    grads = gradients if gradients is not None else [None] * len(images)
+    return np.array(
+        [
+            detect_centre(img, o, low, high, min_points, g)
+            for img, o, g in zip(images, origins, grads, strict=True)
+        ]
+    ).reshape(-1, 2)
+
+
+def image_gradients(image) -> tuple[np.ndarray, np.ndarray]:
+    """Sobel derivatives ``(gx, gy)`` of an image (3 x 3 aperture, replicated border, float32):
+    those of :func:`detect_centre` and :func:`rectify_coc`."""
+    img = np.asarray(image, dtype=np.float32)
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    return gx, gy

@@ -10,7 +10,9 @@ are :mod:`calstudy.estimators.coc`):
   :func:`defocus_vignetted` (the same blur spot cut off axis by a lens rim: :func:`rim_shadow`,
   :func:`defocus_kernel`) and
   :func:`expose` (exposure time, saturation, shot and read noise, 8-bit quantisation);
-- :func:`fuse_exposures`: exposure fusion with contrast and well-exposedness weights (Eq. 3).
+- :func:`fuse_exposures`: exposure fusion with contrast and well-exposedness weights (Eq. 3);
+  :func:`expose_and_fuse` does both in one pass (these three live in
+  :mod:`calstudy.models.exposure` and are re-exported here).
 
 Images are float arrays with values in [0, 1] (or uint8 for raw exposures); coordinates are in px
 with pixel centres at integers (OpenCV's convention); a region of interest (ROI) is given by the
@@ -19,13 +21,18 @@ image coordinates of its top-left pixel, ``origin = (u0, v0)``.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import cv2
 import numpy as np
 
 from calstudy.core.errors import CalibrationError
-from calstudy.models.sensors import UNDISTORT_CRITERIA
+from calstudy.models.exposure import (  # noqa: F401  (re-exported: the model's last steps)
+    expose,
+    expose_and_fuse,
+    fuse_exposures,
+)
 
 # ----------------------------------------------------------------------------------------------
 # circle of confusion (Eq. 4-5)
@@ -161,9 +168,7 @@ def render_dot(k, dist, centre, normal, radius_mm: float, origin, shape) -> np.n
 def render_dots(k, dist, centres, normals, radius_mm: float, origins, shape) -> np.ndarray:
     """Sharp images of ``m`` round flat dots, one ROI each, all ROIs of one ``shape``.
 
-    The model of :func:`render_dot`, batched: the undistortion grids of all ROIs go through one
-    ``cv2.undistortPointsIter`` call and the coverage is computed on an ``(m, rows, cols)``
-    stack.
+    The model of :func:`render_dot`, batched (:func:`render_rois` with one shape).
 
     Parameters
     ----------
@@ -176,42 +181,80 @@ def render_dots(k, dist, centres, normals, radius_mm: float, origins, shape) -> 
     -------
     (m, rows, cols) float32 array
     """
-    c = np.asarray(centres, dtype=float)
-    n = np.asarray(normals, dtype=float)
-    rows, cols = shape
-    x, y = _undistorted_grids(k, dist, np.asarray(origins), shape)  # (m, rows*cols) each
+    m = len(np.asarray(centres))
+    return np.stack(render_rois(k, dist, centres, normals, radius_mm, origins, [shape] * m))
+
+
+def render_rois(k, dist, centres, normals, radius_mm: float, origins, shapes) -> list:
+    """Sharp images of ``m`` round flat dots, each in its own ROI (``shapes``: ``m`` pairs
+    ``(rows, cols)``): the model of :func:`render_dot`, batched. The undistortion grids of all
+    ROIs go through one ``cv2.undistortPointsIter`` call and the coverage is computed on all
+    their pixels at once; each pixel's value is the one :func:`render_dot` gives it.
+
+    Returns
+    -------
+    list of ``m`` float32 arrays ``(rows, cols)``
+    """
+    c = np.asarray(centres, dtype=float).reshape(-1, 3)
+    n = np.asarray(normals, dtype=float).reshape(-1, 3)
+    shapes = [tuple(int(v) for v in sh) for sh in shapes]
+    sizes = [rows * cols for rows, cols in shapes]
+    x, y = _undistorted_pixels(k, dist, np.asarray(origins).reshape(-1, 2), shapes)
     # Ray r = (x, y, 1) meets the dot plane at s r, s = (c.n) / (r.n). The offset from the dot
     # centre is written with the ray through the centre, (xc, yc, 1), as reference, so that the
     # per-pixel work is on small numbers (float32 keeps ~1e-3 px): with dx = x - xc,
     # dy = y - yc, t = dx nx + dy ny and r.n = dn_c + t, s = cz dn_c / (r.n) and
     # s r - c = (s dx - xc cz t / (r.n), s dy - yc cz t / (r.n), -cz t / (r.n)).
+    # All pixels of all ROIs are one vector (each dot's numbers repeated over its pixels), and
+    # every step writes into one of a few buffers: the operations and their order are those of
+    # the formulas, so the float32 result depends neither on the buffering nor on the batch.
     cz = c[:, 2]
     xc, yc = c[:, 0] / cz, c[:, 1] / cz
     dn_c = xc * n[:, 0] + yc * n[:, 1] + n[:, 2]
     f32 = np.float32
+    counts = np.array(sizes)
 
     def col(v):
-        return np.asarray(v, dtype=f32)[:, None]
+        return np.repeat(np.asarray(v, dtype=f32), counts)
 
-    dx = x - col(xc)
-    dy = y - col(yc)
-    t = dx * col(n[:, 0]) + dy * col(n[:, 1])
-    dn = t + col(dn_c)
-    if np.any(np.abs(dn) < 1e-9):
+    xc32, yc32 = col(xc), col(yc)
+    dx = x - xc32
+    dy = y - yc32
+    t = dx * col(n[:, 0])
+    tmp = np.multiply(dy, col(n[:, 1]))
+    t += tmp
+    dn = t + col(dn_c)  # r.n
+    abs_dn = np.abs(dn)
+    if np.any(abs_dn < 1e-9):
         raise CalibrationError("the dot is seen edge-on (its plane contains a viewing ray)")
-    inv = f32(1.0) / dn
+    inv = np.divide(f32(1.0), dn, out=dn)
     s = col(cz * dn_c) * inv
-    q = col(cz) * t * inv  # cz t / (r.n)
-    px = s * dx - col(xc) * q
-    py = s * dy - col(yc) * q
-    rho = np.sqrt(px * px + py * py + q * q)
-    len2 = x * x + y * y + f32(1.0)
-    ray_len = np.sqrt(len2)
-    cos_tilt = np.abs(dn) / ray_len
+    q = np.multiply(col(cz), t, out=t)
+    q *= inv  # cz t / (r.n)
+    px = np.multiply(s, dx, out=dx)
+    px -= np.multiply(xc32, q, out=tmp)
+    py = np.multiply(s, dy, out=dy)
+    py -= np.multiply(yc32, q, out=tmp)
+    rho = np.multiply(px, px, out=px)
+    rho += np.multiply(py, py, out=py)
+    rho += np.multiply(q, q, out=q)
+    np.sqrt(rho, out=rho)
+    len2 = np.multiply(x, x, out=x)
+    len2 += np.multiply(y, y, out=y)
+    len2 += f32(1.0)
+    ray_len = np.sqrt(len2, out=y)
+    cos_tilt = np.divide(abs_dn, ray_len, out=abs_dn)
     focal = f32(0.5 * (k[0, 0] + k[1, 1]))
-    footprint = s * ray_len / (focal * np.sqrt(cos_tilt))
-    coverage = np.clip(f32(0.5) - (rho - f32(radius_mm)) / footprint, f32(0.0), f32(1.0))
-    return (coverage / (len2 * len2)).reshape(-1, rows, cols)
+    footprint = np.multiply(s, ray_len, out=s)
+    root = np.sqrt(cos_tilt, out=cos_tilt)
+    footprint /= np.multiply(focal, root, out=root)
+    coverage = np.subtract(rho, f32(radius_mm), out=rho)
+    coverage /= footprint
+    np.subtract(f32(0.5), coverage, out=coverage)
+    np.clip(coverage, f32(0.0), f32(1.0), out=coverage)
+    coverage /= np.multiply(len2, len2, out=len2)
+    parts = np.split(coverage, np.cumsum(sizes)[:-1])
+    return [part.reshape(shape) for part, shape in zip(parts, shapes, strict=True)]
 
 
 def _undistorted_grid(k, dist, origin, shape, step: int = 8) -> np.ndarray:
@@ -221,37 +264,58 @@ def _undistorted_grid(k, dist, origin, shape, step: int = 8) -> np.ndarray:
     and interpolated bilinearly in between: the distortion field is smooth enough that this
     changes the result by less than 1e-3 px for Table 1's lenses, at a tenth of the cost.
     """
-    x, y = _undistorted_grids(k, dist, np.reshape(origin, (1, 2)), shape, step)
-    return np.stack([x[0], y[0]], axis=-1).astype(np.float64)
+    x, y = _undistorted_pixels(k, dist, np.reshape(origin, (1, 2)), [tuple(shape)], step)
+    return np.stack([x, y], axis=-1).astype(np.float64)
 
 
-def _undistorted_grids(k, dist, origins, shape, step: int = 8) -> np.ndarray:
-    """:func:`_undistorted_grid` of ``m`` ROIs of one shape: ``x`` and ``y``, float32
-    ``(m, rows * cols)`` each."""
-    rows, cols = shape
-    gu = np.arange(0, cols + step, step)
-    gv = np.arange(0, rows + step, step)
-    uu, vv = np.meshgrid(gu, gv)
-    nodes = np.stack([uu, vv], axis=-1).astype(np.float64)  # (gv, gu, 2)
-    uv = nodes[None] + np.asarray(origins, dtype=np.float64)[:, None, None, :]
-    coarse = cv2.undistortPointsIter(uv.reshape(-1, 1, 2), k, dist, None, None, UNDISTORT_CRITERIA)
-    coarse = coarse.reshape(len(origins), len(gv), len(gu), 2)
-    wy = _linear_weights(rows, len(gv), step).astype(np.float32)
-    wx = _linear_weights(cols, len(gu), step).astype(np.float32)
-    coarse = coarse.astype(np.float32)
-    # separable bilinear interpolation, float32 (the grid values are ~0.3, error ~1e-8)
-    x = (wy @ coarse[..., 0] @ wx.T).reshape(len(origins), rows * cols)
-    y = (wy @ coarse[..., 1] @ wx.T).reshape(len(origins), rows * cols)
-    return x, y
+def _undistorted_pixels(k, dist, origins, shapes, step: int = 8):
+    """:func:`_undistorted_grid` of ``m`` ROIs (``shapes``: ``(rows, cols)`` each): ``x`` and
+    ``y``, float32, the ROIs' pixels one after the other (row by row). One
+    ``cv2.undistortPointsIter`` call for all grid nodes (each point is undistorted on its own)."""
+    grids = []
+    for origin, (rows, cols) in zip(origins, shapes, strict=True):
+        gu = np.arange(0, cols + step, step)
+        gv = np.arange(0, rows + step, step)
+        uu, vv = np.meshgrid(gu, gv)
+        nodes = np.stack([uu, vv], axis=-1).astype(np.float64)  # (gv, gu, 2)
+        grids.append(nodes + np.asarray(origin, dtype=np.float64))
+    sizes = [g.shape[0] * g.shape[1] for g in grids]
+    uv = np.concatenate([g.reshape(-1, 2) for g in grids])
+    coarse = cv2.undistortPointsIter(
+        uv.reshape(-1, 1, 2), k, dist, None, None, RENDER_UNDISTORT_CRITERIA
+    )
+    coarse = coarse.reshape(-1, 2).astype(np.float32)
+    xs, ys = [], []
+    for part, g, (rows, cols) in zip(
+        np.split(coarse, np.cumsum(sizes)[:-1]), grids, shapes, strict=True
+    ):
+        part = part.reshape(g.shape)
+        wy = _linear_weights(rows, g.shape[0], step)
+        wx = _linear_weights(cols, g.shape[1], step)
+        # separable bilinear interpolation, float32 (the grid values are ~0.3, error ~1e-8)
+        xs.append((wy @ part[None, :, :, 0] @ wx.T).reshape(-1))
+        ys.append((wy @ part[None, :, :, 1] @ wx.T).reshape(-1))
+    return np.concatenate(xs), np.concatenate(ys)
 
 
+#: Iterations of ``cv2.undistortPointsIter`` for the rendering grid: 20 fixed-point steps
+#: reach the float64 solution to 2e-16 over the whole frame of Table 1's lenses (the sensors'
+#: criterion, 100 steps or 1e-15 px, keeps iterating on rounding), and the grid is used in
+#: float32 (resolution ~3e-8).
+RENDER_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-15)
+
+
+@functools.lru_cache(maxsize=512)
 def _linear_weights(n: int, m: int, step: int) -> np.ndarray:
-    """``(n, m)`` matrix of 1-D linear interpolation from nodes every ``step`` to ``0..n-1``."""
+    """``(n, m)`` float32 matrix of 1-D linear interpolation from nodes every ``step`` to
+    ``0..n-1`` (read-only: cached)."""
     f = np.arange(n) / step
     i = f.astype(int)
     w = np.zeros((n, m))
     w[np.arange(n), i] = 1.0 - (f - i)
     w[np.arange(n), i + 1] = f - i
+    w = w.astype(np.float32)
+    w.flags.writeable = False
     return w
 
 
@@ -407,21 +471,21 @@ def defocus_kernel(
     k = np.outer(g1, g1)
     if not _rim_clears(delta_px, c, r):
         h = n // 2
-        y, x = np.mgrid[-h : h + 1, -h : h + 1].astype(np.float64)
-        px, py = side * x / delta_px, side * y / delta_px  # pupil point of each landing pixel
-        pupil = np.clip(0.5 + (1.0 - np.hypot(px, py)) * delta_px, 0.0, 1.0)
+        offsets = np.arange(-h, h + 1, dtype=np.float64)
+        # pupil point of each landing pixel: x along the rows (1, n), y down the columns (n, 1)
+        px, py = (side * offsets / delta_px)[None, :], (side * offsets / delta_px)[:, None]
+        both = np.empty((n, n, 2))  # the pupil and the transmitted pupil, spread in one call
+        pupil, passed = both[..., 0], both[..., 1]
+        np.clip(0.5 + (1.0 - np.hypot(px, py)) * delta_px, 0.0, 1.0, out=pupil)
         through = np.clip(0.5 + (r - np.hypot(px - c[0], py - c[1])) * delta_px, 0.0, 1.0)
-        passed = pupil * through
+        np.multiply(pupil, through, out=passed)
         share = float(passed.sum() / pupil.sum())  # |T| / |D|
         if not share > 0:
             raise CalibrationError("the rim blocks every ray of the blur spot")
         s = delta_px / math.sqrt(2.0)
-
-        def spread(a):
-            return cv2.GaussianBlur(a, (0, 0), sigmaX=s, borderType=cv2.BORDER_CONSTANT)
-
+        spread = cv2.GaussianBlur(both, (0, 0), sigmaX=s, borderType=cv2.BORDER_CONSTANT)
         # G_s * 1_T / |D| + (|T| / |D|) (G_delta - G_s * 1_D / |D|)
-        k = np.clip((spread(passed) + share * (k * pupil.sum() - spread(pupil))), 0.0, None)
+        k = np.clip((spread[..., 1] + share * (k * pupil.sum() - spread[..., 0])), 0.0, None)
     return (k / k.sum()).astype(np.float32)
 
 
@@ -441,104 +505,3 @@ def defocus_vignetted(image, delta_px: float, side: float, rim_centre, rim_radiu
     k = defocus_kernel(delta_px, side, c, r)
     # filter2D correlates: flip the kernel to convolve
     return cv2.filter2D(img, cv2.CV_32F, k[::-1, ::-1].copy(), borderType=cv2.BORDER_REPLICATE)
-
-
-def expose(
-    radiance,
-    exposure_ms: float,
-    peak_at_100ms: float,
-    background_at_100ms: float,
-    read_noise_dn: float,
-    electrons_per_dn: float,
-    rng: np.random.Generator,
-    bits: int = 8,
-) -> np.ndarray:
-    """One exposure of a dot image: scale with time, add shot and read noise, saturate, quantise.
-
-    Parameters
-    ----------
-    radiance : array
-        Defocused dot image in [0, 1] (1 = the dot's peak brightness).
-    exposure_ms : float
-        Exposure time; the signal scales with ``exposure_ms / 100``.
-    peak_at_100ms, background_at_100ms : float
-        Dot peak and background at 100 ms, in units of full scale.
-    read_noise_dn, electrons_per_dn : float
-        Read noise (DN) and conversion gain; shot noise is ``sqrt(DN / electrons_per_dn)`` DN.
-    rng : numpy.random.Generator
-        Noise source.
-    bits : int, default 8
-        Output bit depth.
-
-    Returns
-    -------
-    uint8 or uint16 array
-    """
-    full = 2**bits - 1
-    scale = exposure_ms / 100.0
-    rad = np.asarray(radiance, dtype=np.float32)
-    dn = np.float32(full * scale * (peak_at_100ms - background_at_100ms)) * rad
-    dn += np.float32(full * scale * background_at_100ms)
-    sigma = np.sqrt(np.float32(read_noise_dn**2) + np.maximum(dn, 0) / np.float32(electrons_per_dn))
-    noisy = np.rint(dn + sigma * rng.standard_normal(dn.shape, dtype=np.float32))
-    return np.clip(noisy, 0, full).astype(np.uint8 if bits <= 8 else np.uint16)
-
-
-# ----------------------------------------------------------------------------------------------
-# fusion (Eq. 3)
-
-
-def fuse_exposures(
-    images,
-    weight_contrast: float = 1.0,
-    weight_exposure: float = 1.0,
-    sigma: float = 0.2,
-) -> np.ndarray:
-    """Fuse exposures by contrast and well-exposedness weights (Eq. 3).
-
-    ``W_s = C_s^wc * E_s^we`` with ``C_s = |Laplacian(I_s)|`` and
-    ``E_s = exp(-(I_s - 0.5)^2 / (2 sigma^2))``; ``R = sum_s W_s I_s / sum_s W_s``. The pixel
-    positions are unchanged (the paper's remark under Eq. 3).
-
-    Parameters
-    ----------
-    images : sequence of arrays, same shape
-        Raw exposures (uint8/uint16 or float in [0, 1]): images ``(rows, cols)`` or stacks
-        ``(m, rows, cols)`` of ROIs, each fused on its own.
-
-    Returns
-    -------
-    float32 array in [0, 1]
-    """
-    stack = []
-    for img in images:
-        a = np.asarray(img)
-        full = float(np.iinfo(a.dtype).max) if np.issubdtype(a.dtype, np.integer) else 1.0
-        stack.append(a.astype(np.float32) / full)
-    if len(stack) < 1 or any(s.shape != stack[0].shape for s in stack):
-        raise CalibrationError(f"fusion needs >= 1 images of one shape, got {len(stack)}")
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise CalibrationError(f"well-exposedness sigma = {sigma} must be a finite number > 0")
-    if not all(np.isfinite(w) and w >= 0 for w in (weight_contrast, weight_exposure)):
-        raise CalibrationError(
-            f"fusion weights {weight_contrast}, {weight_exposure} must be finite numbers >= 0"
-        )
-    num = np.zeros_like(stack[0])
-    den = np.zeros_like(stack[0])
-    for img in stack:
-        contrast = np.abs(_laplacian(img))
-        exposure = np.exp(-((img - 0.5) ** 2) / (2.0 * sigma**2))
-        w = contrast**weight_contrast * exposure**weight_exposure + 1e-12
-        num += w * img
-        den += w
-    return num / den
-
-
-def _laplacian(img: np.ndarray) -> np.ndarray:
-    """``cv2.Laplacian`` (3 x 3 aperture, replicated border) of an image or of each image of an
-    ``(m, rows, cols)`` stack (as the channels of one call)."""
-    if img.ndim == 2:
-        return cv2.Laplacian(img, cv2.CV_32F, borderType=cv2.BORDER_REPLICATE)
-    chans = np.ascontiguousarray(np.moveaxis(img, 0, -1))
-    out = cv2.Laplacian(chans, cv2.CV_32F, borderType=cv2.BORDER_REPLICATE)
-    return np.moveaxis(out.reshape(chans.shape), -1, 0)

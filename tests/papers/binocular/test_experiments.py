@@ -93,6 +93,13 @@ def test_holdout_modification_does_not_see_the_evaluated_target(scenario):
     assert held[0, 1] - want[0] == pytest.approx(0.05, abs=1e-4)  # P1 kept its error
     full, _ = bino.modify_observed_error(measured, pairs, standard)
     assert abs(bino.distances_to_p7(full)[0] - want[0]) < 0.01  # the circular reading fixes it
+    # several sets of points at once: each the check it gets alone
+    rng = np.random.default_rng(2)
+    sets = bino.with_virtual(measured[:6] + rng.normal(0, 0.02, (3, 6, 3)))
+    batch = ex.holdout_distances(sets, world)
+    assert batch.shape == (3, 6, 2)
+    for one, got in zip(sets, batch, strict=True):
+        np.testing.assert_array_equal(got, ex.holdout_distances(one, world))
 
 
 def test_rendered_pipeline_without_noise_or_defocus(scenario):

@@ -85,18 +85,26 @@ def holdout_distances(points8, world: World) -> np.ndarray:
     Returns
     -------
     (6, 2) array
-        Without and with the modification, mm.
+        Without and with the modification, mm; ``(..., 6, 2)`` for points ``(..., 8, 3)`` (the
+        check of each set of points, all modifications solved as one stack).
     """
-    p6 = np.asarray(points8, dtype=float)[:6]
+    points8 = np.asarray(points8, dtype=float)
+    p6 = points8[..., :6, :].reshape(-1, 6, 3)
     pairs = world.standard_pairs
     physical = (pairs < 6).all(axis=1)
-    out = np.empty((6, 2))
-    for k in range(6):
-        use = physical & (pairs != k).all(axis=1)
-        modified, _ = bino.modify_observed_error(p6, pairs[use], world.standard_mm[use])
-        out[k, 0] = bino.distances_to_p7(bino.with_virtual(p6))[k]
-        out[k, 1] = bino.distances_to_p7(bino.with_virtual(modified))[k]
-    return out
+    uses = [physical & (pairs != k).all(axis=1) for k in range(6)]
+    sets = np.repeat(p6, 6, axis=0)  # (n * 6, 6, 3): every set of points once per target
+    modified, _ = bino.modify_observed_errors(
+        sets,
+        np.array([pairs[u] for u in uses] * len(p6)),
+        np.array([world.standard_mm[u] for u in uses] * len(p6)),
+    )
+    out = np.empty((len(p6), 6, 2))
+    before = bino.distances_to_p7(bino.with_virtual(p6))  # (n, 7)
+    after = bino.distances_to_p7(bino.with_virtual(modified)).reshape(len(p6), 6, 7)
+    out[:, :, 0] = before[:, :6]
+    out[:, :, 1] = np.diagonal(after[:, :, :6], axis1=1, axis2=2)
+    return out.reshape(points8.shape[:-2] + (6, 2))
 
 
 def standard_to_p7(world: World) -> np.ndarray:
@@ -106,14 +114,9 @@ def standard_to_p7(world: World) -> np.ndarray:
 
 
 def _modify(world: World, points8) -> np.ndarray:
-    return np.array(
-        [
-            bino.modify_observed_error(
-                p, world.standard_pairs, world.standard_mm, combine=bino.virtual_weights()
-            )[0]
-            for p in points8
-        ]
-    )
+    return bino.modify_observed_errors(
+        points8, world.standard_pairs, world.standard_mm, combine=bino.virtual_weights()
+    )[0]
 
 
 def distance_figures(world: World, cal: Views, val: Views, sharp: Views, model, tol: float):
@@ -130,7 +133,7 @@ def distance_figures(world: World, cal: Views, val: Views, sharp: Views, model, 
     d_raw = bino.distances_to_p7(raw8).mean(0)
     d_rect = bino.distances_to_p7(rect8).mean(0)
     d_mod = bino.distances_to_p7(mod8).mean(0)
-    hold = np.mean([holdout_distances(p, world) for p in rect8], axis=0)
+    hold = np.mean(holdout_distances(rect8, world), axis=0)
     sharp_raw, _ = sharp.points(model, tol)
     d_sharp = bino.distances_to_p7(bino.with_virtual(sharp_raw)).mean(0)
     row = {

@@ -20,7 +20,13 @@ from calstudy.core import geometry as geo
 from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators import binocular as bino
-from calstudy.estimators.coc import detect_centre, rectify_coc
+from calstudy.estimators.coc import (
+    detect_centre,
+    detect_centres,
+    image_gradients,
+    rectify_coc,
+    rectify_cocs,
+)
 from calstudy.models import optics
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import perturb_robot
@@ -151,16 +157,14 @@ def _rim_inputs(scenario: Scenario) -> tuple[float, float, float, float]:
     )
 
 
-def blur(scenario: Scenario, sharp, deltas, sides, rims) -> np.ndarray:
-    """Defocus ``m`` sharp ROIs ``(m, rows, cols)``, each by its own blur spot (Eq. 7 with the
-    rim's cut, :func:`calstudy.models.optics.defocus_vignetted`; ``rims`` as :func:`blur_spots`
-    returns them)."""
-    return np.stack(
-        [
-            optics.defocus_vignetted(img, d, s, rim[:2], float(rim[2]))
-            for img, d, s, rim in zip(sharp, deltas, sides, rims, strict=True)
-        ]
-    )
+def blur(scenario: Scenario, sharp, deltas, sides, rims) -> list:
+    """Defocus ``m`` sharp ROIs (a list of 2-D arrays, or a stack), each by its own blur spot
+    (Eq. 7 with the rim's cut, :func:`calstudy.models.optics.defocus_vignetted`; ``rims`` as
+    :func:`blur_spots` returns them): the list of blurred ROIs."""
+    return [
+        optics.defocus_vignetted(img, d, s, rim[:2], float(rim[2]))
+        for img, d, s, rim in zip(sharp, deltas, sides, rims, strict=True)
+    ]
 
 
 def render_blurred_dot(scenario: Scenario, camera: PinholeCamera, centre, normal, delta_px=None):
@@ -178,10 +182,10 @@ def render_blurred_dot(scenario: Scenario, camera: PinholeCamera, centre, normal
         deltas = np.array([float(delta_px)])
     radius = scenario.dot_radius_mm
     r_px = radius * camera.fx / centre[2]
-    margin = 4.0 * float(deltas[0]) + 10.0
+    margin = 4.0 * float(deltas[0]) + ROI_MARGIN_PX
     origin, shape = optics.roi_around(uv, r_px, margin, camera.width, camera.height)
     sharp = optics.render_dot(camera.K, camera.dist_coeffs, centre, normal, radius, origin, shape)
-    return uv, origin, blur(scenario, sharp[None], deltas, sides, rims)[0]
+    return uv, origin, blur(scenario, [sharp], deltas, sides, rims)[0]
 
 
 def expose_and_fuse(
@@ -189,73 +193,93 @@ def expose_and_fuse(
 ) -> np.ndarray:
     """The exposures of ``sensor.toml [exposure]`` of a blurred ROI, fused (Eq. 3)."""
     exp = scenario.config["sensor"]["exposure"]
-    shots = [
-        optics.expose(
-            blurred,
-            t,
-            exp["dot_peak_at_100ms"],
-            exp["background_at_100ms"],
-            read_noise_dn,
-            electrons_per_dn,
-            rng,
-            exp["bits"],
-        )
-        for t in exp["times_ms"]
-    ]
-    return optics.fuse_exposures(
-        shots, exp["weight_contrast"], exp["weight_exposure"], exp["well_exposed_sigma"]
+    return optics.expose_and_fuse(
+        blurred,
+        exp["times_ms"],
+        exp["dot_peak_at_100ms"],
+        exp["background_at_100ms"],
+        read_noise_dn,
+        electrons_per_dn,
+        rng,
+        exp["bits"],
+        exp["weight_contrast"],
+        exp["weight_exposure"],
+        exp["well_exposed_sigma"],
     )
+
+
+#: Margin of an ROI beyond the dot's edge besides the blur's reach (4 CoC radii), px: room for
+#: the edge detection (:func:`render_rois`).
+ROI_MARGIN_PX = 10.0
 
 
 def render_rois(scenario, camera: PinholeCamera, centres_cam, normals_cam):
-    """Sharp ROIs of ``m`` dots in one camera, one ROI shape for all, large enough for each dot
-    with the margin its circle of confusion (Eq. 4) needs.
+    """Sharp ROIs of ``m`` dots in one camera, each large enough for its dot with the margin its
+    circle of confusion (Eq. 4) needs: ``4 delta + ROI_MARGIN_PX`` px beyond the dot's edge, as
+    :func:`render_blurred_dot` (the blur spot reaches 4 delta; each ROI is sized by its own
+    dot, so a dot near focus is not processed in the ROI of a blurred neighbour).
 
-    Returns ``(sharp, origins, spots)``: the ``(m, rows, cols)`` ROIs, their top-left pixels
-    ``(m, 2)`` and the true blur spots of :func:`blur_spots` (CoC radii, sides, rim discs).
+    Returns ``(sharp, origins, spots, radii)``: the list of ``m`` ROIs, their top-left pixels
+    ``(m, 2)``, the true blur spots of :func:`blur_spots` (CoC radii, sides, rim discs) and the
+    dots' radii in the image ``(m,)`` px.
     """
     centres = np.asarray(centres_cam, dtype=float)
-    depth = centres[:, 2]
+    normals = np.asarray(normals_cam, dtype=float)
     deltas, sides, rims = blur_spots(scenario, centres)
     uv = camera.project(centres)
-    r_px = float(np.max(scenario.dot_radius_mm * camera.fx / depth))
-    margin = float(np.max(4.0 * deltas)) + 10.0
-    rois = [optics.roi_around(p, r_px, margin, camera.width, camera.height) for p in uv]
-    origins = np.array([o for o, _ in rois])
-    sharp = optics.render_dots(
-        camera.K,
-        camera.dist_coeffs,
-        centres,
-        normals_cam,
-        scenario.dot_radius_mm,
-        origins,
-        rois[0][1],
+    radii = scenario.dot_radius_mm * camera.fx / centres[:, 2]
+    origins, shapes = [], []
+    for i in range(len(centres)):
+        margin = 4.0 * float(deltas[i]) + ROI_MARGIN_PX
+        origin, shape = optics.roi_around(uv[i], radii[i], margin, camera.width, camera.height)
+        origins.append(origin)
+        shapes.append(shape)
+    sharp = optics.render_rois(
+        camera.K, camera.dist_coeffs, centres, normals, scenario.dot_radius_mm, origins, shapes
     )
-    return sharp, origins, (deltas, sides, rims)
+    return sharp, np.array(origins), (deltas, sides, rims), radii
+
+
+def _in_focus_rois(sharp, origins, radii) -> tuple[list, np.ndarray]:
+    """The ROIs of :func:`render_rois` cut to what an in-focus dot needs (the margin
+    ``ROI_MARGIN_PX``, no blur), around the same centre pixel."""
+    cut, starts = [], []
+    for img, origin, r in zip(sharp, origins, radii, strict=True):
+        half = (img.shape[0] - 1) // 2
+        keep = int(math.ceil(r + ROI_MARGIN_PX))  # roi_around's half size without blur
+        off = half - keep
+        cut.append(img[off : off + 2 * keep + 1, off : off + 2 * keep + 1])
+        starts.append(origin + off)
+    return cut, np.array(starts)
 
 
 def image_dots(
     scenario, camera: PinholeCamera, centres_cam, normals_cam, rng, imaging: Imaging, rendered=None
 ):
     """Fused ROIs of ``m`` dots in one camera: render (:func:`render_rois`, or the given
-    ``rendered`` triple of it), defocus (Eq. 4, 7), two exposures, fuse (Eq. 3), batched over
-    the dots.
+    ``rendered`` result of it), defocus (Eq. 4, 7), two exposures, fuse (Eq. 3), dot by dot.
+    Without defocus the ROIs are those an in-focus dot needs (:func:`_in_focus_rois`).
 
-    Returns ``(fused, origins, deltas, rendered)``: the ``(m, rows, cols)`` ROIs, their top-left
-    pixels ``(m, 2)``, the CoC radii ``(m,)`` applied (zeros without defocus) and the
-    :func:`render_rois` triple.
+    Returns ``(fused, origins, deltas, rendered)``: the list of ROIs, their top-left pixels
+    ``(m, 2)``, the CoC radii ``(m,)`` applied (zeros without defocus) and the
+    :func:`render_rois` result.
     """
     if rendered is None:
         rendered = render_rois(scenario, camera, centres_cam, normals_cam)
-    sharp, origins, (true_deltas, sides, rims) = rendered
-    deltas = true_deltas if imaging.defocus else np.zeros(len(true_deltas))
+    sharp, origins, (true_deltas, sides, rims), radii = rendered
+    if imaging.defocus:
+        deltas = true_deltas
+    else:
+        deltas = np.zeros(len(true_deltas))
+        sharp, origins = _in_focus_rois(sharp, origins, radii)
     blurred = blur(scenario, sharp, deltas, sides, rims)
     if not imaging.noise:
         return blurred, origins, deltas, rendered
     noise = scenario.config["sensor"]["noise"]
-    fused = expose_and_fuse(
-        scenario, blurred, rng, noise["read_noise_dn"], noise["electrons_per_dn"]
-    )
+    fused = [
+        expose_and_fuse(scenario, b, rng, noise["read_noise_dn"], noise["electrons_per_dn"])
+        for b in blurred
+    ]
     return fused, origins, deltas, rendered
 
 
@@ -273,7 +297,7 @@ class Observation:
 
     uv_raw: np.ndarray
     uv_rect: np.ndarray
-    rendered: tuple = ()  # per camera, the sharp ROIs of :func:`render_rois` (oracle re-imaging)
+    rendered: tuple = ()  # per camera, the :func:`render_rois` result (oracle re-imaging)
 
     def points(self, sensor: StereoRig, tol_mm: float) -> tuple[np.ndarray, np.ndarray]:
         """Sensor-frame points ``(m, 3)`` triangulated with the calibrated ``sensor`` (Eq. 1):
@@ -308,22 +332,25 @@ def observe(
             rois.append(image_dots(scenario, camera, geo.apply(s2c, dots_s), n, rng, imaging))
     kept = tuple(r[3] for r in rois)
     kwargs = scenario.detection
+    grads = [[image_gradients(img) for img in f] for f, _, _, _ in rois]
     uv_raw = np.array(
         [
-            [detect_centre(img, o, **kwargs) for img, o in zip(f, org, strict=True)]
-            for f, org, _, _ in rois
+            detect_centres(f, org, **kwargs, gradients=g)
+            for (f, org, _, _), g in zip(rois, grads, strict=True)
         ]
     )
     if not imaging.defocus:
         return Observation(uv_raw, uv_raw, kept)
     tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
     raw = bino.triangulate(model, uv_raw[0], uv_raw[1], tol)
-    uv_rect = np.empty_like(uv_raw)
+    uv_rect = uv_raw.copy()  # below 1/3 px the image is used as it is (rectified_centre)
     for c, (_, s2c) in enumerate(model.cameras()):
         est = np.atleast_1d(scenario.coc_radius_px(geo.apply(s2c, raw)[:, 2]))
         fused, origins, _, _ = rois[c]
-        for i in range(len(raw)):
-            uv_rect[c, i] = rectified_centre(scenario, fused[i], origins[i], est[i])
+        todo = np.flatnonzero(est >= 1.0 / 3.0)
+        if todo.size:
+            fixed = rectify_cocs([fused[i] for i in todo], est[todo], [grads[c][i] for i in todo])
+            uv_rect[c, todo] = detect_centres(fixed, origins[todo], **kwargs)
     return Observation(uv_raw, uv_rect, kept)
 
 
@@ -424,9 +451,21 @@ class Views:
         return np.array(out)
 
     def points(self, model: StereoRig, tol_mm: float) -> tuple[np.ndarray, np.ndarray]:
-        """Triangulated points ``(n, m, 3)`` of all views with ``model``: raw and rectified."""
-        pts = [o.points(model, tol_mm) for o in self.observations]
-        return np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
+        """Triangulated points ``(n, m, 3)`` of all views with ``model``: raw and rectified
+        (:meth:`Observation.points` of each view, triangulated as one batch)."""
+        obs = self.observations
+        sets = []  # (raw, rect) of each view in turn: the order Observation.points takes them
+        for o in obs:
+            sets.append(o.uv_raw)
+            if o.uv_rect is not o.uv_raw:
+                sets.append(o.uv_rect)
+        uv = np.array(sets)  # (sets, 2 cameras, m, 2)
+        pts = iter(bino.triangulate_sets(model, uv[:, 0], uv[:, 1], tol_mm))
+        raw, rect = [], []
+        for o in obs:
+            raw.append(next(pts))
+            rect.append(next(pts) if o.uv_rect is not o.uv_raw else raw[-1].copy())
+        return np.array(raw), np.array(rect)
 
 
 def view_target(scenario, world, target2base, dots, normal, n, rng, imaging, model) -> Views:

@@ -1,0 +1,234 @@
+"""Exposure and fusion of the dot images: the last steps of the optics model of the binocular
+paper (Section 3.1, Eq. 3), re-exported by :mod:`calstudy.models.optics`.
+
+- :func:`expose`: exposure time, saturation, shot and read noise, quantisation;
+- :func:`fuse_exposures`: exposure fusion with contrast and well-exposedness weights (Eq. 3);
+- :func:`expose_and_fuse`: both in one pass over a stack of ROIs (the same numbers).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from calstudy.core.errors import CalibrationError
+
+
+def expose(
+    radiance,
+    exposure_ms: float,
+    peak_at_100ms: float,
+    background_at_100ms: float,
+    read_noise_dn: float,
+    electrons_per_dn: float,
+    rng: np.random.Generator,
+    bits: int = 8,
+) -> np.ndarray:
+    """One exposure of a dot image: scale with time, add shot and read noise, saturate, quantise.
+
+    Parameters
+    ----------
+    radiance : array
+        Defocused dot image in [0, 1] (1 = the dot's peak brightness).
+    exposure_ms : float
+        Exposure time; the signal scales with ``exposure_ms / 100``.
+    peak_at_100ms, background_at_100ms : float
+        Dot peak and background at 100 ms, in units of full scale.
+    read_noise_dn, electrons_per_dn : float
+        Read noise (DN) and conversion gain; shot noise is ``sqrt(DN / electrons_per_dn)`` DN.
+    rng : numpy.random.Generator
+        Noise source.
+    bits : int, default 8
+        Output bit depth.
+
+    Returns
+    -------
+    uint8 or uint16 array
+    """
+    full = 2**bits - 1
+    levels = _exposed(
+        np.asarray(radiance, dtype=np.float32),
+        exposure_ms,
+        peak_at_100ms,
+        background_at_100ms,
+        read_noise_dn,
+        electrons_per_dn,
+        rng,
+        full,
+    )
+    return levels.astype(np.uint8 if bits <= 8 else np.uint16)
+
+
+def _exposed(rad, exposure_ms, peak, background, read_noise_dn, electrons_per_dn, rng, full):
+    """:func:`expose` before the cast to integers: float32 levels ``0 .. full``."""
+    scale = exposure_ms / 100.0
+    dn = np.float32(full * scale * (peak - background)) * rad
+    dn += np.float32(full * scale * background)
+    # sigma = sqrt(read^2 + max(dn, 0) / gain); noisy = rint(dn + sigma z), in place
+    sigma = np.maximum(dn, np.float32(0.0))
+    sigma /= np.float32(electrons_per_dn)
+    sigma += np.float32(read_noise_dn**2)
+    np.sqrt(sigma, out=sigma)
+    noisy = rng.standard_normal(dn.shape, dtype=np.float32)
+    noisy *= sigma
+    noisy += dn
+    np.rint(noisy, out=noisy)
+    return np.clip(noisy, 0, full, out=noisy)
+
+
+def expose_and_fuse(
+    radiance,
+    exposures_ms,
+    peak_at_100ms: float,
+    background_at_100ms: float,
+    read_noise_dn: float,
+    electrons_per_dn: float,
+    rng: np.random.Generator,
+    bits: int = 8,
+    weight_contrast: float = 1.0,
+    weight_exposure: float = 1.0,
+    sigma: float = 0.2,
+) -> np.ndarray:
+    """:func:`expose` at each of ``exposures_ms``, then :func:`fuse_exposures` (Eq. 3).
+
+    The same numbers as the two steps (the same noise draws in the same order, the same float32
+    operations), in one pass: the quantised levels are used as they are instead of going
+    through integer images, and the well-exposedness weight, a function of the level, is read
+    from a table of its ``2**bits`` values.
+
+    Parameters
+    ----------
+    radiance : (rows, cols) or (m, rows, cols) array
+        Defocused dot image(s) in [0, 1]; a stack is fused ROI by ROI.
+    exposures_ms : sequence of float
+        Exposure times, in the order the exposures are taken (and the noise drawn).
+
+    The other parameters are those of :func:`expose` and :func:`fuse_exposures`.
+
+    Returns
+    -------
+    float32 array in [0, 1], the shape of ``radiance``
+    """
+    _check_fusion(weight_contrast, weight_exposure, sigma)
+    times = list(exposures_ms)
+    if not times:
+        raise CalibrationError("fusion needs at least one exposure time")
+    rad = np.asarray(radiance, dtype=np.float32)
+    full = 2**bits - 1
+    stack = rad.reshape((-1,) + rad.shape[-2:])
+    # fuse_exposures scales an integer image by its type's maximum (255 or 65535)
+    scale = np.float32(np.iinfo(np.uint8 if bits <= 8 else np.uint16).max)
+    levels = np.arange(full + 1, dtype=np.float32) / scale
+    well = _well_exposed(levels, sigma, weight_exposure)
+    num = den = None
+    for t in times:
+        raw = _exposed(
+            stack,
+            t,
+            peak_at_100ms,
+            background_at_100ms,
+            read_noise_dn,
+            electrons_per_dn,
+            rng,
+            full,
+        )
+        if bits <= 8:  # a table look-up of 8-bit levels (OpenCV's is the fastest)
+            flat = raw.astype(np.uint8).reshape(-1, raw.shape[-1])
+            well_s = cv2.LUT(flat, well).reshape(raw.shape)
+        else:
+            well_s = np.take(well, raw.astype(np.uint16))
+        img = np.divide(raw, scale, out=raw)  # the level / the integer type's maximum
+        w = _fusion_weight(img, weight_contrast, well_s)
+        if num is None:
+            num, den = w * img, w
+        else:
+            num += np.multiply(w, img, out=img)
+            den += w
+    return np.divide(num, den, out=num).reshape(rad.shape)
+
+
+# ----------------------------------------------------------------------------------------------
+# fusion (Eq. 3)
+
+
+def fuse_exposures(
+    images,
+    weight_contrast: float = 1.0,
+    weight_exposure: float = 1.0,
+    sigma: float = 0.2,
+) -> np.ndarray:
+    """Fuse exposures by contrast and well-exposedness weights (Eq. 3).
+
+    ``W_s = C_s^wc * E_s^we`` with ``C_s = |Laplacian(I_s)|`` and
+    ``E_s = exp(-(I_s - 0.5)^2 / (2 sigma^2))``; ``R = sum_s W_s I_s / sum_s W_s``. The pixel
+    positions are unchanged (the paper's remark under Eq. 3).
+
+    Parameters
+    ----------
+    images : sequence of arrays, same shape
+        Raw exposures (uint8/uint16 or float in [0, 1]): images ``(rows, cols)`` or stacks
+        ``(m, rows, cols)`` of ROIs, each fused on its own.
+
+    Returns
+    -------
+    float32 array in [0, 1]
+    """
+    stack = []
+    for img in images:
+        a = np.asarray(img)
+        full = float(np.iinfo(a.dtype).max) if np.issubdtype(a.dtype, np.integer) else 1.0
+        stack.append(a.astype(np.float32) / full)
+    if len(stack) < 1 or any(s.shape != stack[0].shape for s in stack):
+        raise CalibrationError(f"fusion needs >= 1 images of one shape, got {len(stack)}")
+    _check_fusion(weight_contrast, weight_exposure, sigma)
+    num = np.zeros_like(stack[0])
+    den = np.zeros_like(stack[0])
+    for img in stack:
+        w = _fusion_weight(img, weight_contrast, _well_exposed(img, sigma, weight_exposure))
+        num += w * img
+        den += w
+    return num / den
+
+
+def _check_fusion(weight_contrast: float, weight_exposure: float, sigma: float) -> None:
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise CalibrationError(f"well-exposedness sigma = {sigma} must be a finite number > 0")
+    if not all(np.isfinite(w) and w >= 0 for w in (weight_contrast, weight_exposure)):
+        raise CalibrationError(
+            f"fusion weights {weight_contrast}, {weight_exposure} must be finite numbers >= 0"
+        )
+
+
+def _well_exposed(img: np.ndarray, sigma: float, weight_exposure: float) -> np.ndarray:
+    """``E^we``, ``E = exp(-(I - 0.5)^2 / (2 sigma^2))`` (float32)."""
+    e = np.exp(-((img - 0.5) ** 2) / (2.0 * sigma**2))
+    return e if weight_exposure == 1.0 else e**weight_exposure
+
+
+def _fusion_weight(img: np.ndarray, weight_contrast: float, well: np.ndarray) -> np.ndarray:
+    """``W = C^wc E^we + 1e-12`` of Eq. 3 from the image and its ``E^we`` (a new array)."""
+    w = np.abs(_laplacian(img))
+    if weight_contrast != 1.0:
+        w **= weight_contrast
+    w *= well
+    w += np.float32(1e-12)
+    return w
+
+
+def _laplacian(img: np.ndarray) -> np.ndarray:
+    """``cv2.Laplacian`` (3 x 3 aperture, replicated border) of an image or of each image of an
+    ``(m, rows, cols)`` stack.
+
+    The images of a stack are laid one above the other with a copy of their first and last row
+    around each (the replicated border of a 3 x 3 aperture), so that one call filters them all;
+    each pixel is computed as for the image alone.
+    """
+    if img.ndim == 2:
+        return cv2.Laplacian(img, cv2.CV_32F, borderType=cv2.BORDER_REPLICATE)
+    m, rows, cols = img.shape
+    tall = np.empty((m, rows + 2, cols), dtype=np.float32)
+    tall[:, 1:-1] = img
+    tall[:, 0] = img[:, 0]
+    tall[:, -1] = img[:, -1]
+    out = cv2.Laplacian(tall.reshape(-1, cols), cv2.CV_32F, borderType=cv2.BORDER_REPLICATE)
+    return out.reshape(tall.shape)[:, 1:-1]
