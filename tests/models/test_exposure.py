@@ -58,3 +58,26 @@ def test_one_pass_checks_its_inputs():
         exposure.expose_and_fuse(
             disk_image(), [100.0], 1.3, 0.06, 1.5, 4.0, np.random.default_rng(), sigma=0.0
         )
+
+
+def test_fusion_of_12_bit_images_in_uint16_uses_their_bit_depth():
+    rng = np.random.default_rng(3)
+    levels = rng.uniform(0.05, 0.95, (2, 16, 16))
+    twelve = np.round(levels * 4095).astype(np.uint16)
+    eight = np.round(levels * 255).astype(np.uint8)
+    fused12 = exposure.fuse_exposures(list(twelve), bits=12)
+    fused8 = exposure.fuse_exposures(list(eight))
+    # the same scene at two bit depths fuses to nearly the same image (the contrast weights see
+    # the coarser 8-bit quantisation: a few levels at most)
+    np.testing.assert_allclose(fused12, fused8, atol=5.0 / 255)
+    assert np.abs(fused12 - fused8).mean() < 1.0 / 255
+    # without the bit depth, the 12-bit data are read as 16-bit: everything below 1/16
+    assert exposure.fuse_exposures(list(twelve)).max() < 1.0 / 16
+
+
+def test_fusion_rejects_a_wrong_bit_depth():
+    img = np.full((8, 8), 4000, dtype=np.uint16)
+    with pytest.raises(CalibrationError, match="above the 255 of 8-bit data"):
+        exposure.fuse_exposures([img, img], bits=8)
+    with pytest.raises(CalibrationError, match="bit depth 17 must be an integer from 1 to 16"):
+        exposure.fuse_exposures([img, img], bits=17)

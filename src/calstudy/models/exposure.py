@@ -156,6 +156,7 @@ def fuse_exposures(
     weight_contrast: float = 1.0,
     weight_exposure: float = 1.0,
     sigma: float = 0.2,
+    bits: int | None = None,
 ) -> np.ndarray:
     """Fuse exposures by contrast and well-exposedness weights (Eq. 3).
 
@@ -168,6 +169,16 @@ def fuse_exposures(
     images : sequence of arrays, same shape
         Raw exposures (uint8/uint16 or float in [0, 1]): images ``(rows, cols)`` or stacks
         ``(m, rows, cols)`` of ROIs, each fused on its own.
+    bits : int, optional
+        Bit depth of integer images: full scale ``2**bits - 1``. A 10- or 12-bit camera stores
+        its images in ``uint16``; without ``bits`` they would be scaled by 65535 and all look
+        nearly black to the well-exposedness weight. Default: the full range of the dtype.
+
+    Raises
+    ------
+    CalibrationError
+        On images of different shapes, bad weights, a bit depth outside 1 to the dtype's width,
+        or integer values above ``2**bits - 1``.
 
     Returns
     -------
@@ -176,7 +187,7 @@ def fuse_exposures(
     stack = []
     for img in images:
         a = np.asarray(img)
-        full = float(np.iinfo(a.dtype).max) if np.issubdtype(a.dtype, np.integer) else 1.0
+        full = _full_scale(a, bits) if np.issubdtype(a.dtype, np.integer) else 1.0
         stack.append(a.astype(np.float32) / full)
     if len(stack) < 1 or any(s.shape != stack[0].shape for s in stack):
         raise CalibrationError(f"fusion needs >= 1 images of one shape, got {len(stack)}")
@@ -188,6 +199,24 @@ def fuse_exposures(
         num += w * img
         den += w
     return num / den
+
+
+def _full_scale(a: np.ndarray, bits: int | None) -> float:
+    """Full scale of the integer image ``a``: ``2**bits - 1``, or its dtype's maximum."""
+    width = np.iinfo(a.dtype).bits
+    if bits is None:
+        return float(np.iinfo(a.dtype).max)
+    if not (isinstance(bits, (int, np.integer)) and 1 <= bits <= width):
+        raise CalibrationError(
+            f"bit depth {bits!r} must be an integer from 1 to {width} for {a.dtype} images"
+        )
+    full = 2 ** int(bits) - 1
+    if a.size and int(a.max()) > full:
+        raise CalibrationError(
+            f"an image holds the value {int(a.max())}, above the {full} of {bits}-bit data: is "
+            "the bit depth right?"
+        )
+    return float(full)
 
 
 def _check_fusion(weight_contrast: float, weight_exposure: float, sigma: float) -> None:
