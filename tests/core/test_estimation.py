@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
+from calstudy.core.errors import CalibrationError
 from calstudy.core.estimation import minpack_lm
 
 
@@ -44,3 +45,39 @@ def test_minpack_lm_respects_the_evaluation_limit():
     ).x
     assert capped.tobytes() == ref.tobytes()
     assert not np.allclose(capped, [2.0, 1.3, 0.5], atol=1e-6)
+
+
+@pytest.mark.parametrize("max_nfev", [None, 3])
+def test_levenberg_marquardt_minpack_path_is_least_squares(max_nfev):
+    from calstudy.core import estimation
+
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 4.0, 40)
+    y = _exp_model(np.array([2.0, 1.3, 0.5]), t, 0.0) + rng.normal(0.0, 0.01, t.size)
+    x0 = np.array([1.0, 0.5, 0.0])
+    calls = {"ours": [], "ref": []}
+
+    def fun_for(key):
+        def fun(x):
+            calls[key].append(x.copy())
+            return _exp_model(x, t, y)
+
+        return fun
+
+    def jac(x):
+        return _exp_jac(x, t, y)
+
+    tols = {"xtol": 1e-12, "ftol": 1e-12, "gtol": 1e-12, "max_nfev": max_nfev}
+    ours = estimation._lmder(fun_for("ours"), x0, jac, **tols)
+    ref = least_squares(fun_for("ref"), x0, jac=jac, method="lm", **tols)
+    for field in ("x", "fun", "jac"):
+        assert getattr(ours, field).tobytes() == np.asarray(getattr(ref, field)).tobytes(), field
+    assert (ours.cost, ours.nfev, ours.status) == (ref.cost, ref.nfev, ref.status)
+    # the same evaluations in the same order: the history an Estimate keeps is the same
+    assert [c.tobytes() for c in calls["ours"]] == [c.tobytes() for c in calls["ref"]]
+    if max_nfev == 3:
+        assert ours.status == 0
+        with pytest.raises(CalibrationError, match="did not converge after 3 evaluations"):
+            estimation.levenberg_marquardt(
+                lambda x: _exp_model(x, t, y), x0, jac=jac, max_nfev=3, label="fit"
+            )

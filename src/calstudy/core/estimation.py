@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares, leastsq
+from scipy.optimize import OptimizeResult, least_squares, leastsq
 from scipy.stats import chi2 as _chi2
 
 from calstudy.core.errors import CalibrationError, CalibrationWarning
@@ -291,6 +291,51 @@ def minpack_lm(
     return np.asarray(sol[0], dtype=float)
 
 
+#: scipy's translation of MINPACK's exit codes into least_squares' status (<= 0: not converged)
+_MINPACK_STATUS = {0: -1, 1: 2, 2: 3, 3: 4, 4: 1, 5: 0}
+
+
+def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev) -> OptimizeResult:
+    """What ``least_squares(fun, x0, jac=jac, method="lm", ...)`` returns (the fields
+    :func:`levenberg_marquardt` reads: x, fun, jac, cost, nfev, status, message), computed by the
+    same MINPACK call through :func:`scipy.optimize.leastsq`'s thinner wrapper. As in
+    least_squares, a repeated evaluation at the last point is answered from memory, so ``fun`` is
+    called at the same points in the same order (the evaluation history is the same)."""
+    n = x0.size
+    last: list = []
+
+    def remembered(x):
+        if last and np.array_equal(x, last[0]):
+            return last[1]
+        f = fun(x)
+        last[:] = [np.array(x, dtype=float), f]
+        return f
+
+    x, _, info, message, ier = leastsq(
+        remembered,
+        x0.copy(),
+        Dfun=jac,
+        full_output=True,
+        ftol=ftol,
+        xtol=xtol,
+        gtol=gtol,
+        maxfev=100 * n if max_nfev is None else max_nfev,
+        factor=100.0,
+        diag=None,
+    )
+    x = np.asarray(x, dtype=float)
+    f = np.asarray(info["fvec"], dtype=float)
+    return OptimizeResult(
+        x=x,
+        fun=f,
+        jac=np.asarray(jac(x), dtype=float),
+        cost=0.5 * float(f @ f),
+        nfev=int(info["nfev"]),
+        status=_MINPACK_STATUS.get(int(ier), -1),
+        message=str(message),
+    )
+
+
 def levenberg_marquardt(
     fun: Callable[[np.ndarray], np.ndarray],
     x0: np.ndarray,
@@ -358,9 +403,12 @@ def levenberg_marquardt(
         history.append(0.5 * float(r @ r))
         return r
 
-    res = least_squares(
-        wrapped, x0, jac=jac, method=method, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev
-    )
+    if method == "lm" and callable(jac):
+        res = _lmder(wrapped, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
+    else:
+        res = least_squares(
+            wrapped, x0, jac=jac, method=method, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev
+        )
     if res.status <= 0:
         raise CalibrationError(
             f"{label} did not converge after {res.nfev} evaluations (cost {res.cost:.6g}): "
