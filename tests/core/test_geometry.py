@@ -83,3 +83,25 @@ def test_cross3_is_numpy_cross_byte_for_byte(v):
     a, b = np.array(v[:3]), np.array(v[3:])
     assert geo._cross3(a, b).tobytes() == np.cross(a, b).tobytes()
     assert geo._cross3(a, list(v[3:])).tobytes() == np.cross(a, b).tobytes()
+
+
+def test_rotation_angle_agrees_with_scipy_at_every_angle():
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(11)
+    axes = rng.normal(size=(3000, 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    angles = np.concatenate(
+        [
+            10 ** rng.uniform(-10, 0, 1000),  # near 0: an arccos of the trace would fail here
+            rng.uniform(0.0, np.pi, 1000),
+            np.pi - 10 ** rng.uniform(-10, -1, 1000),  # near pi
+        ]
+    )
+    rot = Rotation.from_rotvec(axes * angles[:, None])
+    ours = geo.rotation_angle(rot.as_matrix())
+    np.testing.assert_allclose(ours, rot.magnitude(), rtol=1e-12, atol=1e-14)
+    assert ours.shape == (3000,)
+    assert geo.rotation_angle(np.eye(3)) == 0.0
+    with pytest.raises(CalibrationError, match=r"expected \(\.\.\., 3, 3\)"):
+        geo.rotation_angle(np.eye(4))
