@@ -200,3 +200,46 @@ def test_perspective_centre_of_a_circle_matches_its_closed_form(centre, normal, 
         np.testing.assert_allclose(got, proj, atol=0.05)
     else:  # the ellipse centre is not the image of the circle's centre
         assert shift > min_shift
+
+
+def _whole_rois(k, dist, centres, normals, radius, origins, shapes):
+    """The coverage of every pixel of each ROI (no box): the reference of the boxed render."""
+    whole = [(0, rows, 0, cols) for rows, cols in shapes]
+    return optics._render_boxes(k, dist, centres, normals, radius, origins, shapes, whole)
+
+
+def test_render_rois_in_boxes_is_the_whole_roi_render_bit_for_bit(monkeypatch):
+    # strong distortion, dots off axis and tilted up to 60 deg, wide margins (blurred dots)
+    k = np.array([[2400.0, 0.0, 1000.0], [0.0, 2380.0, 800.0], [0.0, 0.0, 1.0]])
+    dist = np.array([-0.25, 0.12, 1e-3, -8e-4, -0.02])
+    rng = np.random.default_rng(7)
+    centres = np.column_stack(
+        [rng.uniform(-60, 60, 8), rng.uniform(-50, 50, 8), rng.uniform(300, 500, 8)]
+    )
+    tilt = rng.uniform(0.0, np.radians(60.0), 8)
+    az = rng.uniform(0, 2 * np.pi, 8)
+    normals = np.column_stack(
+        [np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), -np.cos(tilt)]
+    )
+    radius = 4.0
+    uv = cv2.projectPoints(centres, np.zeros(3), np.zeros(3), k, dist)[0].reshape(-1, 2)
+    origins, shapes = [], []
+    for p, c, margin in zip(uv, centres, rng.uniform(10, 60, 8), strict=True):
+        o, s = optics.roi_around(p, 2400.0 * radius / c[2], margin, 2000, 1600)
+        origins.append(o)
+        shapes.append(s)
+    origins = np.array(origins)
+    want = _whole_rois(k, dist, centres, normals, radius, origins, shapes)
+    got = optics.render_rois(k, dist, centres, normals, radius, origins, shapes)
+    boxes = optics._dot_boxes(k, centres, radius, shapes)
+    assert any(b != (0, s[0], 0, s[1]) for b, s in zip(boxes, shapes, strict=True))
+    for g, w in zip(got, want, strict=True):
+        assert g.dtype == np.float32 and w.max() > 0.5
+        np.testing.assert_array_equal(g, w)
+    # a box too small for its dot (the dot reaches its ring): the whole ROI is rendered
+    tiny = [(s[0] // 2 - 2, s[0] // 2 + 3, s[1] // 2 - 2, s[1] // 2 + 3) for s in shapes]
+    monkeypatch.setattr(optics, "_dot_boxes", lambda *args: tiny)
+    for g, w in zip(
+        optics.render_rois(k, dist, centres, normals, radius, origins, shapes), want, strict=True
+    ):
+        np.testing.assert_array_equal(g, w)

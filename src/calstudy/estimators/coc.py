@@ -298,7 +298,7 @@ def detect_centre(
             f"intensity range {span:.3g} of full scale"
         )
     gx, gy = image_gradients(img) if gradients is None else gradients
-    scale = 16000.0 / float(cv2.magnitude(gx, gy).max())
+    scale = 16000.0 / cv2.minMaxLoc(cv2.magnitude(gx, gy))[1]
     edges = cv2.Canny(
         (gx * scale).astype(np.int16),
         (gy * scale).astype(np.int16),

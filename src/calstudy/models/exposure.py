@@ -73,7 +73,8 @@ def _exposed(rad, exposure_ms, peak, background, read_noise_dn, electrons_per_dn
     noisy *= sigma
     noisy += dn
     np.rint(noisy, out=noisy)
-    return np.clip(noisy, 0, full, out=noisy)
+    np.maximum(noisy, np.float32(0.0), out=noisy)  # np.clip(noisy, 0, full), without its checks
+    return np.minimum(noisy, np.float32(full), out=noisy)
 
 
 def expose_and_fuse(

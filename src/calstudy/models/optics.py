@@ -189,7 +189,9 @@ def render_rois(k, dist, centres, normals, radius_mm: float, origins, shapes) ->
     """Sharp images of ``m`` round flat dots, each in its own ROI (``shapes``: ``m`` pairs
     ``(rows, cols)``): the model of :func:`render_dot`, batched. The undistortion grids of all
     ROIs go through one ``cv2.undistortPointsIter`` call and the coverage is computed on all
-    their pixels at once; each pixel's value is the one :func:`render_dot` gives it.
+    their pixels at once; each pixel's value is the one :func:`render_dot` gives it. The
+    coverage is computed only in a box around each dot (:func:`_dot_boxes`) and is 0 outside
+    it; when the dot reaches the box's outer ring, the whole ROI is computed instead.
 
     Returns
     -------
@@ -198,8 +200,56 @@ def render_rois(k, dist, centres, normals, radius_mm: float, origins, shapes) ->
     c = np.asarray(centres, dtype=float).reshape(-1, 3)
     n = np.asarray(normals, dtype=float).reshape(-1, 3)
     shapes = [tuple(int(v) for v in sh) for sh in shapes]
-    sizes = [rows * cols for rows, cols in shapes]
-    x, y = _undistorted_pixels(k, dist, np.asarray(origins).reshape(-1, 2), shapes)
+    origins = np.asarray(origins).reshape(-1, 2)
+    boxes = _dot_boxes(k, c, radius_mm, shapes)
+    cut = _render_boxes(k, dist, c, n, radius_mm, origins, shapes, boxes)
+    out = []
+    redo = []
+    for i, (part, shape, (r0, r1, c0, c1)) in enumerate(zip(cut, shapes, boxes, strict=True)):
+        full = (r0, r1, c0, c1) == (0, shape[0], 0, shape[1])
+        if not full and _ring_lit(part):  # the dot may reach beyond the box: render it all
+            redo.append(i)
+        img = np.zeros(shape, dtype=np.float32)
+        img[r0:r1, c0:c1] = part
+        out.append(img)
+    if redo:
+        whole = [(0, shapes[i][0], 0, shapes[i][1]) for i in redo]
+        again = _render_boxes(
+            k, dist, c[redo], n[redo], radius_mm, origins[redo], [shapes[i] for i in redo], whole
+        )
+        for i, img in zip(redo, again, strict=True):
+            out[i] = img
+    return out
+
+
+def _dot_boxes(k, centres, radius_mm: float, shapes) -> list:
+    """Per ROI, the centred box ``(r0, r1, c0, c1)`` outside which its dot's coverage is 0: a
+    half-size of 1.5 times the largest image radius of the dot (its nearest edge point, at
+    depth ``cz - radius``) plus 4 px, within the ROI. The renderer checks the box's outer ring
+    and renders the whole ROI when the dot reaches it."""
+    focal = 0.5 * (k[0, 0] + k[1, 1])
+    boxes = []
+    for cz, (rows, cols) in zip(centres[:, 2], shapes, strict=True):
+        near = cz - radius_mm
+        reach = 1.1 * focal * radius_mm / near + 3.0 if near > 0 else math.inf
+        half_r, half_c = (rows - 1) // 2, (cols - 1) // 2
+        keep = int(math.ceil(reach)) if math.isfinite(reach) else max(half_r, half_c)
+        dr, dc = max(0, half_r - keep), max(0, half_c - keep)
+        boxes.append((dr, rows - dr, dc, cols - dc))
+    return boxes
+
+
+def _ring_lit(img: np.ndarray) -> bool:
+    """True when a pixel of the image's outermost rows or columns is not 0."""
+    return bool(img[0].any() or img[-1].any() or img[:, 0].any() or img[:, -1].any())
+
+
+def _render_boxes(k, dist, c, n, radius_mm: float, origins, shapes, boxes) -> list:
+    """The coverage of :func:`render_rois` on the box ``(r0, r1, c0, c1)`` of each ROI (the
+    ROI's own undistortion grid, cut to the box): the list of box images."""
+    shapes_b = [(r1 - r0, c1 - c0) for r0, r1, c0, c1 in boxes]
+    sizes = [rows * cols for rows, cols in shapes_b]
+    x, y = _undistorted_pixels(k, dist, origins, shapes, boxes=boxes)
     # Ray r = (x, y, 1) meets the dot plane at s r, s = (c.n) / (r.n). The offset from the dot
     # centre is written with the ray through the centre, (xc, yc, 1), as reference, so that the
     # per-pixel work is on small numbers (float32 keeps ~1e-3 px): with dx = x - xc,
@@ -254,7 +304,7 @@ def render_rois(k, dist, centres, normals, radius_mm: float, origins, shapes) ->
     np.clip(coverage, f32(0.0), f32(1.0), out=coverage)
     coverage /= np.multiply(len2, len2, out=len2)
     parts = np.split(coverage, np.cumsum(sizes)[:-1])
-    return [part.reshape(shape) for part, shape in zip(parts, shapes, strict=True)]
+    return [part.reshape(shape) for part, shape in zip(parts, shapes_b, strict=True)]
 
 
 def _undistorted_grid(k, dist, origin, shape, step: int = 8) -> np.ndarray:
@@ -268,10 +318,12 @@ def _undistorted_grid(k, dist, origin, shape, step: int = 8) -> np.ndarray:
     return np.stack([x, y], axis=-1).astype(np.float64)
 
 
-def _undistorted_pixels(k, dist, origins, shapes, step: int = 8):
+def _undistorted_pixels(k, dist, origins, shapes, step: int = 8, boxes=None):
     """:func:`_undistorted_grid` of ``m`` ROIs (``shapes``: ``(rows, cols)`` each): ``x`` and
     ``y``, float32, the ROIs' pixels one after the other (row by row). One
-    ``cv2.undistortPointsIter`` call for all grid nodes (each point is undistorted on its own)."""
+    ``cv2.undistortPointsIter`` call for all grid nodes (each point is undistorted on its own).
+    ``boxes``: per ROI, ``(r0, r1, c0, c1)``, the pixels to return (those of the whole ROI's
+    interpolation, cut)."""
     grids = []
     for origin, (rows, cols) in zip(origins, shapes, strict=True):
         gu = np.arange(0, cols + step, step)
@@ -285,16 +337,18 @@ def _undistorted_pixels(k, dist, origins, shapes, step: int = 8):
         uv.reshape(-1, 1, 2), k, dist, None, None, RENDER_UNDISTORT_CRITERIA
     )
     coarse = coarse.reshape(-1, 2).astype(np.float32)
+    if boxes is None:
+        boxes = [(0, rows, 0, cols) for rows, cols in shapes]
     xs, ys = [], []
-    for part, g, (rows, cols) in zip(
-        np.split(coarse, np.cumsum(sizes)[:-1]), grids, shapes, strict=True
+    for part, g, (rows, cols), (r0, r1, c0, c1) in zip(
+        np.split(coarse, np.cumsum(sizes)[:-1]), grids, shapes, boxes, strict=True
     ):
         part = part.reshape(g.shape)
         wy = _linear_weights(rows, g.shape[0], step)
         wx = _linear_weights(cols, g.shape[1], step)
         # separable bilinear interpolation, float32 (the grid values are ~0.3, error ~1e-8)
-        xs.append((wy @ part[None, :, :, 0] @ wx.T).reshape(-1))
-        ys.append((wy @ part[None, :, :, 1] @ wx.T).reshape(-1))
+        xs.append((wy @ part[None, :, :, 0] @ wx.T)[0, r0:r1, c0:c1].reshape(-1))
+        ys.append((wy @ part[None, :, :, 1] @ wx.T)[0, r0:r1, c0:c1].reshape(-1))
     return np.concatenate(xs), np.concatenate(ys)
 
 
