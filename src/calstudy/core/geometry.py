@@ -294,7 +294,7 @@ def rotation_angle(rotation) -> np.ndarray:
     and ``tr R - 1 = 2 cos a``, each known to a few ulps, so the angle is accurate to about
     1e-16 rad at every angle (an arccos of the trace alone loses half the digits near 0). It
     agrees with scipy's ``Rotation.from_matrix(R).magnitude()`` to 1e-14 rad (a test checks it)
-    at a tenth of the cost, which matters for the hundreds of errors a Monte Carlo trial scores.
+    at a sixth of the cost, which matters for the hundreds of errors a Monte Carlo trial scores.
     """
     r = np.asarray(rotation, dtype=float)
     if r.shape[-2:] != (3, 3):
