@@ -105,3 +105,10 @@ def test_rotation_angle_agrees_with_scipy_at_every_angle():
     assert geo.rotation_angle(np.eye(3)) == 0.0
     with pytest.raises(CalibrationError, match=r"expected \(\.\.\., 3, 3\)"):
         geo.rotation_angle(np.eye(4))
+
+
+@pytest.mark.parametrize("rows", [1, 3, 1000])
+def test_cross_rows_is_numpy_cross_byte_for_byte(rows):
+    rng = np.random.default_rng(rows)
+    a, b = rng.normal(size=(rows, 3)) * 100, rng.normal(size=(rows, 3))
+    assert geo.cross_rows(a, b).tobytes() == np.cross(a, b).tobytes()

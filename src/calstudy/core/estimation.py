@@ -274,21 +274,27 @@ def minpack_lm(
     (a homography of 20 points: 0.34 ms against 0.64 ms).
     """
     x = np.asarray(x0, dtype=float)
-    n = x.size
-    sol = leastsq(
+    return np.asarray(_leastsq(fun, x, jac, args, xtol, ftol, gtol, max_nfev)[0], dtype=float)
+
+
+def _leastsq(fun, x0: np.ndarray, jac, args: tuple, xtol, ftol, gtol, max_nfev) -> tuple:
+    """:func:`scipy.optimize.leastsq` (MINPACK ``lmder``) with the settings of
+    ``least_squares(method="lm")``: ``x_scale="jac"`` (no ``diag``), step bound factor 100, at
+    most ``100 n`` evaluations; ``full_output`` also keeps it from warning on a stop at the
+    tolerances, as least_squares does. Returns leastsq's ``(x, cov_x, info, message, ier)``."""
+    return leastsq(
         fun,
-        x.copy(),
+        x0.copy(),
         args=args,
         Dfun=jac,
-        full_output=True,  # also: no warning on a stop at the tolerances, as least_squares
+        full_output=True,
         ftol=ftol,
         xtol=xtol,
         gtol=gtol,
-        maxfev=100 * n if max_nfev is None else max_nfev,
+        maxfev=100 * x0.size if max_nfev is None else max_nfev,
         factor=100.0,
         diag=None,
     )
-    return np.asarray(sol[0], dtype=float)
 
 
 #: scipy's translation of MINPACK's exit codes into least_squares' status (<= 0: not converged)
@@ -301,7 +307,6 @@ def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev) -> OptimizeResult:
     same MINPACK call through :func:`scipy.optimize.leastsq`'s thinner wrapper. As in
     least_squares, a repeated evaluation at the last point is answered from memory, so ``fun`` is
     called at the same points in the same order (the evaluation history is the same)."""
-    n = x0.size
     last: list = []
 
     def remembered(x):
@@ -311,18 +316,7 @@ def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev) -> OptimizeResult:
         last[:] = [np.array(x, dtype=float), f]
         return f
 
-    x, _, info, message, ier = leastsq(
-        remembered,
-        x0.copy(),
-        Dfun=jac,
-        full_output=True,
-        ftol=ftol,
-        xtol=xtol,
-        gtol=gtol,
-        maxfev=100 * n if max_nfev is None else max_nfev,
-        factor=100.0,
-        diag=None,
-    )
+    x, _, info, message, ier = _leastsq(remembered, x0, jac, (), xtol, ftol, gtol, max_nfev)
     x = np.asarray(x, dtype=float)
     f = np.asarray(info["fvec"], dtype=float)
     return OptimizeResult(

@@ -346,6 +346,15 @@ def _cross3(a: np.ndarray, b) -> np.ndarray:
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of the rows of two ``(N, 3)`` arrays with the same products and differences
+    (the same bytes) as :func:`_cross3`, without np.cross's axis handling, which dominates for a
+    few rows."""
+    a0, a1, a2 = a.T
+    b0, b1, b2 = b.T
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
+
+
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     """Camera-to-world transform of a camera at ``eye`` with its optical (+z) axis on ``target``.
 

@@ -170,8 +170,7 @@ def _rectify_strip(img, y0: int, y1: int, setup, out, gx=None, gy=None) -> None:
     mean = cv2.filter2D(src, cv2.CV_32F, kernel, borderType=cv2.BORDER_REPLICATE)[keep]
     own = gx is None  # derivatives of this strip, free to be overwritten
     if own:
-        gx = cv2.Sobel(src, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
-        gy = cv2.Sobel(src, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)[keep]
+        gx, gy = (g[keep] for g in image_gradients(src))
     here = src[keep]
     # X = 2 pi delta^4 (E_u0 - E_u) / (t E_u0); step = sign(X) sqrt(2 |X|) / |grad|
     x = np.subtract(mean, here)

@@ -120,10 +120,7 @@ def _weighted_rigid_step(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[n
     s2 = float(np.sum(r**2 @ w)) / max(3 * n - 6, 1)
     rot = _rodrigues(delta[:3])
     # rotation about the centroid, then the translation
-    step = np.zeros((4, 4))
-    step[:3, :3] = rot
-    step[:3, 3] = c - rot @ c + delta[3:]
-    step[3, 3] = 1.0
+    step = geo.make_transform(rot, c - rot @ c + delta[3:])
     return step, float(delta @ h @ delta) / max(s2, 1e-300)
 
 
@@ -298,10 +295,10 @@ def weighted_icp(
         n_pairs = int(np.count_nonzero(keep))
         if n_pairs < MIN_PAIRS:
             if it == 0:
-                nearest = float(kd.query(cur, k=1)[0].min())
+                closest = float(kd.query(cur, k=1)[0].min())
                 raise CalibrationError(
                     f"the clouds do not overlap: {n_pairs} of {len(cur)} points lie within "
-                    f"{max_pair_mm:g} mm of the reference (closest {nearest:.3g} mm); ICP needs "
+                    f"{max_pair_mm:g} mm of the reference (closest {closest:.3g} mm); ICP needs "
                     f"{MIN_PAIRS}"
                 )
             raise CalibrationError(

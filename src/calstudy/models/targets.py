@@ -202,9 +202,9 @@ def circle_image_centres(k_matrix, centres_cam, normals_cam, radius: float) -> n
     """
     k, c, n = _check_circles(k_matrix, centres_cam, normals_cam, radius)
     helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    e1 = _cross_rows(n, helper)
+    e1 = geo.cross_rows(n, helper)
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = _cross_rows(n, e1)
+    e2 = geo.cross_rows(n, e1)
     h = k @ np.stack([e1, e2, c], axis=2)  # (N, 3, 3), columns e1, e2, c
     h_inv = np.linalg.inv(h)
     conic = np.swapaxes(h_inv, 1, 2) @ np.diag([1.0, 1.0, -(float(radius) ** 2)]) @ h_inv
@@ -217,14 +217,6 @@ def circle_image_centres(k_matrix, centres_cam, normals_cam, radius: float) -> n
             "hyperbola): part of it lies at or behind the camera's plane"
         )
     return -np.linalg.solve(a, b[..., None])[..., 0]
-
-
-def _cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` of the rows of ``(N, 3)`` arrays with the same products and differences
-    (the same bytes), without its axis handling, which dominates for a few rows."""
-    a0, a1, a2 = a.T
-    b0, b1, b2 = b.T
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
 
 
 def _check_circles(k_matrix, centres_cam, normals_cam, radius: float):
