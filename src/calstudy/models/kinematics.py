@@ -350,13 +350,14 @@ class Robot:
         err = self._ik_error(q, desired)
         cost = float(err @ err)
         damping, iterations = 1e-6, 0
+        eye = np.eye(self.nq)
         while math.sqrt(cost) > tol and iterations < max_iter:
             iterations += 1
             jac = self._ik_jacobian(q, desired)
             jtj, jte = jac.T @ jac, jac.T @ err
             while True:
                 try:
-                    step = -np.linalg.solve(jtj + damping * np.eye(self.nq), jte)
+                    step = -np.linalg.solve(jtj + damping * eye, jte)
                 except np.linalg.LinAlgError:  # numerically singular: damp more, or give up
                     trial_cost = cost
                     if damping > 1e12:
@@ -394,17 +395,21 @@ class Robot:
 
     def _wrap_into_limits(self, q: np.ndarray, q_start: np.ndarray) -> np.ndarray:
         out = q.copy()
-        for j in range(self.nq):
-            first = math.ceil((self.qmin[j] - q[j]) / _TURN)
-            last = math.floor((self.qmax[j] - q[j]) / _TURN)
-            inside = q[j] + _TURN * np.arange(first, last + 1)
-            if inside.size == 0:
+        for j, (qj, lo, hi, q0) in enumerate(
+            zip(q.tolist(), self.qmin.tolist(), self.qmax.tolist(), q_start.tolist(), strict=True)
+        ):
+            first = math.ceil((lo - qj) / _TURN)
+            last = math.floor((hi - qj) / _TURN)
+            if first > last:
                 raise CalibrationError(
                     f"IK solution is outside the joint limits: joint {j + 1} at "
-                    f"{math.degrees(q[j]):.2f} deg, range {math.degrees(self.qmin[j]):.1f} to "
-                    f"{math.degrees(self.qmax[j]):.1f} deg"
+                    f"{math.degrees(qj):.2f} deg, range {math.degrees(lo):.1f} to "
+                    f"{math.degrees(hi):.1f} deg"
                 )
-            out[j] = inside[np.argmin(np.abs(inside - q_start[j]))]
+            # the candidate nearest the start (the first one on a tie), in float arithmetic
+            inside = [qj + _TURN * float(i) for i in range(first, last + 1)]
+            dist = [abs(x - q0) for x in inside]
+            out[j] = inside[dist.index(min(dist))]
         return out
 
     # ------------------------------------------------------------------ parameters

@@ -248,6 +248,7 @@ def select_poses(blocks, n: int, exchange_rounds: int = 2, ridge: float = 1e-6) 
 def _exchange_round(b, chosen, free, info, reg) -> bool:
     """One pass of single swaps (in place); True if any swap improved ``log det``."""
     improved = False
+    current = None  # log det of info, recomputed only after a swap changed it
     for slot in range(len(chosen)):
         out = chosen[slot]
         without = info - b[out].T @ b[out]
@@ -255,10 +256,12 @@ def _exchange_round(b, chosen, free, info, reg) -> bool:
         gain = _gains(b, np.linalg.inv(without))
         gain[~free] = -np.inf
         best = int(np.argmax(gain))
-        _, current = np.linalg.slogdet(info)
+        if current is None:
+            _, current = np.linalg.slogdet(info)
         if base + gain[best] > current + 1e-9:
             info += b[best].T @ b[best] - b[out].T @ b[out]
             chosen[slot] = best
             free[best], free[out] = False, True
             improved = True
+            current = None
     return improved
