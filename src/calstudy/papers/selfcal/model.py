@@ -199,8 +199,10 @@ class GlobalModel:
         # velocity of the point P = origin + R C: v + w x (R C) = v - [R C]_x w
         dpoint = jac6[:, :3, :] - skew(lever) @ jac6[:, 3:, :]
         # each parameter moves one joint: its column, + 0.0 as the product with the 0/1 matrix
-        # it replaces (a zero comes out +0.0)
-        return lever + pos, (dpoint[:, :, self._param_joint] + 0.0).reshape(3 * m, N_PARAMS)
+        # it replaces (a zero comes out +0.0), in the same C order (later products see the
+        # same memory layout)
+        jac = np.take(dpoint, self._param_joint, axis=2) + 0.0
+        return lever + pos, jac.reshape(3 * m, N_PARAMS)
 
 
 # ----------------------------------------------------------------------------------------------
