@@ -112,3 +112,25 @@ def test_cross_rows_is_numpy_cross_byte_for_byte(rows):
     rng = np.random.default_rng(rows)
     a, b = rng.normal(size=(rows, 3)) * 100, rng.normal(size=(rows, 3))
     assert geo.cross_rows(a, b).tobytes() == np.cross(a, b).tobytes()
+
+
+def _look_at_reference(eye, target, up=(0.0, 0.0, 1.0)):
+    """look_at written with np.linalg.norm, np.cross and make_transform."""
+    eye = np.asarray(eye, dtype=float)
+    z = np.asarray(target, dtype=float) - eye
+    z = z / np.linalg.norm(z)
+    x = np.cross(z, np.asarray(up, dtype=float))
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.cross(z, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    return geo.make_transform(np.stack([x, np.cross(z, x), z], axis=1), eye)
+
+
+def test_look_at_is_the_plain_numpy_construction_to_the_bit():
+    rng = np.random.default_rng(11)
+    cases = [(np.zeros(3), np.array([0.0, 0.0, 5.0])), (np.zeros(3), np.array([0.0, 0.0, -2.0]))]
+    cases += [(rng.normal(0, 500, 3), rng.normal(0, 500, 3)) for _ in range(2000)]
+    for eye, target in cases:
+        assert geo.look_at(eye, target).tobytes() == _look_at_reference(eye, target).tobytes()
+    with pytest.raises(CalibrationError, match="eye and target coincide"):
+        geo.look_at(np.ones(3), np.ones(3))

@@ -10,6 +10,7 @@ import pytest
 
 from calstudy import CalibrationError
 from calstudy.core import paths
+from calstudy.models import kinematics
 from calstudy.models.kinematics import Link, Robot
 from calstudy.models.robots import load_robot, perturb_robot, pose_errors
 
@@ -403,6 +404,20 @@ def test_ik_singular_normal_equations_raise_calibration_error(kr16, monkeypatch)
     def singular(*args, **kwargs):
         raise np.linalg.LinAlgError("Singular matrix")
 
-    monkeypatch.setattr(np.linalg, "solve", singular)
+    monkeypatch.setattr(kinematics, "_solve", singular)
     with pytest.raises(CalibrationError, match="IK did not converge after 1 iterations"):
         kr16.ik(target, q + 0.1)
+
+
+def test_small_solve_matches_numpy_to_the_bit():
+    """The IK's linear solve is np.linalg.solve without its argument handling: same bytes,
+    LinAlgError on a singular system."""
+    _solve = kinematics._solve
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        jac = rng.normal(size=(6, 6))
+        a = jac.T @ jac + 1e-6 * np.eye(6)
+        b = rng.normal(size=6)
+        assert _solve(a, b).tobytes() == np.linalg.solve(a, b).tobytes()
+    with pytest.raises(np.linalg.LinAlgError, match="Singular matrix"):
+        _solve(np.zeros((6, 6)), np.ones(6))

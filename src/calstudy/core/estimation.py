@@ -301,13 +301,18 @@ def _leastsq(fun, x0: np.ndarray, jac, args: tuple, xtol, ftol, gtol, max_nfev) 
 _MINPACK_STATUS = {0: -1, 1: 2, 2: 3, 3: 4, 4: 1, 5: 0}
 
 
-def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev) -> OptimizeResult:
+def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev, f0=None) -> OptimizeResult:
     """What ``least_squares(fun, x0, jac=jac, method="lm", ...)`` returns (the fields
     :func:`levenberg_marquardt` reads: x, fun, jac, cost, nfev, status, message), computed by the
     same MINPACK call through :func:`scipy.optimize.leastsq`'s thinner wrapper. As in
     least_squares, a repeated evaluation at the last point is answered from memory, so ``fun`` is
-    called at the same points in the same order (the evaluation history is the same)."""
-    last: list = []
+    called at the same points in the same order (the evaluation history is the same). ``f0``,
+    if given, is ``fun(x0)`` already computed: the first evaluation, at ``x0``, is answered
+    from it. The Jacobian is remembered the same way: leastsq evaluates it at ``x0`` to check
+    its shape before MINPACK evaluates it there again, and the result's Jacobian at the
+    solution may be the one MINPACK evaluated last."""
+    last: list = [] if f0 is None else [np.array(x0, dtype=float), f0]
+    last_jac: list = []
 
     def remembered(x):
         if last and np.array_equal(x, last[0]):
@@ -316,13 +321,22 @@ def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev) -> OptimizeResult:
         last[:] = [np.array(x, dtype=float), f]
         return f
 
-    x, _, info, message, ier = _leastsq(remembered, x0, jac, (), xtol, ftol, gtol, max_nfev)
+    def remembered_jac(x):
+        if last_jac and np.array_equal(x, last_jac[0]):
+            return last_jac[1]
+        j = jac(x)
+        last_jac[:] = [np.array(x, dtype=float), j]
+        return j
+
+    x, _, info, message, ier = _leastsq(
+        remembered, x0, remembered_jac, (), xtol, ftol, gtol, max_nfev
+    )
     x = np.asarray(x, dtype=float)
     f = np.asarray(info["fvec"], dtype=float)
     return OptimizeResult(
         x=x,
         fun=f,
-        jac=np.asarray(jac(x), dtype=float),
+        jac=np.asarray(remembered_jac(x), dtype=float),
         cost=0.5 * float(f @ f),
         nfev=int(info["nfev"]),
         status=_MINPACK_STATUS.get(int(ier), -1),
@@ -398,7 +412,9 @@ def levenberg_marquardt(
         return r
 
     if method == "lm" and callable(jac):
-        res = _lmder(wrapped, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
+        # the residuals at x0 are known: the solver's first evaluation is answered from r0
+        history.append(0.5 * float(r0 @ r0))
+        res = _lmder(wrapped, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev, f0=r0)
     else:
         res = least_squares(
             wrapped, x0, jac=jac, method=method, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev

@@ -355,6 +355,12 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
 
 
+def _norm3(v: np.ndarray) -> float:
+    """``np.linalg.norm`` of a float 3-vector, as it computes it (``sqrt(v . v)``, the same
+    bytes), without its argument handling, which costs several times the arithmetic."""
+    return math.sqrt(v.dot(v))
+
+
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     """Camera-to-world transform of a camera at ``eye`` with its optical (+z) axis on ``target``.
 
@@ -363,16 +369,19 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     """
     eye = np.asarray(eye, dtype=float)
     z = np.asarray(target, dtype=float) - eye
-    norm = np.linalg.norm(z)
+    norm = _norm3(z)
     if norm == 0:
         raise CalibrationError("look_at: eye and target coincide (distance 0 mm)")
     z = z / norm
     x = _cross3(z, np.asarray(up, dtype=float))
-    if np.linalg.norm(x) < 1e-9:
+    if _norm3(x) < 1e-9:
         x = _cross3(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else _cross3(z, [0.0, 1.0, 0.0])
-    x /= np.linalg.norm(x)
+    x /= _norm3(x)
     y = _cross3(z, x)
-    return make_transform(np.stack([x, y, z], axis=1), eye)
+    out = np.zeros((4, 4))
+    out[:3, 0], out[:3, 1], out[:3, 2], out[:3, 3] = x, y, z, eye
+    out[3, 3] = 1.0
+    return out
 
 
 # ----------------------------------------------------------------------------------------------

@@ -38,6 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
+from numpy.linalg import _umath_linalg
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import check_transform
@@ -68,6 +69,20 @@ def _trans(axis: int, length: float) -> np.ndarray:
     out = np.eye(4)
     out[axis, 3] = length
     return out
+
+
+def _raise_singular(err, flag):
+    raise np.linalg.LinAlgError("Singular matrix")
+
+
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.solve(a, b)`` for a float64 matrix (n, n) and vector (n,): the same LAPACK
+    gufunc under the same error state (the same bytes; LinAlgError on a singular matrix),
+    without the argument handling, which costs four times the solve of a 6 x 6 system."""
+    with np.errstate(
+        call=_raise_singular, invalid="call", over="ignore", divide="ignore", under="ignore"
+    ):
+        return _umath_linalg.solve1(a, b, signature="dd->d")
 
 
 def _se3(transform: np.ndarray) -> pin.SE3:
@@ -350,13 +365,14 @@ class Robot:
         err = self._ik_error(q, desired)
         cost = float(err @ err)
         damping, iterations = 1e-6, 0
+        eye = np.eye(self.nq)
         while math.sqrt(cost) > tol and iterations < max_iter:
             iterations += 1
             jac = self._ik_jacobian(q, desired)
             jtj, jte = jac.T @ jac, jac.T @ err
             while True:
                 try:
-                    step = -np.linalg.solve(jtj + damping * np.eye(self.nq), jte)
+                    step = -_solve(jtj + damping * eye, jte)
                 except np.linalg.LinAlgError:  # numerically singular: damp more, or give up
                     trial_cost = cost
                     if damping > 1e12:
@@ -394,17 +410,21 @@ class Robot:
 
     def _wrap_into_limits(self, q: np.ndarray, q_start: np.ndarray) -> np.ndarray:
         out = q.copy()
-        for j in range(self.nq):
-            first = math.ceil((self.qmin[j] - q[j]) / _TURN)
-            last = math.floor((self.qmax[j] - q[j]) / _TURN)
-            inside = q[j] + _TURN * np.arange(first, last + 1)
-            if inside.size == 0:
+        for j, (qj, lo, hi, q0) in enumerate(
+            zip(q.tolist(), self.qmin.tolist(), self.qmax.tolist(), q_start.tolist(), strict=True)
+        ):
+            first = math.ceil((lo - qj) / _TURN)
+            last = math.floor((hi - qj) / _TURN)
+            if first > last:
                 raise CalibrationError(
                     f"IK solution is outside the joint limits: joint {j + 1} at "
-                    f"{math.degrees(q[j]):.2f} deg, range {math.degrees(self.qmin[j]):.1f} to "
-                    f"{math.degrees(self.qmax[j]):.1f} deg"
+                    f"{math.degrees(qj):.2f} deg, range {math.degrees(lo):.1f} to "
+                    f"{math.degrees(hi):.1f} deg"
                 )
-            out[j] = inside[np.argmin(np.abs(inside - q_start[j]))]
+            # the candidate nearest the start (the first one on a tie), in float arithmetic
+            inside = [qj + _TURN * float(i) for i in range(first, last + 1)]
+            dist = [abs(x - q0) for x in inside]
+            out[j] = inside[dist.index(min(dist))]
         return out
 
     # ------------------------------------------------------------------ parameters

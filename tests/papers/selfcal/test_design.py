@@ -132,6 +132,21 @@ def test_greedy_then_exchange_is_no_worse_than_greedy():
     )
 
 
+def test_sizes_at_once_are_the_selections_one_by_one():
+    """The shared greedy steps and the exchange rounds of one size leave the others alone."""
+    rng = np.random.default_rng(2)
+    blocks = rng.normal(size=(80, 3, 12))
+    together = design.select_poses_sizes(blocks, [4, 9, 15, 30])
+    for n, chosen in together.items():
+        alone = design.select_poses_sizes(blocks, [n])[n]
+        assert chosen.tobytes() == alone.tobytes(), n
+    # the greedy prefix: without exchange, a size's choice is the start of a larger one's
+    greedy = design.select_poses_sizes(blocks, [4, 15], exchange_rounds=0)
+    assert set(greedy[4]) < set(greedy[15])
+    with pytest.raises(CalibrationError, match="cannot choose 81 poses"):
+        design.select_poses_sizes(blocks, [4, 81])
+
+
 def test_selection_refuses_impossible_sizes():
     blocks = np.zeros((20, 3, 30))
     with pytest.raises(CalibrationError, match="cannot choose 5 poses"):

@@ -22,7 +22,13 @@ from calstudy.papers.selfcal.model import (
     parameters_from_robot,
     scaled_error,
 )
-from calstudy.papers.selfcal.routes import three_step, three_step_reordered, two_step
+from calstudy.papers.selfcal.routes import (
+    hand_eye,
+    three_step,
+    three_step_alternated,
+    three_step_reordered,
+    two_step,
+)
 from calstudy.papers.selfcal.simulate import draw_station, poor_start, scan_cap, simulate
 
 
@@ -151,3 +157,26 @@ def test_ml_weights_need_noise(noise_free):
     station, meas, _ = noise_free
     with pytest.raises(CalibrationError, match="not positive definite"):
         identify(meas, station.nominal_params, weighted=True)
+
+
+def test_routes_given_the_hand_eye_fit_are_the_routes_that_fit_it(scenario):
+    """Handing the three-step routes one shared hand-eye fit changes none of their results."""
+    rng = np.random.default_rng(8)
+    station = draw_station(scenario, rng)
+    meas = simulate(scenario, station, station.spheres_base, 6, rng)
+    start, robot = station.nominal_params, scenario.robot
+    first = hand_eye(meas, robot, start)
+    assert three_step(meas, robot, start, first=first).tobytes() == (
+        three_step(meas, robot, start).tobytes()
+    )
+    assert three_step_reordered(meas, robot, start, first=first).tobytes() == (
+        three_step_reordered(meas, robot, start).tobytes()
+    )
+    shared, rounds = three_step_alternated(meas, robot, start, max_rounds=3, first=first)
+    alone, rounds_alone = three_step_alternated(meas, robot, start, max_rounds=3)
+    assert (shared.tobytes(), rounds) == (alone.tobytes(), rounds_alone)
+    # a different first step does change the route: the argument is used
+    moved = (first[0] + 1e-3, first[1])
+    assert not np.array_equal(
+        three_step(meas, robot, start, first=moved), three_step(meas, robot, start)
+    )

@@ -4,8 +4,9 @@
   (and the combination), which not at all, by a column-pivoted QR decomposition of the scaled
   identification Jacobian (the base-parameter analysis of FIGAROH and of Khalil and Dombre).
 - :func:`select_poses`: from a set of candidate poses, the ``N`` that maximise D-optimality
-  (``log det`` of the scaled information matrix), greedily, then improved by exchange;
-  :func:`observability` gives the indices of any selection.
+  (``log det`` of the scaled information matrix), greedily, then improved by exchange
+  (:func:`select_poses_sizes` for several ``N`` at once); :func:`observability` gives the
+  indices of any selection.
 - :func:`candidate_jacobians`: the scaled Jacobian rows of each candidate at the nominal
   parameters and the sphere readings (what is known before measuring).
 
@@ -218,36 +219,58 @@ def select_poses(blocks, n: int, exchange_rounds: int = 2, ridge: float = 1e-6) 
     n : int
         Poses to choose, ``3 n >= p`` and ``n <= k``.
     """
+    return select_poses_sizes(blocks, [n], exchange_rounds, ridge)[n]
+
+
+def select_poses_sizes(
+    blocks, sizes, exchange_rounds: int = 2, ridge: float = 1e-6
+) -> dict[int, np.ndarray]:
+    """:func:`select_poses` for several ``n`` at once: ``{n: indices}``.
+
+    The greedy steps do not depend on ``n`` (the first ``n`` of a longer greedy run are the
+    greedy choice of ``n``), so they run once, to the largest ``n``; each ``n`` then gets its
+    own exchange rounds. The result is the one of separate calls.
+    """
     b = np.asarray(blocks, float)
     if b.ndim != 3 or b.shape[1] != 3:
         raise CalibrationError(f"candidate blocks have shape {b.shape}; expected (k, 3, p)")
     k, _, p = b.shape
-    if not 3 * n >= p or n > k:
-        raise CalibrationError(
-            f"cannot choose {n} poses from {k} candidates for {p} parameters "
-            f"(need {math.ceil(p / 3)} <= n <= {k})"
-        )
+    sizes = [int(n) for n in sizes]
+    for n in sizes:
+        if not 3 * n >= p or n > k:
+            raise CalibrationError(
+                f"cannot choose {n} poses from {k} candidates for {p} parameters "
+                f"(need {math.ceil(p / 3)} <= n <= {k})"
+            )
     full = np.einsum("kap,kaq->pq", b, b)
     reg = ridge * max(float(np.trace(full)) / p / k, 1e-300) * np.eye(p)
     info = reg.copy()
     chosen: list[int] = []
     free = np.ones(k, bool)
-    for _ in range(n):
+    greedy = {}
+    for step in range(max(sizes, default=0)):
         gain = _gains(b, np.linalg.inv(info))
         gain[~free] = -np.inf
         best = int(np.argmax(gain))
         chosen.append(best)
         free[best] = False
         info += b[best].T @ b[best]
-    for _ in range(exchange_rounds):
-        if not _exchange_round(b, chosen, free, info, reg):
-            break
-    return np.array(sorted(chosen))
+        if step + 1 in sizes:
+            greedy[step + 1] = (list(chosen), free.copy(), info.copy())
+    out = {}
+    for n in sizes:
+        picked, unpicked, information = greedy[n]
+        for _ in range(exchange_rounds):
+            if not _exchange_round(b, picked, unpicked, information, reg):
+                break
+        out[n] = np.array(sorted(picked))
+    return out
 
 
 def _exchange_round(b, chosen, free, info, reg) -> bool:
     """One pass of single swaps (in place); True if any swap improved ``log det``."""
     improved = False
+    current = None  # log det of info, recomputed only after a swap changed it
     for slot in range(len(chosen)):
         out = chosen[slot]
         without = info - b[out].T @ b[out]
@@ -255,10 +278,12 @@ def _exchange_round(b, chosen, free, info, reg) -> bool:
         gain = _gains(b, np.linalg.inv(without))
         gain[~free] = -np.inf
         best = int(np.argmax(gain))
-        _, current = np.linalg.slogdet(info)
+        if current is None:
+            _, current = np.linalg.slogdet(info)
         if base + gain[best] > current + 1e-9:
             info += b[best].T @ b[best] - b[out].T @ b[out]
             chosen[slot] = best
             free[best], free[out] = False, True
             improved = True
+            current = None
     return improved

@@ -35,7 +35,12 @@ import pandas as pd
 from calstudy.core.config import read_toml, scenario_file
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, trial_rng
-from calstudy.papers.selfcal.design import candidate_jacobians, observability, select_poses
+from calstudy.papers.selfcal.design import (
+    candidate_jacobians,
+    observability,
+    select_poses,
+    select_poses_sizes,
+)
 from calstudy.papers.selfcal.identify import (
     RANK_RTOL,
     Identification,
@@ -56,6 +61,7 @@ from calstudy.papers.selfcal.model import (
     scaled_error,
 )
 from calstudy.papers.selfcal.routes import (
+    hand_eye,
     three_step,
     three_step_alternated,
     three_step_reordered,
@@ -253,14 +259,16 @@ def calibration_trial(
     except CalibrationError:
         poor = None
     ml = identify(meas, st.nominal_params, weighted=True, max_evaluations=MAX_EVALUATIONS)
+    # the three three-step routes begin with the same hand-eye fit: computed once
+    first = hand_eye(meas, scenario.robot, st.nominal_params)
     alternated, rounds = three_step_alternated(
-        meas, scenario.robot, st.nominal_params, max_rounds=ALTERNATION_ROUNDS
+        meas, scenario.robot, st.nominal_params, max_rounds=ALTERNATION_ROUNDS, first=first
     )
     params = {
         ONE_STEP: good.params,
         ONE_STEP_ML: ml.params,
-        ROUTES[0]: three_step(meas, scenario.robot, st.nominal_params),
-        ROUTES[1]: three_step_reordered(meas, scenario.robot, st.nominal_params),
+        ROUTES[0]: three_step(meas, scenario.robot, st.nominal_params, first=first),
+        ROUTES[1]: three_step_reordered(meas, scenario.robot, st.nominal_params, first=first),
         ROUTES[2]: alternated,
         ROUTES[3]: two_step(meas, scenario.robot, st.nominal_params),
         NULL: st.nominal_params,
@@ -473,9 +481,11 @@ def pose_selection_trial(
     blocks, _ = candidate_jacobians(st.nominal_params, Q, st.spheres_part, sphere)
     val = simulate(scenario, st, draw_placements(scenario, scenario.n_validation, rng), 1, rng)
     rows = []
-    for n in (int(v) for v in sizes.split()):
+    sizes_n = [int(v) for v in sizes.split()]
+    optimised = select_poses_sizes(blocks, sizes_n)  # draws nothing: the stream is unchanged
+    for n in sizes_n:
         picks = {
-            OPTIMISED: select_poses(blocks, int(n)),
+            OPTIMISED: optimised[n],
             RANDOM: np.sort(rng.choice(len(Q), int(n), replace=False)),
         }
         for name, chosen in picks.items():

@@ -147,6 +147,8 @@ class GlobalModel:
                 self._from_params[i, k] = 1.0
             if j is not None:
                 self._from_q[i, j] = 1.0
+        # the joint each parameter moves (one per parameter: a column of _from_params)
+        self._param_joint = np.argmax(self._from_params, axis=0)
 
     def _configs(self, params, Q) -> np.ndarray:
         p = np.asarray(params, dtype=float)
@@ -163,9 +165,11 @@ class GlobalModel:
     def sensor2part(self, params, Q) -> np.ndarray:
         """Sensor poses ``(m, 4, 4)`` in the part frame (Eq. 6) at joint angles ``Q`` (m, 6)."""
         out = np.empty((len(Q), 4, 4))
+        model, data, last, placements = self.model, self.data, self._last, self.data.oMi
+        forward = pin.forwardKinematics
         for k, cfg in enumerate(self._configs(params, Q)):
-            pin.forwardKinematics(self.model, self.data, cfg)
-            out[k] = self.data.oMi[self._last].homogeneous
+            forward(model, data, cfg)
+            out[k] = placements[last].homogeneous
         return out
 
     def points(self, params, Q, C) -> np.ndarray:
@@ -184,17 +188,21 @@ class GlobalModel:
         jac6 = np.empty((m, 6, len(_CHAIN)))
         rot = np.empty((m, 3, 3))
         pos = np.empty((m, 3))
+        model, data, last, placements = self.model, self.data, self._last, self.data.oMi
+        compute, get = pin.computeJointJacobians, pin.getJointJacobian
         for k, cfg in enumerate(cfgs):
-            pin.computeJointJacobians(self.model, self.data, cfg)
-            jac6[k] = pin.getJointJacobian(
-                self.model, self.data, self._last, pin.LOCAL_WORLD_ALIGNED
-            )
-            placement = self.data.oMi[self._last]
+            compute(model, data, cfg)
+            jac6[k] = get(model, data, last, pin.LOCAL_WORLD_ALIGNED)
+            placement = placements[last]
             rot[k], pos[k] = placement.rotation, placement.translation
         lever = np.einsum("mij,mj->mi", rot, C)
         # velocity of the point P = origin + R C: v + w x (R C) = v - [R C]_x w
         dpoint = jac6[:, :3, :] - skew(lever) @ jac6[:, 3:, :]
-        return lever + pos, (dpoint @ self._from_params).reshape(3 * m, N_PARAMS)
+        # each parameter moves one joint: its column, + 0.0 as the product with the 0/1 matrix
+        # it replaces (a zero comes out +0.0), in the same C order (later products see the
+        # same memory layout)
+        jac = np.take(dpoint, self._param_joint, axis=2) + 0.0
+        return lever + pos, jac.reshape(3 * m, N_PARAMS)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -7,7 +7,9 @@ robot steps use the constraint that every sphere stays put (:func:`_fixed_sphere
 exterior step fits the base pose to the tracker's readings (Kabsch). The routes:
 :func:`three_step` (the paper's order), :func:`three_step_reordered` (hand-eye, exterior,
 robot), :func:`three_step_alternated` (hand-eye and robot alternated, then exterior) and
-:func:`two_step` (sensor and robot jointly, then exterior).
+:func:`two_step` (sensor and robot jointly, then exterior). The three-step routes begin with the
+same hand-eye fit (:func:`hand_eye`): a caller that runs several computes it once and hands it
+to each (``first``).
 
 Frames: ``part`` is the laser tracker's frame, ``sensor`` the scanner's. Millimetres and radians.
 """
@@ -52,6 +54,9 @@ def _fixed_sphere_fit(meas: Measurements, start, free, model: GlobalModel, centr
     select = np.zeros((3 * len(meas), 3 * k))
     for i, s in enumerate(meas.sphere):
         select[3 * i : 3 * i + 3, 3 * s : 3 * s + 3] = np.eye(3)
+    minus_select = -select
+    # the Jacobian of the last residual evaluation: LM asks for it at nearly every such point
+    last: list = [None, None]
 
     def split(x):
         p = start.copy()
@@ -60,12 +65,17 @@ def _fixed_sphere_fit(meas: Measurements, start, free, model: GlobalModel, centr
 
     def fun(x):
         p, centres = split(x)
-        return model.points(p, meas.Q, meas.C).ravel() - select @ centres
+        points, last[1] = model.points_and_jacobian(p, meas.Q, meas.C)
+        last[0] = np.asarray(x, float).tobytes()
+        return points.ravel() - select @ centres
 
     def jac(x):
-        p, _ = split(x)
-        _, j = model.points_and_jacobian(p, meas.Q, meas.C)
-        return np.hstack([j[:, mask], -select])
+        if last[0] == np.asarray(x, float).tobytes():
+            j = last[1]
+        else:
+            p, _ = split(x)
+            _, j = model.points_and_jacobian(p, meas.Q, meas.C)
+        return np.hstack([j[:, mask], minus_select])
 
     est = levenberg_marquardt(fun, x0, jac=jac, max_nfev=200, xtol=1e-10, label="fixed-sphere LM")
     p, centres = split(est.params)
@@ -98,7 +108,18 @@ def _exterior(meas: Measurements, params: np.ndarray, centres_base: np.ndarray) 
     return out
 
 
-def three_step(meas: Measurements, robot: Robot, start, model: GlobalModel | None = None):
+def hand_eye(meas: Measurements, robot: Robot, start, model: GlobalModel | None = None):
+    """The hand-eye step that the three-step routes begin with: the sensor pose (6) and the
+    sphere centres in the robot base frame, with the nominal ``robot``, from the constraint
+    that each sphere stays put; the sensor pose starts from ``start``. Returns the parameters
+    (30,) and the centres (k, 3); the routes take it as ``first`` to share one fit."""
+    model = default_model() if model is None else model
+    return _fixed_sphere_fit(meas, _own_frame_start(robot, start), _mask(SENSOR), model)
+
+
+def three_step(
+    meas: Measurements, robot: Robot, start, model: GlobalModel | None = None, first=None
+):
     """The route the paper argues against, on the same measurements, in its natural order.
 
     1. Hand-eye: the sensor pose (6) and the sphere centres in the robot base frame, with the
@@ -109,25 +130,27 @@ def three_step(meas: Measurements, robot: Robot, start, model: GlobalModel | Non
     3. Exterior: the base pose from the sphere centres of step 2 and their tracker readings
        (Kabsch, :func:`calstudy.estimators.fitting.fit_rigid`).
 
+    ``first``: the result of :func:`hand_eye` on the same inputs, if already computed.
+
     Returns
     -------
     numpy.ndarray, shape (30,)
         The assembled parameters.
     """
     model = default_model() if model is None else model
-    after_he, _ = _fixed_sphere_fit(meas, _own_frame_start(robot, start), _mask(SENSOR), model)
+    after_he, _ = hand_eye(meas, robot, start, model) if first is None else first
     after_robot, centres_base = _fixed_sphere_fit(meas, after_he, _mask(ROBOT), model)
     return _exterior(meas, after_robot, centres_base)
 
 
 def three_step_reordered(
-    meas: Measurements, robot: Robot, start, model: GlobalModel | None = None
+    meas: Measurements, robot: Robot, start, model: GlobalModel | None = None, first=None
 ) -> np.ndarray:
     """Hand-eye, then exterior, then robot: the robot step fits the 18 robot parameters to the
-    tracker readings with the sensor (step 1) and base (step 2) held."""
+    tracker readings with the sensor (step 1) and base (step 2) held. ``first`` as in
+    :func:`three_step`."""
     model = default_model() if model is None else model
-    own = _own_frame_start(robot, start)
-    after_he, centres = _fixed_sphere_fit(meas, own, _mask(SENSOR), model)
+    after_he, centres = hand_eye(meas, robot, start, model) if first is None else first
     placed = _exterior(meas, after_he, centres)
     fit = identify(meas, placed, free=_mask(ROBOT), model=model, max_evaluations=200)
     return fit.params
@@ -140,20 +163,24 @@ def three_step_alternated(
     model: GlobalModel | None = None,
     max_rounds: int = 10,
     tol_mm: float = 1e-4,
+    first=None,
 ) -> tuple[np.ndarray, int]:
     """Hand-eye and robot steps alternated until the parameters stop moving, then exterior.
 
     Each round refits the sensor with the robot held, then the robot with the sensor held
     (warm-started). Stops when a round moves no parameter by more than ``tol_mm`` (angles as
     mm at ``ANGLE_SCALE_MM``) or after ``max_rounds`` rounds. Returns the parameters and the
-    rounds used.
+    rounds used. ``first`` as in :func:`three_step` (the first round's hand-eye step).
     """
     model = default_model() if model is None else model
     p, centres = _own_frame_start(robot, start), None
     done = 0
     while done < max_rounds:
         before = p
-        p, centres = _fixed_sphere_fit(meas, p, _mask(SENSOR), model, centres)
+        if done == 0 and first is not None:
+            p, centres = first
+        else:
+            p, centres = _fixed_sphere_fit(meas, p, _mask(SENSOR), model, centres)
         p, centres = _fixed_sphere_fit(meas, p, _mask(ROBOT), model, centres)
         done += 1
         step = np.where(IS_LENGTH, 1.0, ANGLE_SCALE_MM) * (p - before)
