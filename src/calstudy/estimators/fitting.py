@@ -22,6 +22,7 @@ from calstudy.core.geometry import (
     check_points,
     check_same_length,
     check_shape,
+    cross_rows,
     format_values,
     is_rank_deficient,
     make_transform,
@@ -191,22 +192,30 @@ def _check_camera_matrix(k) -> np.ndarray:
     return k
 
 
-def _homography_residuals(h8, xy, uv):
-    h = np.append(h8, 1.0).reshape(3, 3)
-    q = np.column_stack([xy, np.ones(len(xy))]) @ h.T
+def _homography_matrix(h8) -> np.ndarray:
+    """``H`` (3 x 3, C order) from its first eight entries, ``H[2, 2] = 1``."""
+    h = np.empty(9)
+    h[:8] = h8
+    h[8] = 1.0
+    return h.reshape(3, 3)
+
+
+def _homography_residuals(h8, x1, uv):
+    """Reprojection residuals ``(2 N,)`` of the plane points ``x1 = [x y 1]`` (N, 3)."""
+    q = x1 @ _homography_matrix(h8).T
     return (q[:, :2] / q[:, 2:] - uv).ravel()
 
 
-def _homography_jacobian(h8, xy, uv):
-    h = np.append(h8, 1.0).reshape(3, 3)
-    x1 = np.column_stack([xy, np.ones(len(xy))])
-    q = x1 @ h.T
+def _homography_jacobian(h8, x1, uv):
+    """Jacobian ``(2 N, 8)`` of :func:`_homography_residuals`."""
+    q = x1 @ _homography_matrix(h8).T
     w = q[:, 2:]
     proj = q[:, :2] / w
-    jac = np.zeros((len(xy), 2, 8))
-    jac[:, 0, 0:3] = x1 / w
-    jac[:, 1, 3:6] = x1 / w
-    jac[:, :, 6:8] = -proj[:, :, None] * (xy / w)[:, None, :]
+    xw = x1 / w
+    jac = np.zeros((len(x1), 2, 8))
+    jac[:, 0, 0:3] = xw
+    jac[:, 1, 3:6] = xw
+    jac[:, :, 6:8] = -proj[:, :, None] * xw[:, None, :2]
     return jac.reshape(-1, 8)
 
 
@@ -222,14 +231,13 @@ def check_homography_data(xy: np.ndarray, uv: np.ndarray) -> float:
     correspondences; CalibrationError if below :data:`HOMOGRAPHY_RANK_TOL` (the points do not
     determine a homography: with 4 points, 3 of them on a line)."""
     a, b = _normalise_2d(xy), _normalise_2d(uv)
-    one, zero = np.ones((len(a), 1)), np.zeros((len(a), 3))
-    ah = np.column_stack([a, one])
-    rows = np.concatenate(
-        [
-            np.hstack([ah, zero, -b[:, :1] * ah]),
-            np.hstack([zero, ah, -b[:, 1:] * ah]),
-        ]
-    )
+    n = len(a)
+    ah = np.column_stack([a, np.ones(n)])
+    rows = np.zeros((2 * n, 9))  # [ah 0 -u ah] over [0 ah -v ah]
+    rows[:n, 0:3] = ah
+    rows[n:, 3:6] = ah
+    rows[:n, 6:9] = -b[:, :1] * ah
+    rows[n:, 6:9] = -b[:, 1:] * ah
     s = singular_values(rows)
     ratio = float(s[7] / s[0]) if s.size > 7 and s[0] > 0 else 0.0
     if ratio < HOMOGRAPHY_RANK_TOL:
@@ -298,12 +306,12 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
             _homography_residuals,
             h.ravel()[:8],
             _homography_jacobian,
-            (xy, uv),
+            (np.column_stack([xy, np.ones(len(xy))]), uv),
             xtol=1e-15,
             ftol=1e-15,
             gtol=1e-15,
         )
-        h = np.append(x, 1.0).reshape(3, 3)
+        h = _homography_matrix(x)
     if not np.all(np.isfinite(h)):
         raise CalibrationError(f"the homography of the {xy.shape[0]} points is not finite")
     return h
@@ -366,7 +374,7 @@ def homography_to_pose(h, k) -> np.ndarray:
             f"|r2|/|r1| = {ratio:.3g} and r1.r2 = {r1 @ r2:.3g} (a rotation gives 1 and 0); "
             "check K and the homography's direction (plane to image)"
         )
-    rot = project_to_so3(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    rot = project_to_so3(np.column_stack([r1, r2, cross_rows(r1[None], r2[None])[0]]))
     return make_transform(rot, t)
 
 
@@ -413,8 +421,11 @@ def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.
     n = obj.shape[0]
     if n < 4:
         raise CalibrationError(f"solve_pnp needs at least 4 points; got {n}")
-    check_not_collinear("object points", obj)
     s = singular_values(obj - obj.mean(axis=0))
+    if is_rank_deficient(s, 2):  # what check_not_collinear says, from the same values
+        raise CalibrationError(
+            f"the {n} object points are collinear (singular values {format_values(s)})"
+        )
     if not is_rank_deficient(s, 3) and n < 6:
         raise CalibrationError(
             f"non-planar object points need at least 6 points for SOLVEPNP_ITERATIVE; got {n}"
