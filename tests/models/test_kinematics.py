@@ -10,6 +10,7 @@ import pytest
 
 from calstudy import CalibrationError
 from calstudy.core import paths
+from calstudy.models import kinematics
 from calstudy.models.kinematics import Link, Robot
 from calstudy.models.robots import load_robot, perturb_robot, pose_errors
 
@@ -400,9 +401,21 @@ def test_ik_singular_normal_equations_raise_calibration_error(kr16, monkeypatch)
     q = np.array([0.3, -0.8, 0.9, 0.2, 0.6, -0.4])
     target = kr16.fk(q)
 
-    def singular(*args, **kwargs):
-        raise np.linalg.LinAlgError("Singular matrix")
+    solve = kinematics._solve
 
-    monkeypatch.setattr(np.linalg, "solve", singular)
+    def singular(a, b):
+        return solve(np.zeros_like(a), b)  # what a singular system raises
+
+    monkeypatch.setattr(kinematics, "_solve", singular)
     with pytest.raises(CalibrationError, match="IK did not converge after 1 iterations"):
         kr16.ik(target, q + 0.1)
+
+
+def test_ik_solve_is_numpy_solve_byte_for_byte():
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        j = rng.normal(size=(6, 6))
+        a, b = j.T @ j + 1e-6 * np.eye(6), rng.normal(size=6)
+        assert kinematics._solve(a, b).tobytes() == np.linalg.solve(a, b).tobytes()
+    with pytest.raises(FloatingPointError):
+        kinematics._solve(np.zeros((6, 6)), np.ones(6))

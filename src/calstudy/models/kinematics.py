@@ -38,6 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
+from numpy.linalg import _umath_linalg
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import check_transform
@@ -50,6 +51,14 @@ FLANGE = "flange"
 DEFAULT_MARGIN = math.radians(5.0)
 _TURN = 2.0 * math.pi
 _MAX_IK_STEP = 0.5  # rad per joint and iteration: a trust region that keeps LM off far branches
+
+
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.solve(a, b)`` for a square float matrix and a vector: the same LAPACK call
+    (numpy's ``solve1`` kernel), without the type and shape handling that costs twice the solve
+    of a 6 x 6 system; a singular ``a`` raises FloatingPointError (numpy: LinAlgError)."""
+    with np.errstate(invalid="raise"):
+        return _umath_linalg.solve1(a, b, signature="dd->d")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -349,15 +358,18 @@ class Robot:
         desired = _se3(target)
         err = self._ik_error(q, desired)
         cost = float(err @ err)
+        eye = np.eye(self.nq)
         damping, iterations = 1e-6, 0
         while math.sqrt(cost) > tol and iterations < max_iter:
             iterations += 1
             jac = self._ik_jacobian(q, desired)
-            jtj, jte = jac.T @ jac, jac.T @ err
+            jt = jac.T
+            jtj, jte = jt @ jac, jt @ err
             while True:
                 try:
-                    step = -np.linalg.solve(jtj + damping * np.eye(self.nq), jte)
-                except np.linalg.LinAlgError:  # numerically singular: damp more, or give up
+                    step = -_solve(jtj + damping * eye, jte)
+                except (np.linalg.LinAlgError, FloatingPointError):
+                    # numerically singular: damp more, or give up
                     trial_cost = cost
                     if damping > 1e12:
                         break
@@ -383,9 +395,9 @@ class Robot:
         return self._wrap_into_limits(q, q_start)
 
     def _ik_error(self, q: np.ndarray, desired: pin.SE3) -> np.ndarray:
-        pin.forwardKinematics(self.model, self.data, q)
-        current = pin.updateFramePlacement(self.model, self.data, self._flange_id)
-        return np.asarray(pin.log6(current.actInv(desired)).vector)
+        model, data, fid = self.model, self.data, self._flange_id
+        pin.forwardKinematics(model, data, q)
+        return pin.log6(pin.updateFramePlacement(model, data, fid).actInv(desired)).vector
 
     def _ik_jacobian(self, q: np.ndarray, desired: pin.SE3) -> np.ndarray:
         jac = pin.computeFrameJacobian(self.model, self.data, q, self._flange_id, pin.LOCAL)
