@@ -41,6 +41,26 @@ HOMOGRAPHY_RANK_TOL = 1e-8
 HOMOGRAPHY_SINGULAR_TOL = 1e-8
 
 
+#: inputs whose check passed, by (check, bytes): a study fits the same target points and camera
+#: matrix thousands of times, and their checks (an SVD each) need to run once; bounded
+_PASSED: dict = {}
+_PASSED_MAX = 256
+
+
+def _check_once(label: str, array: np.ndarray, check) -> None:
+    """Run ``check(array)`` (it raises on bad input) unless the same float array passed it
+    before."""
+    if not (isinstance(array, np.ndarray) and array.dtype == np.float64):
+        check(array)
+        return
+    key = (label, array.shape, array.tobytes())
+    if key not in _PASSED:
+        check(array)
+        if len(_PASSED) >= _PASSED_MAX:
+            _PASSED.clear()
+        _PASSED[key] = True
+
+
 # ----------------------------------------------------------------------------------------------
 # rotations and rigid motions
 
@@ -178,6 +198,11 @@ def fit_sphere(points) -> tuple[np.ndarray, float, float]:
 def _check_camera_matrix(k) -> np.ndarray:
     """Check a 3 x 3 intrinsic matrix: upper triangular, ``fx, fy > 0``, ``K[2, 2] = 1``."""
     k = check_shape("K", k, (3, 3))
+    _check_once("K", k, _check_intrinsics)
+    return k
+
+
+def _check_intrinsics(k: np.ndarray) -> None:
     lower = np.abs(k[[1, 2, 2], [0, 0, 1]])
     if lower.max() > 1e-12 * np.abs(k).max():
         raise CalibrationError(
@@ -189,7 +214,6 @@ def _check_camera_matrix(k) -> np.ndarray:
             f"K is not an invertible camera matrix (diagonal {format_values(np.diag(k))}; expected "
             "fx > 0, fy > 0, 1)"
         )
-    return k
 
 
 def _homography_matrix(h8) -> np.ndarray:
@@ -286,7 +310,7 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
     check_same_length("plane_xy", xy, "image_uv", uv)
     if xy.shape[0] < 4:
         raise CalibrationError(f"homography needs at least 4 points; got {xy.shape[0]}")
-    check_not_collinear("points", xy)
+    _check_once("plane points", xy, lambda p: check_not_collinear("points", p))
     check_not_collinear("image points", uv)
     check_homography_data(xy, uv)
     try:
@@ -378,6 +402,20 @@ def homography_to_pose(h, k) -> np.ndarray:
     return make_transform(rot, t)
 
 
+def _check_pnp_points(obj: np.ndarray) -> None:
+    """Object points SOLVEPNP_ITERATIVE accepts: not on a line, at least 6 unless coplanar."""
+    n = obj.shape[0]
+    s = singular_values(obj - obj.mean(axis=0))
+    if is_rank_deficient(s, 2):  # what check_not_collinear says
+        raise CalibrationError(
+            f"the {n} object points are collinear (singular values {format_values(s)})"
+        )
+    if not is_rank_deficient(s, 3) and n < 6:
+        raise CalibrationError(
+            f"non-planar object points need at least 6 points for SOLVEPNP_ITERATIVE; got {n}"
+        )
+
+
 def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.ndarray:
     """Pose ``target2cam`` from 3-D/2-D correspondences by ``cv2.solvePnP`` (iterative).
 
@@ -421,15 +459,7 @@ def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.
     n = obj.shape[0]
     if n < 4:
         raise CalibrationError(f"solve_pnp needs at least 4 points; got {n}")
-    s = singular_values(obj - obj.mean(axis=0))
-    if is_rank_deficient(s, 2):  # what check_not_collinear says, from the same values
-        raise CalibrationError(
-            f"the {n} object points are collinear (singular values {format_values(s)})"
-        )
-    if not is_rank_deficient(s, 3) and n < 6:
-        raise CalibrationError(
-            f"non-planar object points need at least 6 points for SOLVEPNP_ITERATIVE; got {n}"
-        )
+    _check_once("object points", obj, _check_pnp_points)
     d = None if dist is None else check_shape("dist", np.ravel(dist), (None,))
     try:
         ok, rvec, tvec = cv2.solvePnP(obj, uv, km, d, flags=cv2.SOLVEPNP_ITERATIVE)
