@@ -311,6 +311,9 @@ def _leastsq(fun, x0: np.ndarray, jac, args: tuple, xtol, ftol, gtol, max_nfev) 
     )
 
 
+#: relative step of scipy's 2-point finite differences for float64 (``eps ** 0.5``)
+_FD_STEP = np.finfo(np.float64).eps ** 0.5
+
 #: scipy's translation of MINPACK's exit codes into least_squares' status (<= 0: not converged)
 _MINPACK_STATUS = {0: -1, 1: 2, 2: 3, 3: 4, 4: 1, 5: 0}
 
@@ -320,16 +323,42 @@ def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev) -> OptimizeResult:
     :func:`levenberg_marquardt` reads: x, fun, jac, cost, nfev, status, message), computed by the
     same MINPACK call through :func:`scipy.optimize.leastsq`'s thinner wrapper. As in
     least_squares, a repeated evaluation at the last point is answered from memory, so ``fun`` is
-    called at the same points in the same order (the evaluation history is the same)."""
+    called at the same points in the same order (the evaluation history is the same).
+
+    ``jac="2-point"`` is least_squares' forward-difference Jacobian, computed as scipy's
+    ``approx_derivative`` does (relative step ``sqrt(eps) max(1, |x_i|)`` signed as ``x_i``, the
+    step actually taken ``(x_i + h_i) - x_i`` as divisor, the residuals at the last point as
+    base) and kept until ``fun`` is evaluated elsewhere, as least_squares' ``VectorFunction``
+    keeps it: the same Jacobians, hence the same MINPACK iterates, without least_squares' set-up
+    and per-evaluation wrappers (a test checks the bytes).
+    """
     last: list = []
 
     def remembered(x):
         if last and np.array_equal(x, last[0]):
             return last[1]
         f = fun(x)
-        last[:] = [np.array(x, dtype=float), f]
+        last[:] = [np.array(x, dtype=float), f, None]
         return f
 
+    if isinstance(jac, str):
+        if jac != "2-point":
+            raise CalibrationError(f"finite-difference scheme {jac!r}: only '2-point' here")
+
+        def forward_difference(x):
+            f0 = remembered(x)
+            if last[2] is None:
+                x = last[0]
+                h = _FD_STEP * ((x >= 0).astype(float) * 2 - 1) * np.maximum(1.0, np.abs(x))
+                columns = np.empty((x.size, f0.size))
+                for i in range(x.size):
+                    x1 = np.copy(x)
+                    x1[i] = x[i] + h[i]
+                    columns[i] = (np.asarray(fun(x1), dtype=float) - f0) / ((x[i] + h[i]) - x[i])
+                last[2] = columns.T
+            return last[2]
+
+        jac = forward_difference
     x, _, info, message, ier = _leastsq(remembered, x0, jac, (), xtol, ftol, gtol, max_nfev)
     x = np.asarray(x, dtype=float)
     f = np.asarray(info["fvec"], dtype=float)
@@ -411,7 +440,7 @@ def levenberg_marquardt(
         history.append(0.5 * float(r @ r))
         return r
 
-    if method == "lm" and callable(jac):
+    if method == "lm" and (callable(jac) or jac == "2-point"):
         res = _lmder(wrapped, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
     else:
         res = least_squares(

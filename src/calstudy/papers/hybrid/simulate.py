@@ -24,7 +24,7 @@ from calstudy.core.errors import CalibrationError
 from calstudy.estimators.fitting import solve_pnp
 from calstudy.estimators.sphere_csv import SphereMeasurements
 from calstudy.models.kinematics import Robot
-from calstudy.models.robots import load_robot, perturb_robot
+from calstudy.models.robots import load_robot, perturb_robot, robot_file
 from calstudy.models.sensors import LineLaserSensor, PinholeCamera
 from calstudy.models.targets import HoleTarget, ManufacturedHoleTarget, Sphere
 from calstudy.papers.hybrid.scenario import load_station
@@ -345,7 +345,7 @@ def _draw_robots(
 ) -> tuple[Robot, Robot]:
     """The nominal KUKA KR 16-2 and the true one drawn at ``robot_error_scale`` x its
     tolerances (the nominal one again without ``robot_errors``)."""
-    nominal = load_robot("kuka_kr16_2")
+    nominal = _nominal_robot("kuka_kr16_2")
     tol = nominal.tolerances
     true = (
         perturb_robot(
@@ -358,6 +358,23 @@ def _draw_robots(
         else nominal.with_parameters(nominal.parameters())
     )
     return nominal, true
+
+
+def _nominal_robot(name: str) -> Robot:
+    """``load_robot(name)``, read once per process while its file is unchanged: the stations of a
+    study share the nominal robot (only its Pinocchio scratch data is written, by every
+    kinematics call afresh)."""
+    file = robot_file(name)
+    stat = file.stat()
+    key = (str(file.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key not in _NOMINAL:
+        _NOMINAL.clear()
+        _NOMINAL[key] = load_robot(name)
+    return _NOMINAL[key]
+
+
+#: the nominal robot of :func:`_nominal_robot`, by (resolved path, modification time, size)
+_NOMINAL: dict = {}
 
 
 def _make_target(
