@@ -250,11 +250,30 @@ def _normalise_2d(p: np.ndarray) -> np.ndarray:
     return q * (np.sqrt(2.0) / scale) if scale > 0 else q
 
 
+def _normalised_plane(xy: np.ndarray) -> np.ndarray:
+    """:func:`_normalise_2d` of target-plane points, kept (read-only) for the last few point sets:
+    a study fits images of the same target again and again."""
+    if not (isinstance(xy, np.ndarray) and xy.dtype == np.float64):
+        return _normalise_2d(xy)
+    key = (xy.shape, xy.tobytes())
+    if key not in _PLANES:
+        a = _normalise_2d(xy)
+        a.flags.writeable = False
+        if len(_PLANES) >= 16:
+            _PLANES.clear()
+        _PLANES[key] = a
+    return _PLANES[key]
+
+
+#: normalised target-plane points by (shape, bytes), see :func:`_normalised_plane`
+_PLANES: dict = {}
+
+
 def check_homography_data(xy: np.ndarray, uv: np.ndarray) -> float:
     """Ratio of the 8th to the largest singular value of the normalised DLT matrix of the
     correspondences; CalibrationError if below :data:`HOMOGRAPHY_RANK_TOL` (the points do not
     determine a homography: with 4 points, 3 of them on a line)."""
-    a, b = _normalise_2d(xy), _normalise_2d(uv)
+    a, b = _normalised_plane(xy), _normalise_2d(uv)
     n = len(a)
     ah = np.column_stack([a, np.ones(n)])
     rows = np.zeros((2 * n, 9))  # [ah 0 -u ah] over [0 ah -v ah]

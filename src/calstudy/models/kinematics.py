@@ -376,14 +376,15 @@ class Robot:
                     damping *= 10.0
                     continue
                 step *= min(1.0, _MAX_IK_STEP / np.abs(step).max())
-                trial_err = self._ik_error(q + step, desired)
+                q_trial = q + step
+                trial_err = self._ik_error(q_trial, desired)
                 trial_cost = float(trial_err @ trial_err)
                 if trial_cost < cost or damping > 1e12:
                     break
                 damping *= 10.0
             if trial_cost >= cost:
                 break
-            q, err, cost = q + step, trial_err, trial_cost
+            q, err, cost = q_trial, trial_err, trial_cost
             damping = max(damping / 10.0, 1e-12)
         residual = math.sqrt(cost)
         if residual > tol:
