@@ -12,6 +12,8 @@ SVD) and Eq. 16-19 (homography and the pose it gives).
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -250,37 +252,55 @@ def _normalise_2d(p: np.ndarray) -> np.ndarray:
     return q * (np.sqrt(2.0) / scale) if scale > 0 else q
 
 
-def _normalised_plane(xy: np.ndarray) -> np.ndarray:
-    """:func:`_normalise_2d` of target-plane points, kept (read-only) for the last few point sets:
-    a study fits images of the same target again and again."""
-    if not (isinstance(xy, np.ndarray) and xy.dtype == np.float64):
-        return _normalise_2d(xy)
-    key = (xy.shape, xy.tobytes())
-    if key not in _PLANES:
-        a = _normalise_2d(xy)
-        a.flags.writeable = False
+def _dlt_plane(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The parts of the normalised DLT matrix that depend on the target-plane points only:
+    ``ah = [a 1]`` (``a`` the Hartley-normalised points) and the matrix ``[ah 0 0] / [0 ah 0]``
+    its image columns are written into. Kept (read-only) for the last few point sets: a study
+    fits images of the same target again and again."""
+    key = (xy.dtype.str, xy.shape, xy.tobytes()) if isinstance(xy, np.ndarray) else None
+    if key is None or key not in _PLANES:
+        a = _normalise_2d(np.asarray(xy, dtype=float))
+        n = len(a)
+        ah = np.column_stack([a, np.ones(n)])
+        rows = np.zeros((2 * n, 9))  # [ah 0 -u ah] over [0 ah -v ah]
+        rows[:n, 0:3] = ah
+        rows[n:, 3:6] = ah
+        if key is None:
+            return ah, rows
+        ah.flags.writeable = rows.flags.writeable = False
         if len(_PLANES) >= 16:
             _PLANES.clear()
-        _PLANES[key] = a
+        _PLANES[key] = (ah, rows)
     return _PLANES[key]
 
 
-#: normalised target-plane points by (shape, bytes), see :func:`_normalised_plane`
+#: :func:`_dlt_plane` of target-plane points by (dtype, shape, bytes)
 _PLANES: dict = {}
+
+
+def _check_not_collinear_2d(name: str, points: np.ndarray) -> None:
+    """:func:`~calstudy.core.geometry.check_not_collinear` of ``(N, 2)`` points, accepting at
+    once what it accepts by a margin: the eigenvalues of the 2 x 2 scatter matrix (the squared
+    singular values, each off by a few ulps of the larger) in closed form; a ratio above 1e-12
+    (singular values 1e-6 apart, far from the 1e-9 of the check) passes, anything else goes
+    through the check itself, which decides and words the error."""
+    q = points - points.mean(axis=0)
+    (sxx, sxy), (_, syy) = (q.T @ q).tolist()
+    mid, half = 0.5 * (sxx + syy), math.hypot(0.5 * (sxx - syy), sxy)
+    if not (mid - half > 1e-12 * (mid + half) > 0.0):
+        check_not_collinear(name, points)
 
 
 def check_homography_data(xy: np.ndarray, uv: np.ndarray) -> float:
     """Ratio of the 8th to the largest singular value of the normalised DLT matrix of the
     correspondences; CalibrationError if below :data:`HOMOGRAPHY_RANK_TOL` (the points do not
     determine a homography: with 4 points, 3 of them on a line)."""
-    a, b = _normalised_plane(xy), _normalise_2d(uv)
-    n = len(a)
-    ah = np.column_stack([a, np.ones(n)])
-    rows = np.zeros((2 * n, 9))  # [ah 0 -u ah] over [0 ah -v ah]
-    rows[:n, 0:3] = ah
-    rows[n:, 3:6] = ah
-    rows[:n, 6:9] = -b[:, :1] * ah
-    rows[n:, 6:9] = -b[:, 1:] * ah
+    ah, plane_rows = _dlt_plane(xy)
+    b = _normalise_2d(uv)
+    n = len(ah)
+    rows = plane_rows.copy()
+    np.multiply(-b[:, :1], ah, out=rows[:n, 6:9])
+    np.multiply(-b[:, 1:], ah, out=rows[n:, 6:9])
     s = singular_values(rows)
     ratio = float(s[7] / s[0]) if s.size > 7 and s[0] > 0 else 0.0
     if ratio < HOMOGRAPHY_RANK_TOL:
@@ -330,7 +350,7 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
     if xy.shape[0] < 4:
         raise CalibrationError(f"homography needs at least 4 points; got {xy.shape[0]}")
     _check_once("plane points", xy, lambda p: check_not_collinear("points", p))
-    check_not_collinear("image points", uv)
+    _check_not_collinear_2d("image points", uv)
     check_homography_data(xy, uv)
     try:
         h, _ = cv2.findHomography(xy, uv, method=0)
