@@ -55,8 +55,9 @@ _MAX_IK_STEP = 0.5  # rad per joint and iteration: a trust region that keeps LM 
 
 def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``np.linalg.solve(a, b)`` for a square float matrix and a vector: the same LAPACK call
-    (numpy's ``solve1`` kernel), without the type and shape handling that costs twice the solve
-    of a 6 x 6 system; a singular ``a`` raises FloatingPointError (numpy: LinAlgError)."""
+    (numpy's ``solve1`` kernel), without the type and shape handling around it, which costs
+    several times the solve of a 6 x 6 system itself; a singular ``a`` raises FloatingPointError
+    (numpy: LinAlgError)."""
     with np.errstate(invalid="raise"):
         return _umath_linalg.solve1(a, b, signature="dd->d")
 
