@@ -81,3 +81,35 @@ def test_levenberg_marquardt_minpack_path_is_least_squares(max_nfev):
             estimation.levenberg_marquardt(
                 lambda x: _exp_model(x, t, y), x0, jac=jac, max_nfev=3, label="fit"
             )
+
+
+@pytest.mark.parametrize("start", [[1.0, 0.5, 0.0], [-2.0, 3.0, -1e-3], [0.0, 0.0, 0.0]])
+def test_levenberg_marquardt_two_point_path_is_least_squares(start):
+    """The forward-difference Jacobian of the MINPACK path is least_squares' "2-point" one:
+    the same evaluations in the same order, the same iterates, the same bytes."""
+    from calstudy.core import estimation
+
+    rng = np.random.default_rng(11)
+    t = np.linspace(0.0, 4.0, 40)
+    y = _exp_model(np.array([2.0, 1.3, 0.5]), t, 0.0) + rng.normal(0.0, 0.01, t.size)
+    x0 = np.array(start)
+    calls = {"ours": [], "ref": []}
+
+    def fun_for(key):
+        def fun(x):
+            calls[key].append(x.copy())
+            return _exp_model(x, t, y)
+
+        return fun
+
+    tols = {"xtol": 1e-12, "ftol": 1e-12, "gtol": 1e-12, "max_nfev": None}
+    ours = estimation._lmder(fun_for("ours"), x0, "2-point", **tols)
+    ref = least_squares(fun_for("ref"), x0, jac="2-point", method="lm", **tols)
+    for field in ("x", "fun", "jac"):
+        assert getattr(ours, field).tobytes() == np.asarray(getattr(ref, field)).tobytes(), field
+    assert (ours.cost, ours.nfev, ours.status) == (ref.cost, ref.nfev, ref.status)
+    assert [c.tobytes() for c in calls["ours"]] == [c.tobytes() for c in calls["ref"]]
+    assert len(calls["ours"]) >= ours.nfev + x0.size  # the differences were taken
+    assert np.allclose(ours.x, [2.0, 1.3, 0.5], atol=0.05)
+    with pytest.raises(CalibrationError, match="only '2-point'"):
+        estimation._lmder(fun_for("ours"), x0, "3-point", **tols)

@@ -103,7 +103,7 @@ def _is_rigid_4x4(t: np.ndarray, tol: float) -> bool:
     transforms. False sends the caller to the full check, which says what is wrong.
     """
     v = t.ravel().tolist()
-    if not all(math.isfinite(x) for x in v):
+    if not math.isfinite(sum(v)):  # a NaN or infinity (or a sum past 1e308: the full check)
         return False
     if max(abs(v[12]), abs(v[13]), abs(v[14]), abs(v[15] - 1.0)) > tol:
         return False

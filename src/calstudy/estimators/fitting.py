@@ -12,6 +12,8 @@ SVD) and Eq. 16-19 (homography and the pose it gives).
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -22,6 +24,7 @@ from calstudy.core.geometry import (
     check_points,
     check_same_length,
     check_shape,
+    cross_rows,
     format_values,
     is_rank_deficient,
     make_transform,
@@ -38,6 +41,26 @@ HOMOGRAPHY_RANK_TOL = 1e-8
 #: Ratio of the smallest to the largest singular value of ``K^-1 H`` below which ``H`` is taken
 #: as singular (a plane seen edge-on, or not a homography of a plane at all).
 HOMOGRAPHY_SINGULAR_TOL = 1e-8
+
+
+#: inputs whose check passed, by (check, bytes): a study fits the same target points and camera
+#: matrix thousands of times, and their checks (an SVD each) need to run once; bounded
+_PASSED: dict = {}
+_PASSED_MAX = 256
+
+
+def _check_once(label: str, array: np.ndarray, check) -> None:
+    """Run ``check(array)`` (it raises on bad input) unless the same float array passed it
+    before."""
+    if not (isinstance(array, np.ndarray) and array.dtype == np.float64):
+        check(array)
+        return
+    key = (label, array.shape, array.tobytes())
+    if key not in _PASSED:
+        check(array)
+        if len(_PASSED) >= _PASSED_MAX:
+            _PASSED.clear()
+        _PASSED[key] = True
 
 
 # ----------------------------------------------------------------------------------------------
@@ -177,6 +200,11 @@ def fit_sphere(points) -> tuple[np.ndarray, float, float]:
 def _check_camera_matrix(k) -> np.ndarray:
     """Check a 3 x 3 intrinsic matrix: upper triangular, ``fx, fy > 0``, ``K[2, 2] = 1``."""
     k = check_shape("K", k, (3, 3))
+    _check_once("K", k, _check_intrinsics)
+    return k
+
+
+def _check_intrinsics(k: np.ndarray) -> None:
     lower = np.abs(k[[1, 2, 2], [0, 0, 1]])
     if lower.max() > 1e-12 * np.abs(k).max():
         raise CalibrationError(
@@ -188,25 +216,32 @@ def _check_camera_matrix(k) -> np.ndarray:
             f"K is not an invertible camera matrix (diagonal {format_values(np.diag(k))}; expected "
             "fx > 0, fy > 0, 1)"
         )
-    return k
 
 
-def _homography_residuals(h8, xy, uv):
-    h = np.append(h8, 1.0).reshape(3, 3)
-    q = np.column_stack([xy, np.ones(len(xy))]) @ h.T
+def _homography_matrix(h8) -> np.ndarray:
+    """``H`` (3 x 3, C order) from its first eight entries, ``H[2, 2] = 1``."""
+    h = np.empty(9)
+    h[:8] = h8
+    h[8] = 1.0
+    return h.reshape(3, 3)
+
+
+def _homography_residuals(h8, x1, uv):
+    """Reprojection residuals ``(2 N,)`` of the plane points ``x1 = [x y 1]`` (N, 3)."""
+    q = x1 @ _homography_matrix(h8).T
     return (q[:, :2] / q[:, 2:] - uv).ravel()
 
 
-def _homography_jacobian(h8, xy, uv):
-    h = np.append(h8, 1.0).reshape(3, 3)
-    x1 = np.column_stack([xy, np.ones(len(xy))])
-    q = x1 @ h.T
+def _homography_jacobian(h8, x1, uv):
+    """Jacobian ``(2 N, 8)`` of :func:`_homography_residuals`."""
+    q = x1 @ _homography_matrix(h8).T
     w = q[:, 2:]
     proj = q[:, :2] / w
-    jac = np.zeros((len(xy), 2, 8))
-    jac[:, 0, 0:3] = x1 / w
-    jac[:, 1, 3:6] = x1 / w
-    jac[:, :, 6:8] = -proj[:, :, None] * (xy / w)[:, None, :]
+    xw = x1 / w
+    jac = np.zeros((len(x1), 2, 8))
+    jac[:, 0, 0:3] = xw
+    jac[:, 1, 3:6] = xw
+    jac[:, :, 6:8] = -proj[:, :, None] * xw[:, None, :2]
     return jac.reshape(-1, 8)
 
 
@@ -217,19 +252,55 @@ def _normalise_2d(p: np.ndarray) -> np.ndarray:
     return q * (np.sqrt(2.0) / scale) if scale > 0 else q
 
 
+def _dlt_plane(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The parts of the normalised DLT matrix that depend on the target-plane points only:
+    ``ah = [a 1]`` (``a`` the Hartley-normalised points) and the matrix ``[ah 0 0] / [0 ah 0]``
+    its image columns are written into. Kept (read-only) for the last few point sets: a study
+    fits images of the same target again and again."""
+    key = (xy.dtype.str, xy.shape, xy.tobytes()) if isinstance(xy, np.ndarray) else None
+    if key is None or key not in _PLANES:
+        a = _normalise_2d(np.asarray(xy, dtype=float))
+        n = len(a)
+        ah = np.column_stack([a, np.ones(n)])
+        rows = np.zeros((2 * n, 9))  # [ah 0 -u ah] over [0 ah -v ah]
+        rows[:n, 0:3] = ah
+        rows[n:, 3:6] = ah
+        if key is None:
+            return ah, rows
+        ah.flags.writeable = rows.flags.writeable = False
+        if len(_PLANES) >= 16:
+            _PLANES.clear()
+        _PLANES[key] = (ah, rows)
+    return _PLANES[key]
+
+
+#: :func:`_dlt_plane` of target-plane points by (dtype, shape, bytes)
+_PLANES: dict = {}
+
+
+def _check_not_collinear_2d(name: str, points: np.ndarray) -> None:
+    """:func:`~calstudy.core.geometry.check_not_collinear` of ``(N, 2)`` points, accepting at
+    once what it accepts by a margin: the eigenvalues of the 2 x 2 scatter matrix (the squared
+    singular values, each off by a few ulps of the larger) in closed form; a ratio above 1e-12
+    (singular values 1e-6 apart, far from the 1e-9 of the check) passes, anything else goes
+    through the check itself, which decides and words the error."""
+    q = points - points.mean(axis=0)
+    (sxx, sxy), (_, syy) = (q.T @ q).tolist()
+    mid, half = 0.5 * (sxx + syy), math.hypot(0.5 * (sxx - syy), sxy)
+    if not (mid - half > 1e-12 * (mid + half) > 0.0):
+        check_not_collinear(name, points)
+
+
 def check_homography_data(xy: np.ndarray, uv: np.ndarray) -> float:
     """Ratio of the 8th to the largest singular value of the normalised DLT matrix of the
     correspondences; CalibrationError if below :data:`HOMOGRAPHY_RANK_TOL` (the points do not
     determine a homography: with 4 points, 3 of them on a line)."""
-    a, b = _normalise_2d(xy), _normalise_2d(uv)
-    one, zero = np.ones((len(a), 1)), np.zeros((len(a), 3))
-    ah = np.column_stack([a, one])
-    rows = np.concatenate(
-        [
-            np.hstack([ah, zero, -b[:, :1] * ah]),
-            np.hstack([zero, ah, -b[:, 1:] * ah]),
-        ]
-    )
+    ah, plane_rows = _dlt_plane(xy)
+    b = _normalise_2d(uv)
+    n = len(ah)
+    rows = plane_rows.copy()
+    np.multiply(-b[:, :1], ah, out=rows[:n, 6:9])
+    np.multiply(-b[:, 1:], ah, out=rows[n:, 6:9])
     s = singular_values(rows)
     ratio = float(s[7] / s[0]) if s.size > 7 and s[0] > 0 else 0.0
     if ratio < HOMOGRAPHY_RANK_TOL:
@@ -278,8 +349,8 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
     check_same_length("plane_xy", xy, "image_uv", uv)
     if xy.shape[0] < 4:
         raise CalibrationError(f"homography needs at least 4 points; got {xy.shape[0]}")
-    check_not_collinear("points", xy)
-    check_not_collinear("image points", uv)
+    _check_once("plane points", xy, lambda p: check_not_collinear("points", p))
+    _check_not_collinear_2d("image points", uv)
     check_homography_data(xy, uv)
     try:
         h, _ = cv2.findHomography(xy, uv, method=0)
@@ -298,12 +369,12 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
             _homography_residuals,
             h.ravel()[:8],
             _homography_jacobian,
-            (xy, uv),
+            (np.column_stack([xy, np.ones(len(xy))]), uv),
             xtol=1e-15,
             ftol=1e-15,
             gtol=1e-15,
         )
-        h = np.append(x, 1.0).reshape(3, 3)
+        h = _homography_matrix(x)
     if not np.all(np.isfinite(h)):
         raise CalibrationError(f"the homography of the {xy.shape[0]} points is not finite")
     return h
@@ -366,8 +437,22 @@ def homography_to_pose(h, k) -> np.ndarray:
             f"|r2|/|r1| = {ratio:.3g} and r1.r2 = {r1 @ r2:.3g} (a rotation gives 1 and 0); "
             "check K and the homography's direction (plane to image)"
         )
-    rot = project_to_so3(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    rot = project_to_so3(np.column_stack([r1, r2, cross_rows(r1[None], r2[None])[0]]))
     return make_transform(rot, t)
+
+
+def _check_pnp_points(obj: np.ndarray) -> None:
+    """Object points SOLVEPNP_ITERATIVE accepts: not on a line, at least 6 unless coplanar."""
+    n = obj.shape[0]
+    s = singular_values(obj - obj.mean(axis=0))
+    if is_rank_deficient(s, 2):  # what check_not_collinear says
+        raise CalibrationError(
+            f"the {n} object points are collinear (singular values {format_values(s)})"
+        )
+    if not is_rank_deficient(s, 3) and n < 6:
+        raise CalibrationError(
+            f"non-planar object points need at least 6 points for SOLVEPNP_ITERATIVE; got {n}"
+        )
 
 
 def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.ndarray:
@@ -413,12 +498,7 @@ def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.
     n = obj.shape[0]
     if n < 4:
         raise CalibrationError(f"solve_pnp needs at least 4 points; got {n}")
-    check_not_collinear("object points", obj)
-    s = singular_values(obj - obj.mean(axis=0))
-    if not is_rank_deficient(s, 3) and n < 6:
-        raise CalibrationError(
-            f"non-planar object points need at least 6 points for SOLVEPNP_ITERATIVE; got {n}"
-        )
+    _check_once("object points", obj, _check_pnp_points)
     d = None if dist is None else check_shape("dist", np.ravel(dist), (None,))
     try:
         ok, rvec, tvec = cv2.solvePnP(obj, uv, km, d, flags=cv2.SOLVEPNP_ITERATIVE)

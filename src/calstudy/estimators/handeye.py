@@ -20,7 +20,7 @@ from one robot pose and two images of a two-sided target.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -239,10 +239,17 @@ class _SphereProblem:
     x_f: np.ndarray
     whiten: np.ndarray  # (N, 3, 3): W_i with W_i^T W_i the inverse covariance of centre i
     base: np.ndarray  # rotation around which the correction is parametrised
+    _last: tuple | None = field(default=None, repr=False, compare=False)
 
     def unpack(self, x):
-        rot = self.base @ geo.rotvec_to_matrix(x[3:6])
-        return geo.make_transform(rot, x[:3]), x[6:9]
+        # MINPACK asks for the Jacobian where it has just evaluated the residuals: the rotation
+        # of the last point is kept (read-only) rather than converted again
+        key = np.asarray(x[3:6], dtype=float).tobytes()
+        if self._last is None or self._last[0] != key:
+            rot = self.base @ geo.rotvec_to_matrix(x[3:6])
+            rot.flags.writeable = False
+            self._last = (key, rot)
+        return geo.make_transform(self._last[1], x[:3]), x[6:9]
 
     def residuals(self, x):
         s2f, x_b = self.unpack(x)

@@ -369,7 +369,8 @@ class Robot:
         while math.sqrt(cost) > tol and iterations < max_iter:
             iterations += 1
             jac = self._ik_jacobian(q, desired)
-            jtj, jte = jac.T @ jac, jac.T @ err
+            jt = jac.T
+            jtj, jte = jt @ jac, jt @ err
             while True:
                 try:
                     step = -_solve(jtj + damping * eye, jte)
@@ -380,14 +381,15 @@ class Robot:
                     damping *= 10.0
                     continue
                 step *= min(1.0, _MAX_IK_STEP / np.abs(step).max())
-                trial_err = self._ik_error(q + step, desired)
+                q_trial = q + step
+                trial_err = self._ik_error(q_trial, desired)
                 trial_cost = float(trial_err @ trial_err)
                 if trial_cost < cost or damping > 1e12:
                     break
                 damping *= 10.0
             if trial_cost >= cost:
                 break
-            q, err, cost = q + step, trial_err, trial_cost
+            q, err, cost = q_trial, trial_err, trial_cost
             damping = max(damping / 10.0, 1e-12)
         residual = math.sqrt(cost)
         if residual > tol:
@@ -399,9 +401,9 @@ class Robot:
         return self._wrap_into_limits(q, q_start)
 
     def _ik_error(self, q: np.ndarray, desired: pin.SE3) -> np.ndarray:
-        pin.forwardKinematics(self.model, self.data, q)
-        current = pin.updateFramePlacement(self.model, self.data, self._flange_id)
-        return np.asarray(pin.log6(current.actInv(desired)).vector)
+        model, data, fid = self.model, self.data, self._flange_id
+        pin.forwardKinematics(model, data, q)
+        return pin.log6(pin.updateFramePlacement(model, data, fid).actInv(desired)).vector
 
     def _ik_jacobian(self, q: np.ndarray, desired: pin.SE3) -> np.ndarray:
         jac = pin.computeFrameJacobian(self.model, self.data, q, self._flange_id, pin.LOCAL)

@@ -84,8 +84,35 @@ REEXPORTED = (
 )
 
 
+#: the variants of :func:`stationary_trial`, in the order of its rows
+STATIONARY_VARIANTS = (
+    "homography",
+    "pnp",
+    "images only, homography",
+    "images only, pnp",
+    "design pose",
+    "exact target, homography",
+    "exact target, pnp",
+)
+
+
+def _target_poses(method: str, front_cad, back_cad, uv_pair, k) -> tuple:
+    """``(front2cam, back2cam)`` of the two-sided target from its two images, by Eq. 19 from
+    the homographies (``method="homography"``) or by maximum-likelihood PnP (``"pnp"``)."""
+    (uv_front, uv_back) = uv_pair
+    if method == "pnp":
+        return solve_pnp(front_cad, uv_front, k), solve_pnp(back_cad, uv_back, k)
+    return (
+        homography_to_pose(fit_homography(front_cad[:, :2], uv_front), k),
+        homography_to_pose(fit_homography(back_cad[:, :2], uv_back), k),
+    )
+
+
 def stationary_trial(
-    station: HybridStation, sensor2flange: np.ndarray, rng: np.random.Generator
+    station: HybridStation,
+    sensor2flange: np.ndarray,
+    rng: np.random.Generator,
+    variants=STATIONARY_VARIANTS,
 ) -> list[dict]:
     """Calibrate the ten stationary sensors once (Eq. 23); errors per sensor and per variant.
 
@@ -97,16 +124,29 @@ def stationary_trial(
     (the images-only chains with a target made exactly to its drawing and its back-to-front
     transform known exactly: the hole tolerance and the CMM error removed, the pixel noise kept;
     the oracle control).
+
+    ``variants`` (a subset of :data:`STATIONARY_VARIANTS`) selects the rows computed; every image
+    is drawn whatever the selection, so the generator leaves the trial in the same state and a
+    variant's rows do not depend on which others are computed.
     """
+    unknown = set(variants) - set(STATIONARY_VARIANTS)
+    if unknown:
+        raise CalibrationError(
+            f"unknown stationary variants {sorted(unknown)}; use {list(STATIONARY_VARIANTS)}"
+        )
+    wanted = [v for v in STATIONARY_VARIANTS if v in variants]
     rows = []
     k = station.camera.K
     front_cad = station.target.front_points()
     back_cad = station.target.back_points()
+    b2f_exact = station.target.back2front()
+    s2f_true = station.sensor2flange_true
+    field_point = np.array([0.0, 0.0, station.standoff])  # centre of the measuring field
     for i in range(len(station.statcam2base_true)):
         q, _ = station.stationary_pose(i)
         reported, actual = station.move(q, rng)
         reported, actual = reported[0], actual[0]
-        front2base = actual @ station.sensor2flange_true @ station.front2sensor
+        front2base = actual @ s2f_true @ station.front2sensor
         back2statcam = (
             geo.invert(station.statcam2base_true[i]) @ front2base @ station.target_made.back2front
         )
@@ -116,42 +156,27 @@ def stationary_trial(
         uv_b = station.camera.observe(
             back2statcam, station.target_made.back_points, station.pixel_sigma, rng
         )
-        f_h = homography_to_pose(fit_homography(front_cad[:, :2], uv_f), k)
-        b_h = homography_to_pose(fit_homography(back_cad[:, :2], uv_b), k)
-        f_p = solve_pnp(front_cad, uv_f, k)
-        b_p = solve_pnp(back_cad, uv_b, k)
         # the same views of an exactly made target whose back-to-front transform is known
         # exactly (the oracle control: the target's errors removed, the pixel noise kept)
-        b2f_exact = station.target.back2front()
         back2statcam_exact = back2statcam @ geo.invert(station.target_made.back2front) @ b2f_exact
         uv_f0 = station.camera.observe(station.front2sensor, front_cad, station.pixel_sigma, rng)
         uv_b0 = station.camera.observe(back2statcam_exact, back_cad, station.pixel_sigma, rng)
-        b2f = station.back2front_cmm
         truth = station.statcam2base_true[i]
-        s2f_true = station.sensor2flange_true
-        variants = {
-            "homography": stationary_sensor_to_base(reported, sensor2flange, f_h, b_h, b2f),
-            "pnp": stationary_sensor_to_base(reported, sensor2flange, f_p, b_p, b2f),
-            "images only, homography": stationary_sensor_to_base(actual, s2f_true, f_h, b_h, b2f),
-            "images only, pnp": stationary_sensor_to_base(actual, s2f_true, f_p, b_p, b2f),
-            "design pose": station.statcam2base_design[i],
-            "exact target, homography": stationary_sensor_to_base(
-                actual,
-                s2f_true,
-                homography_to_pose(fit_homography(front_cad[:, :2], uv_f0), k),
-                homography_to_pose(fit_homography(back_cad[:, :2], uv_b0), k),
-                b2f_exact,
-            ),
-            "exact target, pnp": stationary_sensor_to_base(
-                actual,
-                s2f_true,
-                solve_pnp(front_cad, uv_f0, k),
-                solve_pnp(back_cad, uv_b0, k),
-                b2f_exact,
-            ),
-        }
-        field_point = np.array([0.0, 0.0, station.standoff])  # centre of the measuring field
-        for name, est in variants.items():
+        poses: dict = {}  # (method, exact target) -> the target's two poses, fitted once
+        for name in wanted:
+            if name == "design pose":
+                est = station.statcam2base_design[i]
+            else:
+                method = "pnp" if name.endswith("pnp") else "homography"
+                exact = name.startswith("exact target")
+                if (method, exact) not in poses:
+                    uv_pair = (uv_f0, uv_b0) if exact else (uv_f, uv_b)
+                    poses[method, exact] = _target_poses(method, front_cad, back_cad, uv_pair, k)
+                # the paper's chain uses what the station knows; the others, the truth
+                paper = name in ("homography", "pnp")
+                flange, hand = (reported, sensor2flange) if paper else (actual, s2f_true)
+                b2f = b2f_exact if exact else station.back2front_cmm
+                est = stationary_sensor_to_base(flange, hand, *poses[method, exact], b2f)
             rows.append(
                 {
                     "sensor": i + 1,
@@ -353,8 +378,8 @@ def calibrate(st: HybridStation, rng: np.random.Generator) -> ProductionStation:
     features = load_features(station_config=st.config)
     meas, _ = simulate_sphere_measurements(st, *paper_moves(st), rng)
     s2f = sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
-    rows = stationary_trial(st, s2f, rng)
-    cams = np.array([r["estimate"] for r in rows if r["variant"] == "homography"])
+    rows = stationary_trial(st, s2f, rng, variants=("homography",))
+    cams = np.array([r["estimate"] for r in rows])
     return ProductionStation(st, features, teach_program(st, features), s2f, cams)
 
 

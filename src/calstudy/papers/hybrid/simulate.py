@@ -24,7 +24,7 @@ from calstudy.core.errors import CalibrationError
 from calstudy.estimators.fitting import solve_pnp
 from calstudy.estimators.sphere_csv import SphereMeasurements
 from calstudy.models.kinematics import Robot
-from calstudy.models.robots import load_robot, perturb_robot
+from calstudy.models.robots import load_robot, perturb_robot, robot_file
 from calstudy.models.sensors import LineLaserSensor, PinholeCamera
 from calstudy.models.targets import HoleTarget, ManufacturedHoleTarget, Sphere
 from calstudy.papers.hybrid.scenario import load_station
@@ -80,13 +80,36 @@ class HybridStation:
     free_direction: float
     config: dict = field(repr=False, default_factory=dict)
     _sphere_ref: np.ndarray | None = field(default=None, repr=False)
+    _ik_memo: dict = field(default_factory=dict, repr=False, compare=False)
 
     # ------------------------------------------------------------------ robot motion
 
     def solve_ik(
         self, robot: Robot, flange2base: np.ndarray, q0=None, only_q0: bool = False
     ) -> np.ndarray:
-        """Joint angles of ``robot`` for a flange pose, trying ``q0`` then the built-in seeds."""
+        """Joint angles of ``robot`` for a flange pose, trying ``q0`` then the built-in seeds.
+
+        Without ``q0`` the answer depends on the robot and the pose only; a station asks for the
+        same one several times (its sphere reference pose: once to find it, once for the
+        repeatability, once to teach the moves), so it is kept, by robot and pose.
+        """
+        if q0 is not None:
+            return self._solve_ik(robot, flange2base, q0, only_q0)
+        pose = np.asarray(flange2base, dtype=float)
+        key = (
+            tuple((link.convention, link.parallel) for link in robot.links),
+            robot.parameters().tobytes(),
+            robot.base.tobytes(),
+            robot.tool.tobytes(),
+            robot.qmin.tobytes(),
+            robot.qmax.tobytes(),
+            pose.tobytes(),
+        )
+        if key not in self._ik_memo:
+            self._ik_memo[key] = self._solve_ik(robot, pose, None, only_q0)
+        return self._ik_memo[key].copy()
+
+    def _solve_ik(self, robot: Robot, flange2base: np.ndarray, q0, only_q0: bool) -> np.ndarray:
         seeds = [] if q0 is None else [np.asarray(q0, dtype=float)]
         yaw = np.arctan2(flange2base[1, 3], flange2base[0, 3])
         for s in np.deg2rad(_IK_SEEDS_DEG) if not (only_q0 and seeds) else []:
@@ -345,7 +368,7 @@ def _draw_robots(
 ) -> tuple[Robot, Robot]:
     """The nominal KUKA KR 16-2 and the true one drawn at ``robot_error_scale`` x its
     tolerances (the nominal one again without ``robot_errors``)."""
-    nominal = load_robot("kuka_kr16_2")
+    nominal = _nominal_robot("kuka_kr16_2")
     tol = nominal.tolerances
     true = (
         perturb_robot(
@@ -358,6 +381,23 @@ def _draw_robots(
         else nominal.with_parameters(nominal.parameters())
     )
     return nominal, true
+
+
+def _nominal_robot(name: str) -> Robot:
+    """``load_robot(name)``, read once per process while its file is unchanged: the stations of a
+    study share the nominal robot (only its Pinocchio scratch data is written, by every
+    kinematics call afresh)."""
+    file = robot_file(name)
+    stat = file.stat()
+    key = (str(file.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key not in _NOMINAL:
+        _NOMINAL.clear()
+        _NOMINAL[key] = load_robot(name)
+    return _NOMINAL[key]
+
+
+#: the nominal robot of :func:`_nominal_robot`, by (resolved path, modification time, size)
+_NOMINAL: dict = {}
 
 
 def _make_target(

@@ -85,6 +85,7 @@ class ProductionStation:
     sensor2flange: np.ndarray
     statcam2base: np.ndarray
     _joint_sigmas: dict = field(default_factory=dict, repr=False)
+    _reported: dict = field(default_factory=dict, repr=False, compare=False)
 
     def joint_sigma(self, repeatability_mm: float) -> float:
         """Joint noise (rad) for a repeatability of +-``repeatability_mm`` (3 sigma)."""
@@ -96,8 +97,22 @@ class ProductionStation:
 
     def reported_sensor2base(self) -> np.ndarray:
         """``sensor2base`` the station computes with at each program pose: nominal FK, calibrated
-        hand-eye."""
-        return self.station.nominal.fk_many(self.program) @ self.sensor2flange
+        hand-eye. The same at every panel, so computed once per program, robot and hand-eye
+        (a read-only array)."""
+        nominal = self.station.nominal
+        key = (
+            self.program.tobytes(),
+            self.sensor2flange.tobytes(),
+            nominal.parameters().tobytes(),
+            nominal.base.tobytes(),
+            nominal.tool.tobytes(),
+        )
+        if key not in self._reported:
+            poses = nominal.fk_many(self.program) @ self.sensor2flange
+            poses.flags.writeable = False
+            self._reported.clear()
+            self._reported[key] = poses
+        return self._reported[key]
 
 
 def _transform_points(t: np.ndarray, p: np.ndarray) -> np.ndarray:
