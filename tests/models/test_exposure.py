@@ -81,3 +81,22 @@ def test_fusion_rejects_a_wrong_bit_depth():
         exposure.fuse_exposures([img, img], bits=8)
     with pytest.raises(CalibrationError, match="bit depth 17 must be an integer from 1 to 16"):
         exposure.fuse_exposures([img, img], bits=17)
+
+
+def test_filled_arrays_give_numpy_minimum_and_maximum_the_scalars_numbers():
+    rng = np.random.default_rng(5)
+    x = np.rint(rng.normal(0.0, 300.0, 5000)).astype(np.float32)
+    x[::7], x[::11], x[::13] = -0.0, 0.0, 255.0
+    x[::17], x[::19], x[::23] = np.nan, np.inf, -np.inf
+    for value in (0.0, 255.0, 1e-6):
+        for shape in ((5000,), (50, 100), (2, 25, 100)):
+            c = exposure.filled(value, shape)
+            assert c.shape == shape and c.dtype == np.float32 and not c.flags.writeable
+            assert np.all(c == np.float32(value))
+            xs = x.reshape(shape)
+            for op in (np.maximum, np.minimum):
+                assert op(xs, c).tobytes() == op(xs, np.float32(value)).tobytes()
+    # a larger request grows the buffer; earlier views keep their values
+    small = exposure.filled(3.5, (4,))
+    big = exposure.filled(3.5, (300, 300))
+    assert big.size == 90000 and np.all(big == 3.5) and np.all(small == 3.5)

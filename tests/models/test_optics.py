@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 import pytest
@@ -243,3 +245,48 @@ def test_render_rois_in_boxes_is_the_whole_roi_render_bit_for_bit(monkeypatch):
         optics.render_rois(k, dist, centres, normals, radius, origins, shapes), want, strict=True
     ):
         np.testing.assert_array_equal(g, w)
+
+
+def test_undistorted_pixels_of_boxes_are_the_whole_grids_cut_bit_for_bit():
+    k = np.array([[2400.0, 0.0, 1000.0], [0.0, 2380.0, 800.0], [0.0, 0.0, 1.0]])
+    dist = np.array([-0.25, 0.12, 1e-3, -8e-4, -0.02])
+    rng = np.random.default_rng(11)
+    origins, shapes, boxes = [], [], []
+    for _ in range(12):
+        rows = int(rng.integers(9, 200))
+        shapes.append((rows, rows))
+        origins.append(rng.integers(0, 1700, 2))
+        cut = int(rng.integers(0, rows // 2))
+        boxes.append((cut, rows - cut, cut, rows - cut))
+    whole_x, whole_y = optics._undistorted_pixels(k, dist, origins, shapes)
+    x, y = optics._undistorted_pixels(k, dist, origins, shapes, boxes=boxes)
+    want_x, want_y, start = [], [], 0
+    for (rows, cols), (r0, r1, c0, c1) in zip(shapes, boxes, strict=True):
+        want_x.append(whole_x[start : start + rows * cols].reshape(rows, cols)[r0:r1, c0:c1])
+        want_y.append(whole_y[start : start + rows * cols].reshape(rows, cols)[r0:r1, c0:c1])
+        start += rows * cols
+    assert x.tobytes() == np.concatenate([w.ravel() for w in want_x]).tobytes()
+    assert y.tobytes() == np.concatenate([w.ravel() for w in want_y]).tobytes()
+
+
+@pytest.mark.parametrize(("delta", "side"), [(0.7, 1.0), (3.3, -1.0), (8.6, 1.0), (14.2, -1.0)])
+def test_cut_blur_spot_pupil_from_a_quadrant_is_the_whole_grids(delta, side):
+    """The kernel's pupil, computed on a quadrant and mirrored, is the one computed on every
+    pixel of the kernel (the formula written out on the whole grid)."""
+    centre, radius = np.array([0.9, -0.4]), 1.2
+    n = optics._gaussian_size(delta)
+    h = n // 2
+    offsets = np.arange(-h, h + 1, dtype=np.float64)
+    px, py = (side * offsets / delta)[None, :], (side * offsets / delta)[:, None]
+    pupil = np.clip(0.5 + (1.0 - np.hypot(px, py)) * delta, 0.0, 1.0)
+    through = np.clip(0.5 + (radius - np.hypot(px - centre[0], py - centre[1])) * delta, 0, 1)
+    both = np.stack([pupil, pupil * through], axis=-1)
+    share = float(both[..., 1].sum() / pupil.sum())
+    spread = cv2.GaussianBlur(
+        both, (0, 0), sigmaX=delta / math.sqrt(2.0), borderType=cv2.BORDER_CONSTANT
+    )
+    g1 = cv2.getGaussianKernel(n, delta, cv2.CV_64F)[:, 0]
+    k = np.clip(spread[..., 1] + share * (np.outer(g1, g1) * pupil.sum() - spread[..., 0]), 0, None)
+    want = (k / k.sum()).astype(np.float32)
+    got = optics.defocus_kernel(delta, side, centre, radius)
+    assert got.tobytes() == want.tobytes()

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from calstudy.core.errors import CalibrationError
+from calstudy.models.exposure import filled
 
 # ----------------------------------------------------------------------------------------------
 # circle-of-confusion rectification (Eq. 8-11, Fig. 5)
@@ -175,7 +176,7 @@ def _rectify_strip(img, y0: int, y1: int, setup, out, gx=None, gy=None) -> None:
     # X = 2 pi delta^4 (E_u0 - E_u) / (t E_u0); step = sign(X) sqrt(2 |X|) / |grad|
     x = np.subtract(mean, here)
     x *= coef
-    np.maximum(mean, np.float32(1e-6), out=mean)
+    np.maximum(mean, filled(1e-6, mean.shape), out=mean)
     x /= mean
     step = np.abs(x, out=mean)
     step *= 2.0
@@ -289,11 +290,10 @@ def detect_centre(
         raise CalibrationError(
             f"Canny thresholds low = {low}, high = {high}: need 0 < low < high <= 1"
         )
-    where = tuple(np.asarray(origin).tolist())
     span = float(img.max() - img.min())
     if not np.isfinite(span) or span < 0.02:
         raise CalibrationError(
-            f"no dot found in the {img.shape[1]} x {img.shape[0]} px ROI at {where}: "
+            f"no dot found in the {img.shape[1]} x {img.shape[0]} px ROI at {_where(origin)}: "
             f"intensity range {span:.3g} of full scale"
         )
     gx, gy = image_gradients(img) if gradients is None else gradients
@@ -307,26 +307,28 @@ def detect_centre(
     )
     found = cv2.findNonZero(edges)  # (x, y) of the edge pixels, row by row
     pts = np.zeros((0, 2), np.int32) if found is None else found.reshape(-1, 2)
-    cols, rows = pts[:, 0], pts[:, 1]
-    if rows.size < min_points:
+    if len(pts) < min_points:
         raise CalibrationError(
-            f"ellipse fit from {rows.size} edge points in the ROI at {where}; "
+            f"ellipse fit from {len(pts)} edge points in the ROI at {_where(origin)}; "
             f"at least {min_points} are needed"
         )
-    if (
-        rows.min() <= 1
-        or cols.min() <= 1
-        or rows.max() >= img.shape[0] - 2
-        or cols.max() >= img.shape[1] - 2
-    ):
+    # the edge pixels' extent in one pass: first column and row, width and height
+    c0, r0, width, height = cv2.boundingRect(pts)
+    r1, c1 = r0 + height - 1, c0 + width - 1  # last row and column
+    if r0 <= 1 or c0 <= 1 or r1 >= img.shape[0] - 2 or c1 >= img.shape[1] - 2:
         raise CalibrationError(
             f"the dot's boundary touches the border of the {img.shape[1]} x {img.shape[0]} px ROI "
-            f"at {where}: the dot is cut off"
+            f"at {_where(origin)}: the dot is cut off"
         )
     (cu, cv), axes, _ = cv2.fitEllipseDirect(pts.astype(np.float32))
     if not (np.isfinite(cu) and np.isfinite(cv) and min(axes) > 0):
-        raise CalibrationError(f"ellipse fit failed on {rows.size} edge points at {where}")
+        raise CalibrationError(f"ellipse fit failed on {len(pts)} edge points at {_where(origin)}")
     return np.array([cu + origin[0], cv + origin[1]], dtype=float)
+
+
+def _where(origin) -> tuple:
+    """The ROI's origin as the error messages give it."""
+    return tuple(np.asarray(origin).tolist())
 
 
 def detect_centres(

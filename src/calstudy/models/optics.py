@@ -323,29 +323,40 @@ def _undistorted_pixels(k, dist, origins, shapes, step: int = 8, boxes=None):
     ``y``, float32, the ROIs' pixels one after the other (row by row). One
     ``cv2.undistortPointsIter`` call for all grid nodes (each point is undistorted on its own).
     ``boxes``: per ROI, ``(r0, r1, c0, c1)``, the pixels to return (those of the whole ROI's
-    interpolation, cut)."""
-    grids = []
-    for origin, (rows, cols) in zip(origins, shapes, strict=True):
-        gu = np.arange(0, cols + step, step)
-        gv = np.arange(0, rows + step, step)
-        uu, vv = np.meshgrid(gu, gv)
-        nodes = np.stack([uu, vv], axis=-1).astype(np.float64)  # (gv, gu, 2)
-        grids.append(nodes + np.asarray(origin, dtype=np.float64))
-    sizes = [g.shape[0] * g.shape[1] for g in grids]
-    uv = np.concatenate([g.reshape(-1, 2) for g in grids])
-    coarse = cv2.undistortPointsIter(
-        uv.reshape(-1, 1, 2), k, dist, None, None, RENDER_UNDISTORT_CRITERIA
-    )
-    coarse = coarse.reshape(-1, 2).astype(np.float32)
+    interpolation, cut).
+
+    Only the nodes next to a returned pixel are undistorted; the others are left at 0, which
+    reaches no returned pixel (their interpolation weights there are 0): the numbers are those
+    of the whole ROI's grid, cut. (The products keep the whole ROI's shapes: BLAS may round a
+    product of a cut matrix differently.)
+    """
     if boxes is None:
         boxes = [(0, rows, 0, cols) for rows, cols in shapes]
+    grids, used, nodes = [], [], []
+    for origin, (rows, cols), (r0, r1, c0, c1) in zip(origins, shapes, boxes, strict=True):
+        n_v, n_u = -(-(rows + step) // step), -(-(cols + step) // step)  # nodes 0, step, ...
+        # pixel y lies between the nodes y // step and y // step + 1
+        a0, a1 = r0 // step, min(n_v, (r1 - 1) // step + 2)
+        b0, b1 = c0 // step, min(n_u, (c1 - 1) // step + 2)
+        grid = np.empty((a1 - a0, b1 - b0, 2))
+        grid[..., 0] = np.arange(b0 * step, b1 * step, step)[None, :] + float(origin[0])
+        grid[..., 1] = np.arange(a0 * step, a1 * step, step)[:, None] + float(origin[1])
+        nodes.append(grid.reshape(-1, 2))
+        grids.append((n_v, n_u))
+        used.append((a0, a1, b0, b1))
+    sizes = [len(g) for g in nodes]
+    coarse = cv2.undistortPointsIter(
+        np.concatenate(nodes).reshape(-1, 1, 2), k, dist, None, None, RENDER_UNDISTORT_CRITERIA
+    )
+    coarse = coarse.reshape(-1, 2).astype(np.float32)
     xs, ys = [], []
-    for part, g, (rows, cols), (r0, r1, c0, c1) in zip(
-        np.split(coarse, np.cumsum(sizes)[:-1]), grids, shapes, boxes, strict=True
+    for piece, (n_v, n_u), (a0, a1, b0, b1), (rows, cols), (r0, r1, c0, c1) in zip(
+        np.split(coarse, np.cumsum(sizes)[:-1]), grids, used, shapes, boxes, strict=True
     ):
-        part = part.reshape(g.shape)
-        wy = _linear_weights(rows, g.shape[0], step)
-        wx = _linear_weights(cols, g.shape[1], step)
+        part = np.zeros((n_v, n_u, 2), dtype=np.float32)
+        part[a0:a1, b0:b1] = piece.reshape(a1 - a0, b1 - b0, 2)
+        wy = _linear_weights(rows, n_v, step)
+        wx = _linear_weights(cols, n_u, step)
         # separable bilinear interpolation, float32 (the grid values are ~0.3, error ~1e-8)
         xs.append((wy @ part[None, :, :, 0] @ wx.T)[0, r0:r1, c0:c1].reshape(-1))
         ys.append((wy @ part[None, :, :, 1] @ wx.T)[0, r0:r1, c0:c1].reshape(-1))
@@ -519,7 +530,11 @@ def defocus_kernel(
     delta_px = _check_delta(delta_px)
     if not delta_px > 0:
         raise CalibrationError(f"circle-of-confusion radius {delta_px} px must be > 0")
-    side, c, r = _check_rim(side, rim_centre, rim_radius)
+    return _defocus_kernel(delta_px, *_check_rim(side, rim_centre, rim_radius))
+
+
+def _defocus_kernel(delta_px: float, side: float, c: np.ndarray, r: float) -> np.ndarray:
+    """:func:`defocus_kernel` of checked inputs."""
     n = _gaussian_size(delta_px)
     g1 = cv2.getGaussianKernel(n, delta_px, cv2.CV_64F)[:, 0]
     k = np.outer(g1, g1)
@@ -530,7 +545,12 @@ def defocus_kernel(
         px, py = (side * offsets / delta_px)[None, :], (side * offsets / delta_px)[:, None]
         both = np.empty((n, n, 2))  # the pupil and the transmitted pupil, spread in one call
         pupil, passed = both[..., 0], both[..., 1]
-        np.clip(0.5 + (1.0 - np.hypot(px, py)) * delta_px, 0.0, 1.0, out=pupil)
+        # the pupil is symmetric about both axes: computed on a quadrant, |offset| / delta, and
+        # mirrored (hypot ignores the signs: the same numbers as on the whole grid)
+        q = offsets[h:] / delta_px
+        quadrant = np.clip(0.5 + (1.0 - np.hypot(q[None, :], q[:, None])) * delta_px, 0.0, 1.0)
+        mirror = np.abs(np.arange(-h, h + 1))
+        pupil[...] = quadrant[mirror[:, None], mirror[None, :]]
         through = np.clip(0.5 + (r - np.hypot(px - c[0], py - c[1])) * delta_px, 0.0, 1.0)
         np.multiply(pupil, through, out=passed)
         share = float(passed.sum() / pupil.sum())  # |T| / |D|
@@ -556,6 +576,6 @@ def defocus_vignetted(image, delta_px: float, side: float, rim_centre, rim_radiu
         return img.copy()
     if _rim_clears(delta_px, c, r):  # the rim passes every ray: Eq. 7's Gaussian
         return defocus(img, delta_px)
-    k = defocus_kernel(delta_px, side, c, r)
+    k = _defocus_kernel(delta_px, side, c, r)
     # filter2D correlates: flip the kernel to convolve
     return cv2.filter2D(img, cv2.CV_32F, k[::-1, ::-1].copy(), borderType=cv2.BORDER_REPLICATE)

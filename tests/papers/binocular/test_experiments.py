@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pandas as pd
 import pytest
@@ -184,3 +185,23 @@ def test_handeye_chain_carries_the_defocus_error_to_fig13(scenario):
     assert row["trans_err_preliminary_mm"] > 1.0
     assert row["trans_err_sharp_mm"] < 0.3
     assert row["fig13_exact_p7_preliminary"] > 10 * row["fig13_exact_p7_sharp"]
+
+
+@pytest.mark.parametrize("trial", ["binocular_trial", "field_trial", "optics_trial"])
+def test_trials_run_on_one_opencv_thread_and_restore_the_setting(scenario, trial, monkeypatch):
+    seen = []
+
+    def stop(*args, **kwargs):
+        seen.append(cv2.getNumThreads())
+        raise RuntimeError("stopped after the world")
+
+    monkeypatch.setattr(ex, "draw_world", stop)
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(3)
+    try:
+        with pytest.raises(RuntimeError, match="stopped after the world"):
+            getattr(ex, trial)(ex.Setup(scenario), np.random.default_rng(0))
+        assert seen == [1]
+        assert cv2.getNumThreads() == 3
+    finally:
+        cv2.setNumThreads(before)

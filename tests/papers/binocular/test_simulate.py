@@ -172,3 +172,15 @@ def test_blur_spot_agrees_with_a_thin_lens_ray_trace(scenario, depth, f_number, 
     assert np.linalg.norm(model - traced) < 0.15 * np.linalg.norm(traced)
     outward = traced @ field
     assert (outward > 0) == (depth < sc.config["sensor"]["optics"]["focus_distance_mm"])
+
+
+def test_world_builds_each_robot_once_and_replace_starts_afresh(scenario):
+    world = sim.draw_world(scenario, np.random.default_rng(4))
+    q = np.radians([10.0, -40.0, 30.0, 5.0, 50.0, -20.0])
+    one = world.robot(scenario, 1.0)
+    assert world.robot(scenario, 1.0) is one and world.robot(scenario, 2.0) is not one
+    fresh = dataclasses.replace(world)  # the same seeds: equal robots, built again
+    assert fresh.robot(scenario, 1.0) is not one
+    np.testing.assert_array_equal(fresh.robot(scenario, 1.0).fk(q), one.fk(q))
+    other = dataclasses.replace(world, robot_seed=world.robot_seed + 1)
+    assert np.abs(other.robot(scenario, 1.0).fk(q) - one.fk(q)).max() > 1e-6

@@ -12,7 +12,7 @@ calibrated sensor (Eq. 1).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -386,14 +386,26 @@ class World:
     standard_pairs: np.ndarray
     standard_mm: np.ndarray
     repeatability_mm: float  # sigma per axis of the true flange about the commanded pose
+    _robots: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def robot(self, scenario: Scenario, scale: float = 1.0) -> Robot:
-        """The true robot with its tolerances (``kuka_kr210.toml``) times ``scale``."""
-        tol = scenario.robot.tolerances
-        rng = np.random.default_rng(self.robot_seed)
-        return perturb_robot(
-            scenario.robot, rng, tol["sigma_length_mm"] * scale, tol["sigma_angle_deg"] * scale
-        )
+        """The true robot with its tolerances (``kuka_kr210.toml``) times ``scale`` (built once
+        per nominal robot and scale, then shared: a robot's results depend on its parameters
+        alone)."""
+        key = (id(scenario.robot), float(scale))
+        if key not in self._robots:
+            tol = scenario.robot.tolerances
+            rng = np.random.default_rng(self.robot_seed)
+            self._robots[key] = (
+                scenario.robot,  # keeps the nominal robot, and so its id, alive
+                perturb_robot(
+                    scenario.robot,
+                    rng,
+                    tol["sigma_length_mm"] * scale,
+                    tol["sigma_angle_deg"] * scale,
+                ),
+            )
+        return self._robots[key][1]
 
     def model(self, scenario: Scenario, scale: float = 1.0) -> StereoRig:
         """The calibrated sensor: Table 1 plus the calibration errors of ``sensor.toml
