@@ -81,6 +81,12 @@ def pid_row(scenario, rng):
     return {"pid": os.getpid(), "blas": ",".join(os.environ.get(name, "-") for name in blas)}
 
 
+def opencv_threads_row(scenario, rng):
+    import cv2
+
+    return {"opencv_threads": cv2.getNumThreads()}
+
+
 def bad_return(scenario, rng):
     return 3.0
 

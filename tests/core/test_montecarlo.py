@@ -27,6 +27,7 @@ from mc_trials import (
     firsts,
     noisy_solve,
     one_row,
+    opencv_threads_row,
     pid_row,
     stable_experiment,
 )
@@ -36,6 +37,23 @@ from calstudy.core.montecarlo import Experiment, run, run_many, trial_rng
 
 # ----------------------------------------------------------------------------------------------
 # rows and streams
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_trials_run_on_one_opencv_thread_and_the_setting_is_restored(n_jobs):
+    """OpenCV's large filters round differently with another number of threads: every trial
+    runs on one, whatever the machine, and the caller's setting is left as it was."""
+    import cv2
+
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(3)
+    try:
+        exp = Experiment("threads", opencv_threads_row, Scenario(), 4, [{}])
+        df = run(exp, SEED, n_jobs=n_jobs, progress=False)
+        assert df["opencv_threads"].tolist() == [1, 1, 1, 1]
+        assert cv2.getNumThreads() == 3
+    finally:
+        cv2.setNumThreads(before)
 
 
 def test_rows_sorted_and_self_describing():

@@ -16,7 +16,6 @@ how defocus moves a detected centre, against depth and tilt.
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import dataclasses
 import hashlib
@@ -24,13 +23,12 @@ import json
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 import pandas as pd
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment
+from calstudy.core.montecarlo import Experiment, one_opencv_thread
 from calstudy.core.stats import rmse
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import detect_centre
@@ -69,24 +67,6 @@ class Setup:
 
 # ----------------------------------------------------------------------------------------------
 # one trial
-
-
-@contextlib.contextmanager
-def one_opencv_thread():
-    """OpenCV on one thread while the trials (and the noise-free study) run, the caller's
-    setting restored after; also a decorator.
-
-    OpenCV's DFT-based filters (the blur spots, the rectification's mean) round differently
-    with another number of threads, and OpenCV takes as many as the machine has cores: with one
-    thread the rows are those of any machine. A trial's images are small, so the helper threads
-    only cost CPU time (0.14 s of 1.0 s per trial of :func:`binocular_trial` on two cores).
-    """
-    previous = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(previous)
 
 
 def _pair_index(pairs: np.ndarray, a: int, b: int) -> int:
