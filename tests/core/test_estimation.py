@@ -47,14 +47,18 @@ def test_minpack_lm_respects_the_evaluation_limit():
     assert not np.allclose(capped, [2.0, 1.3, 0.5], atol=1e-6)
 
 
-@pytest.mark.parametrize("max_nfev", [None, 3])
-def test_levenberg_marquardt_minpack_path_is_least_squares(max_nfev):
+def _noisy_exp(seed):
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 4.0, 40)
+    return t, _exp_model(np.array([2.0, 1.3, 0.5]), t, 0.0) + rng.normal(0.0, 0.01, t.size)
+
+
+def _lmder_against_least_squares(t, y, x0, jac, max_nfev):
+    """``_lmder`` and ``least_squares(method="lm")`` on the same problem: asserts the same
+    solution, residuals, Jacobian, cost, evaluation count and status, and the same evaluations
+    in the same order (the history an Estimate keeps); returns ours and its evaluations."""
     from calstudy.core import estimation
 
-    rng = np.random.default_rng(5)
-    t = np.linspace(0.0, 4.0, 40)
-    y = _exp_model(np.array([2.0, 1.3, 0.5]), t, 0.0) + rng.normal(0.0, 0.01, t.size)
-    x0 = np.array([1.0, 0.5, 0.0])
     calls = {"ours": [], "ref": []}
 
     def fun_for(key):
@@ -64,17 +68,27 @@ def test_levenberg_marquardt_minpack_path_is_least_squares(max_nfev):
 
         return fun
 
-    def jac(x):
-        return _exp_jac(x, t, y)
-
     tols = {"xtol": 1e-12, "ftol": 1e-12, "gtol": 1e-12, "max_nfev": max_nfev}
     ours = estimation._lmder(fun_for("ours"), x0, jac, **tols)
     ref = least_squares(fun_for("ref"), x0, jac=jac, method="lm", **tols)
     for field in ("x", "fun", "jac"):
         assert getattr(ours, field).tobytes() == np.asarray(getattr(ref, field)).tobytes(), field
     assert (ours.cost, ours.nfev, ours.status) == (ref.cost, ref.nfev, ref.status)
-    # the same evaluations in the same order: the history an Estimate keeps is the same
     assert [c.tobytes() for c in calls["ours"]] == [c.tobytes() for c in calls["ref"]]
+    return ours, calls["ours"]
+
+
+@pytest.mark.parametrize("max_nfev", [None, 3])
+def test_levenberg_marquardt_minpack_path_is_least_squares(max_nfev):
+    from calstudy.core import estimation
+
+    t, y = _noisy_exp(5)
+    x0 = np.array([1.0, 0.5, 0.0])
+
+    def jac(x):
+        return _exp_jac(x, t, y)
+
+    ours, calls = _lmder_against_least_squares(t, y, x0, jac, max_nfev)
     if max_nfev == 3:
         assert ours.status == 0
         with pytest.raises(CalibrationError, match="did not converge after 3 evaluations"):
@@ -89,27 +103,13 @@ def test_levenberg_marquardt_two_point_path_is_least_squares(start):
     the same evaluations in the same order, the same iterates, the same bytes."""
     from calstudy.core import estimation
 
-    rng = np.random.default_rng(11)
-    t = np.linspace(0.0, 4.0, 40)
-    y = _exp_model(np.array([2.0, 1.3, 0.5]), t, 0.0) + rng.normal(0.0, 0.01, t.size)
+    t, y = _noisy_exp(11)
     x0 = np.array(start)
-    calls = {"ours": [], "ref": []}
-
-    def fun_for(key):
-        def fun(x):
-            calls[key].append(x.copy())
-            return _exp_model(x, t, y)
-
-        return fun
-
-    tols = {"xtol": 1e-12, "ftol": 1e-12, "gtol": 1e-12, "max_nfev": None}
-    ours = estimation._lmder(fun_for("ours"), x0, "2-point", **tols)
-    ref = least_squares(fun_for("ref"), x0, jac="2-point", method="lm", **tols)
-    for field in ("x", "fun", "jac"):
-        assert getattr(ours, field).tobytes() == np.asarray(getattr(ref, field)).tobytes(), field
-    assert (ours.cost, ours.nfev, ours.status) == (ref.cost, ref.nfev, ref.status)
-    assert [c.tobytes() for c in calls["ours"]] == [c.tobytes() for c in calls["ref"]]
-    assert len(calls["ours"]) >= ours.nfev + x0.size  # the differences were taken
+    ours, calls = _lmder_against_least_squares(t, y, x0, "2-point", None)
+    assert len(calls) >= ours.nfev + x0.size  # the differences were taken
     assert np.allclose(ours.x, [2.0, 1.3, 0.5], atol=0.05)
     with pytest.raises(CalibrationError, match="only '2-point'"):
-        estimation._lmder(fun_for("ours"), x0, "3-point", **tols)
+        estimation._lmder(
+            lambda x: _exp_model(x, t, y), x0, "3-point",
+            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=None,
+        )

@@ -134,3 +134,22 @@ def test_look_at_is_the_plain_numpy_construction_to_the_bit():
         assert geo.look_at(eye, target).tobytes() == _look_at_reference(eye, target).tobytes()
     with pytest.raises(CalibrationError, match="eye and target coincide"):
         geo.look_at(np.ones(3), np.ones(3))
+
+
+@pytest.mark.parametrize("offset", [1.0, 1e-3, 1e-6, 1e-8, 1e-10, 1e-13, 0.0])
+def test_fast_collinearity_check_decides_as_the_full_one(offset):
+    from calstudy.core.geometry import _check_not_collinear_svd, check_not_collinear
+
+    t = np.linspace(-300.0, 500.0, 35)
+    pts = np.column_stack([t, 0.4 * t + 7.0]) + offset * np.column_stack(
+        [np.zeros_like(t), np.cos(3.0 * t)]
+    )
+    outcomes = []
+    for check in (_check_not_collinear_svd, check_not_collinear):
+        try:
+            check("image points", pts)
+            outcomes.append("passed")
+        except CalibrationError as exc:
+            outcomes.append(str(exc))
+    assert outcomes[0] == outcomes[1]
+    assert (outcomes[0] == "passed") == (offset >= 1e-6)

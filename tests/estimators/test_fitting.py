@@ -343,26 +343,6 @@ def test_solve_pnp_ransac_bad_input():
         solve_pnp_ransac(pts, np.zeros((3, 2)), K, 1.0)
 
 
-@pytest.mark.parametrize("offset", [1.0, 1e-3, 1e-6, 1e-8, 1e-10, 1e-13, 0.0])
-def test_fast_collinearity_check_decides_as_the_full_one(offset):
-    from calstudy.core.geometry import check_not_collinear
-    from calstudy.estimators.fitting import _check_not_collinear_2d
-
-    t = np.linspace(-300.0, 500.0, 35)
-    pts = np.column_stack([t, 0.4 * t + 7.0]) + offset * np.column_stack(
-        [np.zeros_like(t), np.cos(3.0 * t)]
-    )
-    outcomes = []
-    for check in (check_not_collinear, _check_not_collinear_2d):
-        try:
-            check("image points", pts)
-            outcomes.append("passed")
-        except CalibrationError as exc:
-            outcomes.append(str(exc))
-    assert outcomes[0] == outcomes[1]
-    assert (outcomes[0] == "passed") == (offset >= 1e-6)
-
-
 def test_homography_data_check_is_the_textbook_dlt_matrix():
     from calstudy.estimators.fitting import check_homography_data
 

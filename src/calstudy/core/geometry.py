@@ -427,7 +427,25 @@ def is_rank_deficient(s: np.ndarray, rank: int) -> bool:
 
 
 def check_not_collinear(name: str, points: np.ndarray) -> None:
-    """Raise if the rows of ``points`` lie on one line (centred rank < 2)."""
+    """Raise if the rows of ``points`` lie on one line (centred rank < 2).
+
+    Points in the plane ``(N, 2)`` far from a line are accepted in closed form: the eigenvalues
+    of the 2 x 2 scatter matrix (the squared singular values, each off by a few ulps of the
+    larger); a ratio above 1e-12 (singular values 1e-6 apart, far from the ``RANK_RTOL`` of the
+    check) passes at once, anything else goes through the singular values, which decide and
+    word the error.
+    """
+    if points.ndim == 2 and points.shape[1] == 2:
+        q = points - points.mean(axis=0)
+        (sxx, sxy), (_, syy) = (q.T @ q).tolist()
+        mid, half = 0.5 * (sxx + syy), math.hypot(0.5 * (sxx - syy), sxy)
+        if mid - half > 1e-12 * (mid + half) > 0.0:
+            return
+    _check_not_collinear_svd(name, points)
+
+
+def _check_not_collinear_svd(name: str, points: np.ndarray) -> None:
+    """:func:`check_not_collinear` by the singular values of the centred points alone."""
     s = singular_values(points - points.mean(axis=0))
     if is_rank_deficient(s, 2):
         raise CalibrationError(

@@ -12,8 +12,6 @@ SVD) and Eq. 16-19 (homography and the pose it gives).
 
 from __future__ import annotations
 
-import math
-
 import cv2
 import numpy as np
 
@@ -43,24 +41,24 @@ HOMOGRAPHY_RANK_TOL = 1e-8
 HOMOGRAPHY_SINGULAR_TOL = 1e-8
 
 
-#: inputs whose check passed, by (check, bytes): a study fits the same target points and camera
-#: matrix thousands of times, and their checks (an SVD each) need to run once; bounded
-_PASSED: dict = {}
-_PASSED_MAX = 256
+#: what :func:`_by_array` kept, by (label, dtype, shape, bytes): a study fits the same target
+#: points and camera matrix thousands of times; bounded
+_KEPT: dict = {}
+_KEPT_MAX = 256
 
 
-def _check_once(label: str, array: np.ndarray, check) -> None:
-    """Run ``check(array)`` (it raises on bad input) unless the same float array passed it
-    before."""
-    if not (isinstance(array, np.ndarray) and array.dtype == np.float64):
-        check(array)
-        return
-    key = (label, array.shape, array.tobytes())
-    if key not in _PASSED:
-        check(array)
-        if len(_PASSED) >= _PASSED_MAX:
-            _PASSED.clear()
-        _PASSED[key] = True
+def _by_array(label: str, array, compute):
+    """``compute(array)``, kept for the next call with an array of the same bytes (its checks
+    raise on bad input and are not kept then; anything kept must not be modified)."""
+    if not isinstance(array, np.ndarray):
+        return compute(array)
+    key = (label, array.dtype.str, array.shape, array.tobytes())
+    if key not in _KEPT:
+        value = compute(array)
+        if len(_KEPT) >= _KEPT_MAX:
+            _KEPT.clear()
+        _KEPT[key] = value
+    return _KEPT[key]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -200,7 +198,7 @@ def fit_sphere(points) -> tuple[np.ndarray, float, float]:
 def _check_camera_matrix(k) -> np.ndarray:
     """Check a 3 x 3 intrinsic matrix: upper triangular, ``fx, fy > 0``, ``K[2, 2] = 1``."""
     k = check_shape("K", k, (3, 3))
-    _check_once("K", k, _check_intrinsics)
+    _by_array("K", k, _check_intrinsics)
     return k
 
 
@@ -255,40 +253,20 @@ def _normalise_2d(p: np.ndarray) -> np.ndarray:
 def _dlt_plane(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The parts of the normalised DLT matrix that depend on the target-plane points only:
     ``ah = [a 1]`` (``a`` the Hartley-normalised points) and the matrix ``[ah 0 0] / [0 ah 0]``
-    its image columns are written into. Kept (read-only) for the last few point sets: a study
-    fits images of the same target again and again."""
-    key = (xy.dtype.str, xy.shape, xy.tobytes()) if isinstance(xy, np.ndarray) else None
-    if key is None or key not in _PLANES:
-        a = _normalise_2d(np.asarray(xy, dtype=float))
-        n = len(a)
-        ah = np.column_stack([a, np.ones(n)])
-        rows = np.zeros((2 * n, 9))  # [ah 0 -u ah] over [0 ah -v ah]
-        rows[:n, 0:3] = ah
-        rows[n:, 3:6] = ah
-        if key is None:
-            return ah, rows
-        ah.flags.writeable = rows.flags.writeable = False
-        if len(_PLANES) >= 16:
-            _PLANES.clear()
-        _PLANES[key] = (ah, rows)
-    return _PLANES[key]
+    its image columns are written into (read-only: kept by :func:`_by_array`, as a study fits
+    images of the same target again and again)."""
+    return _by_array("DLT plane", xy, _build_dlt_plane)
 
 
-#: :func:`_dlt_plane` of target-plane points by (dtype, shape, bytes)
-_PLANES: dict = {}
-
-
-def _check_not_collinear_2d(name: str, points: np.ndarray) -> None:
-    """:func:`~calstudy.core.geometry.check_not_collinear` of ``(N, 2)`` points, accepting at
-    once what it accepts by a margin: the eigenvalues of the 2 x 2 scatter matrix (the squared
-    singular values, each off by a few ulps of the larger) in closed form; a ratio above 1e-12
-    (singular values 1e-6 apart, far from the 1e-9 of the check) passes, anything else goes
-    through the check itself, which decides and words the error."""
-    q = points - points.mean(axis=0)
-    (sxx, sxy), (_, syy) = (q.T @ q).tolist()
-    mid, half = 0.5 * (sxx + syy), math.hypot(0.5 * (sxx - syy), sxy)
-    if not (mid - half > 1e-12 * (mid + half) > 0.0):
-        check_not_collinear(name, points)
+def _build_dlt_plane(xy) -> tuple[np.ndarray, np.ndarray]:
+    a = _normalise_2d(np.asarray(xy, dtype=float))
+    n = len(a)
+    ah = np.column_stack([a, np.ones(n)])
+    rows = np.zeros((2 * n, 9))  # [ah 0 -u ah] over [0 ah -v ah]
+    rows[:n, 0:3] = ah
+    rows[n:, 3:6] = ah
+    ah.flags.writeable = rows.flags.writeable = False
+    return ah, rows
 
 
 def check_homography_data(xy: np.ndarray, uv: np.ndarray) -> float:
@@ -349,8 +327,8 @@ def fit_homography(plane_xy, image_uv, refine: bool = True) -> np.ndarray:
     check_same_length("plane_xy", xy, "image_uv", uv)
     if xy.shape[0] < 4:
         raise CalibrationError(f"homography needs at least 4 points; got {xy.shape[0]}")
-    _check_once("plane points", xy, lambda p: check_not_collinear("points", p))
-    _check_not_collinear_2d("image points", uv)
+    _by_array("plane points", xy, lambda p: check_not_collinear("points", p))
+    check_not_collinear("image points", uv)
     check_homography_data(xy, uv)
     try:
         h, _ = cv2.findHomography(xy, uv, method=0)
@@ -443,13 +421,9 @@ def homography_to_pose(h, k) -> np.ndarray:
 
 def _check_pnp_points(obj: np.ndarray) -> None:
     """Object points SOLVEPNP_ITERATIVE accepts: not on a line, at least 6 unless coplanar."""
+    check_not_collinear("object points", obj)
     n = obj.shape[0]
-    s = singular_values(obj - obj.mean(axis=0))
-    if is_rank_deficient(s, 2):  # what check_not_collinear says
-        raise CalibrationError(
-            f"the {n} object points are collinear (singular values {format_values(s)})"
-        )
-    if not is_rank_deficient(s, 3) and n < 6:
+    if not is_rank_deficient(singular_values(obj - obj.mean(axis=0)), 3) and n < 6:
         raise CalibrationError(
             f"non-planar object points need at least 6 points for SOLVEPNP_ITERATIVE; got {n}"
         )
@@ -498,7 +472,7 @@ def solve_pnp(object_points, image_uv, k, dist=None, refine: bool = True) -> np.
     n = obj.shape[0]
     if n < 4:
         raise CalibrationError(f"solve_pnp needs at least 4 points; got {n}")
-    _check_once("object points", obj, _check_pnp_points)
+    _by_array("object points", obj, _check_pnp_points)
     d = None if dist is None else check_shape("dist", np.ravel(dist), (None,))
     try:
         ok, rvec, tvec = cv2.solvePnP(obj, uv, km, d, flags=cv2.SOLVEPNP_ITERATIVE)
