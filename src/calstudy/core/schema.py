@@ -228,14 +228,20 @@ def validate(model: type[M], data: Any, source: str | Path, prefix: str = "") ->
         raise CalibrationError(format_errors(exc, source, prefix, model)) from None
 
 
+def file_key(path: Path) -> tuple:
+    """(resolved path, modification time, size) of an existing file: a changed file has a new
+    key."""
+    stat = path.stat()
+    return (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+
+
 def read_toml(path: str | Path, what: str) -> dict:
     """The TOML table of ``path``; FileNotFoundError naming the path and ``what`` if missing,
     CalibrationError with the parser's line and column if it is not valid TOML."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file (the {what})")
-    stat = path.stat()
-    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    key = file_key(path)
     if key in _PARSED:
         return copy.deepcopy(_PARSED[key])
     try:
@@ -261,9 +267,20 @@ def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
     """The TOML table of ``path`` (the ``what``, for messages), unchanged, after validating it
     against ``model``: for loaders that go on reading the dict (the numbers stay the bytes of
     the file)."""
-    table = read_toml(path, what)
-    validate(model, table, path)
+    table = read_toml(path, what)  # a copy of the parsed file, kept by its file_key
+    key = (*file_key(Path(path)), model)
+    if key not in _VALIDATED:
+        validate(model, table, path)
+        if len(_VALIDATED) >= 64:
+            _VALIDATED.clear()
+        _VALIDATED.add(key)
     return table
+
+
+#: (resolved path, modification time, size, model) of the files that passed :func:`check_toml`:
+#: every Monte Carlo trial draws its station from the same files, and validating them costs
+#: more than the rest of the loading (an edited file has a new key, so it is checked again)
+_VALIDATED: set = set()
 
 
 def rotation_problem(matrix, tol: float = 1e-4) -> str:
@@ -428,6 +445,7 @@ __all__ = [
     "Vec2",
     "Vec3",
     "check_toml",
+    "file_key",
     "format_errors",
     "load_toml",
     "number_problem",

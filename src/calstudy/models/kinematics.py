@@ -439,6 +439,19 @@ class Robot:
         """
         return np.array([[getattr(link, f) for f in LINK_FIELDS] for link in self.links]).ravel()
 
+    def key(self) -> tuple:
+        """Everything the robot's kinematics depend on (conventions, link parameters, base, tool,
+        joint limits), as hashable bytes: two robots with the same key give the same FK and IK
+        answers, so results can be kept by it."""
+        return (
+            tuple((link.convention, link.parallel) for link in self.links),
+            self.parameters().tobytes(),
+            self.base.tobytes(),
+            self.tool.tobytes(),
+            self.qmin.tobytes(),
+            self.qmax.tobytes(),
+        )
+
     def parameter_names(self) -> list[str]:
         """Names of :meth:`parameters`: ``"a1", "alpha1", "d1", "theta1", "beta1", "a2", ...``.
 

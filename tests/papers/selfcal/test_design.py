@@ -147,6 +147,14 @@ def test_sizes_at_once_are_the_selections_one_by_one():
         design.select_poses_sizes(blocks, [4, 81])
 
 
+def test_a_size_asked_twice_gets_the_selection_of_one_call():
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        blocks = rng.normal(size=(30, 3, 12))
+        twice = design.select_poses_sizes(blocks, [6, 6], exchange_rounds=1)[6]
+        assert twice.tobytes() == design.select_poses(blocks, 6, exchange_rounds=1).tobytes()
+
+
 def test_selection_refuses_impossible_sizes():
     blocks = np.zeros((20, 3, 30))
     with pytest.raises(CalibrationError, match="cannot choose 5 poses"):

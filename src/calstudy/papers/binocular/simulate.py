@@ -392,20 +392,13 @@ class World:
         """The true robot with its tolerances (``kuka_kr210.toml``) times ``scale`` (built once
         per nominal robot and scale, then shared: a robot's results depend on its parameters
         alone)."""
-        key = (id(scenario.robot), float(scale))
+        tol = scenario.robot.tolerances
+        sigmas = (tol["sigma_length_mm"] * scale, tol["sigma_angle_deg"] * scale)
+        key = (scenario.robot.key(), sigmas)
         if key not in self._robots:
-            tol = scenario.robot.tolerances
             rng = np.random.default_rng(self.robot_seed)
-            self._robots[key] = (
-                scenario.robot,  # keeps the nominal robot, and so its id, alive
-                perturb_robot(
-                    scenario.robot,
-                    rng,
-                    tol["sigma_length_mm"] * scale,
-                    tol["sigma_angle_deg"] * scale,
-                ),
-            )
-        return self._robots[key][1]
+            self._robots[key] = perturb_robot(scenario.robot, rng, *sigmas)
+        return self._robots[key]
 
     def model(self, scenario: Scenario, scale: float = 1.0) -> StereoRig:
         """The calibrated sensor: Table 1 plus the calibration errors of ``sensor.toml

@@ -21,7 +21,6 @@ missing key raise the same errors as in the other papers; ``station.toml`` and
 
 from __future__ import annotations
 
-import copy
 import functools
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -54,27 +53,8 @@ SWEEP_LABELS = {
 
 def _load(name: str, what: str, path: str | Path | None, model) -> dict:
     """The TOML file ``path`` (default ``data/hybrid/<name>``) after checking it against
-    ``model`` (:mod:`calstudy.papers.hybrid.schema`).
-
-    A file that passed is not checked again while it is unchanged (same resolved path,
-    modification time and size): every Monte Carlo trial draws its station from the same file,
-    and the schema's checks cost more than the rest of the loading. The caller gets its own copy.
-    """
-    file = Path(scenario_file(PAPER, name, path))
-    if not file.is_file():
-        return check_toml(file, model, what)  # which says what is missing
-    stat = file.stat()
-    key = (str(file.resolve()), stat.st_mtime_ns, stat.st_size, model.__name__, what)
-    if key not in _CHECKED:
-        table = check_toml(file, model, what)
-        if len(_CHECKED) >= 32:
-            _CHECKED.clear()
-        _CHECKED[key] = table
-    return copy.deepcopy(_CHECKED[key])
-
-
-#: checked tables by (resolved path, modification time, size, schema, what)
-_CHECKED: dict = {}
+    ``model`` (:mod:`calstudy.papers.hybrid.schema`)."""
+    return check_toml(scenario_file(PAPER, name, path), model, what)
 
 
 def load_station(path: str | Path | None = None) -> dict:

@@ -21,6 +21,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.core.schema import file_key
 from calstudy.estimators.fitting import solve_pnp
 from calstudy.estimators.sphere_csv import SphereMeasurements
 from calstudy.models.kinematics import Robot
@@ -96,15 +97,7 @@ class HybridStation:
         if q0 is not None:
             return self._solve_ik(robot, flange2base, q0, only_q0)
         pose = np.asarray(flange2base, dtype=float)
-        key = (
-            tuple((link.convention, link.parallel) for link in robot.links),
-            robot.parameters().tobytes(),
-            robot.base.tobytes(),
-            robot.tool.tobytes(),
-            robot.qmin.tobytes(),
-            robot.qmax.tobytes(),
-            pose.tobytes(),
-        )
+        key = (robot.key(), pose.tobytes())
         if key not in self._ik_memo:
             self._ik_memo[key] = self._solve_ik(robot, pose, None, only_q0)
         return self._ik_memo[key].copy()
@@ -387,9 +380,7 @@ def _nominal_robot(name: str) -> Robot:
     """``load_robot(name)``, read once per process while its file is unchanged: the stations of a
     study share the nominal robot (only its Pinocchio scratch data is written, by every
     kinematics call afresh)."""
-    file = robot_file(name)
-    stat = file.stat()
-    key = (str(file.resolve()), stat.st_mtime_ns, stat.st_size)
+    key = file_key(robot_file(name))
     if key not in _NOMINAL:
         _NOMINAL.clear()
         _NOMINAL[key] = load_robot(name)

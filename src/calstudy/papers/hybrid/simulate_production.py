@@ -100,13 +100,7 @@ class ProductionStation:
         hand-eye. The same at every panel, so computed once per program, robot and hand-eye
         (a read-only array)."""
         nominal = self.station.nominal
-        key = (
-            self.program.tobytes(),
-            self.sensor2flange.tobytes(),
-            nominal.parameters().tobytes(),
-            nominal.base.tobytes(),
-            nominal.tool.tobytes(),
-        )
+        key = (self.program.tobytes(), self.sensor2flange.tobytes(), nominal.key())
         if key not in self._reported:
             poses = nominal.fk_many(self.program) @ self.sensor2flange
             poses.flags.writeable = False

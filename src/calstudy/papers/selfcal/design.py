@@ -259,7 +259,8 @@ def select_poses_sizes(
             greedy[step + 1] = (list(chosen), free.copy(), info.copy())
     out = {}
     for n in sizes:
-        picked, unpicked, information = greedy[n]
+        # copies: the exchange works in place, and a size may be asked for twice
+        picked, unpicked, information = (list(greedy[n][0]), *(a.copy() for a in greedy[n][1:]))
         for _ in range(exchange_rounds):
             if not _exchange_round(b, picked, unpicked, information, reg):
                 break
