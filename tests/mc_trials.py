@@ -87,6 +87,13 @@ def opencv_threads_row(scenario, rng):
     return {"opencv_threads": cv2.getNumThreads()}
 
 
+def blas_threads_row(scenario, rng):
+    from threadpoolctl import threadpool_info
+
+    threads = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+    return {"blas_threads": max(threads)}
+
+
 def bad_return(scenario, rng):
     return 3.0
 

@@ -20,6 +20,7 @@ from mc_trials import (
     Scenario,
     assert_same_bytes,
     bad_return,
+    blas_threads_row,
     calls,
     clashing_row,
     expected_first,
@@ -33,7 +34,7 @@ from mc_trials import (
 )
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment, run, run_many, trial_rng
+from calstudy.core.montecarlo import Experiment, run, run_many, trial_rng, trial_rows
 
 # ----------------------------------------------------------------------------------------------
 # rows and streams
@@ -54,6 +55,18 @@ def test_trials_run_on_one_opencv_thread_and_the_setting_is_restored(n_jobs):
         assert cv2.getNumThreads() == 3
     finally:
         cv2.setNumThreads(before)
+
+
+def test_trials_and_their_spot_checks_run_on_one_blas_thread():
+    """A multi-threaded BLAS splits its sums and moves the last digits of a trial's rows: the
+    serial run, the workers and a recomputed trial (``trial_rows``) all use one thread."""
+    from threadpoolctl import threadpool_info
+
+    assert any(lib["user_api"] == "blas" for lib in threadpool_info())
+    exp = Experiment("blas", blas_threads_row, Scenario(), 2, [{}])
+    for n_jobs in (1, 2):
+        assert run(exp, SEED, n_jobs=n_jobs, progress=False)["blas_threads"].tolist() == [1, 1]
+    assert trial_rows(exp, SEED, 0, 1)["blas_threads"].tolist() == [1]
 
 
 def test_rows_sorted_and_self_describing():

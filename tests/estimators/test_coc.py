@@ -28,6 +28,37 @@ def test_vectorised_rectification_equals_flowchart_loop():
     assert np.abs(fast - img).max() > 0.01  # it does change the image
 
 
+@pytest.mark.parametrize("delta", [2.0, 2.5647, 3.2])
+def test_split_disc_equals_the_flowchart_loop(delta):
+    # 13-19 px discs are summed as a box plus two caps (OpenCV would take them through the DFT)
+    assert coc._rectify_setup(delta).split is not None
+    img = disk_image(size=31, radius=7.0, centre=(15.2, 14.7), blur=delta)
+    fast = coc.rectify_coc(img, delta)
+    slow = coc.rectify_coc_reference(img, delta)
+    np.testing.assert_allclose(fast, slow, atol=5e-3)  # the border rows and columns included
+    assert np.abs(fast - slow).mean() < 1e-3
+
+
+@pytest.mark.parametrize("delta", [0.4, 1.0, 1.9, 2.0, 2.5647, 3.2, 3.4, 5.0, 12.0])
+def test_disc_mean_split_or_whole_agrees_with_one_filter(delta):
+    rng = np.random.default_rng(1)
+    img = rng.uniform(0.05, 1.0, (47, 53)).astype(np.float32)
+    disc = coc._rectify_setup(delta)
+    side = disc.kernel.shape[0]
+    cells = [side * side] if disc.split is None else [disc.split.top.size, disc.split.bottom.size]
+    # split exactly when the whole disc would reach OpenCV's DFT size and the caps would not
+    whole = side * side >= coc._DFT_CELLS
+    assert (disc.split is not None) == (whole and max(cells) < coc._DFT_CELLS)
+    halo = disc.halo
+    padded = cv2.copyMakeBorder(img, halo, halo, 0, 0, cv2.BORDER_REPLICATE)
+    mean = coc._disc_mean(padded, slice(halo, halo + img.shape[0]), disc)
+    want = cv2.filter2D(
+        img.astype(np.float64), cv2.CV_64F, disc.kernel.astype(np.float64),
+        borderType=cv2.BORDER_REPLICATE,
+    )
+    np.testing.assert_allclose(mean, want, rtol=2e-6)
+
+
 def test_rectification_sharpens_and_keeps_a_symmetric_centre():
     # a dot centred on a pixel corner: the image is symmetric, so the centre must stay exactly
     blurred = disk_image(centre=(20.5, 19.5), blur=2.5)

@@ -48,15 +48,11 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.trialcache import Rows, TrialCache
-
-try:  # optional: caps BLAS threads of libraries already loaded in a process
-    from threadpoolctl import threadpool_limits
-except ImportError:  # pragma: no cover - depends on the environment
-    threadpool_limits = None
 
 __all__ = ["Experiment", "one_opencv_thread", "run", "run_many", "trial_rng", "trial_rows"]
 
@@ -301,7 +297,7 @@ def _limit_worker_blas() -> None:
     # loky workers start with the BLAS variables at 1 (inner_max_num_threads) and Dask's nanny
     # sets them too; threadpoolctl also caps a library loaded before the variables were read.
     global _worker_blas_limited
-    if not _worker_blas_limited and threadpool_limits is not None:
+    if not _worker_blas_limited:
         threadpool_limits(1)
     _worker_blas_limited = True
 
@@ -391,8 +387,7 @@ def _outcomes(
     if not pending:
         yield iter(())
     elif scheduler is None and n_jobs == 1:
-        limits = threadpool_limits(1) if threadpool_limits else contextlib.nullcontext()
-        with limits:
+        with _one_blas_thread():
             yield (_run_trial(job, trial, False) for job, trial in pending)
     else:
         import joblib
@@ -414,6 +409,12 @@ def _outcomes(
                     # after a failed trial the engine drops the trials in flight on purpose
                     warnings.filterwarnings("ignore", "[0-9]+ tasks ", UserWarning)
                     results.close()
+
+
+def _one_blas_thread() -> contextlib.AbstractContextManager:
+    """BLAS on one thread, as in the workers: a multi-threaded BLAS splits its sums otherwise
+    and moves the last digits of the rows."""
+    return threadpool_limits(1)
 
 
 @contextlib.contextmanager
@@ -581,7 +582,8 @@ def trial_rows(experiment: Experiment, seed: int, point: int, trial: int) -> pd.
         pt,
         point,
     )
-    _, _, rows, error = _run_trial(job, trial, in_worker=False)
+    with _one_blas_thread():
+        _, _, rows, error = _run_trial(job, trial, in_worker=False)
     if error is not None:
         raise _trial_error(experiment, seed, point, trial, error) from error
     records = [{**pt, "trial": trial, **row} for row in rows]

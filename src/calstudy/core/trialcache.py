@@ -24,12 +24,6 @@ import pandas as pd
 
 from calstudy.core.errors import CalibrationError
 
-try:  # optional: caps BLAS threads of libraries already loaded in a process
-    from threadpoolctl import threadpool_limits
-except ImportError:  # pragma: no cover - depends on the environment
-    threadpool_limits = None
-
-
 #: Version of the cache file layout and key; bump it when either changes.
 CACHE_FORMAT = 1
 _PICKLE_PROTOCOL = 4

@@ -18,6 +18,8 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -52,7 +54,7 @@ def _check_rectify(image, delta_px: float) -> np.ndarray:
 
 
 def rectify_coc(
-    image, delta_px: float, strip_rows: int = 128, workers: int | None = None
+    image, delta_px: float, strip_rows: int = 32, workers: int | None = None
 ) -> np.ndarray:
     """Circle-of-confusion rectification of a whole image (Eq. 8-11, Fig. 5), vectorised.
 
@@ -81,7 +83,7 @@ def rectify_coc(
         Fused image in [0, 1].
     delta_px : float
         Circle-of-confusion radius in px (Eq. 4), >= 1/3.
-    strip_rows : int, default 128
+    strip_rows : int, default 32
         Rows per strip, >= 1.
     workers : int, optional
         Threads; by default the number of CPUs for an image of more than four strips, one
@@ -150,32 +152,108 @@ def rectify_cocs(images, deltas_px, gradients=None, strip_rows: int | None = Non
     return out
 
 
-def _rectify_setup(delta_px: float) -> tuple:
-    """The normalised ``3 delta`` disc, its halo (rows) and Eq. 9-11's ``2 pi delta^4 / t``."""
-    kernel = _disk(3.0 * delta_px)
-    halo = kernel.shape[0] // 2 + 1
-    t = float(kernel.sum())
-    kernel /= t
-    return kernel, halo, np.float32(2.0 * math.pi * delta_px**4 / t)
+# OpenCV's filter2D filters a float kernel of this many cells or more through the DFT, at a
+# cost that does not fall with the kernel's zeros; a smaller kernel is summed directly, tap by
+# non-zero tap, the same numbers at every position.
+_DFT_CELLS = 130
 
 
-def _rectify_strip(img, y0: int, y1: int, setup, out, gx=None, gy=None) -> None:
+class _Split(NamedTuple):
+    """A disc as the box of its full-width rows (a row sum, then a column sum) plus its top
+    and bottom caps; each cap is anchored on its row next to the box and its sums are then
+    moved by ``shift`` rows."""
+
+    row: np.ndarray  # ones (1, 2r + 1)
+    column: np.ndarray  # ones (rows of the box, 1)
+    top: np.ndarray
+    bottom: np.ndarray
+    shift: int
+    inv_t: np.float32  # 1 / (cells of the disc)
+
+
+@dataclass(frozen=True)
+class _Disc:
+    """The ``3 delta`` disc of :func:`rectify_coc` and how to sum an image over it.
+
+    ``kernel``: the disc normalised to a unit sum (one ``filter2D``). ``split``: the disc cut
+    into pieces that are each summed directly, when the whole disc would go through the DFT
+    and the pieces would not (13-19 px wide discs, that of a full frame among them; 1.2-2.5x
+    faster, and the same numbers whatever the strip); ``None`` otherwise.
+    """
+
+    kernel: np.ndarray
+    halo: int  # rows of context a strip needs on each side: the disc's radius and one
+    coef: np.float32  # Eq. 9-11's 2 pi delta^4 / t
+    split: _Split | None
+
+
+def _rectify_setup(delta_px: float) -> _Disc:
+    """The ``3 delta`` disc of radius ``delta_px``: see :class:`_Disc`."""
+    disk = _disk(3.0 * delta_px)
+    r = disk.shape[0] // 2
+    t = float(disk.sum())
+    split = None
+    if disk.size >= _DFT_CELLS:
+        full = np.flatnonzero(disk.all(axis=1))  # the full-width rows: r - h .. r + h
+        lo = int(full[0])
+        if lo * disk.shape[1] < _DFT_CELLS:
+            split = _Split(
+                row=np.ones((1, disk.shape[1]), np.float32),
+                column=np.ones((full.size, 1), np.float32),
+                top=disk[:lo].copy(),
+                bottom=disk[-lo:].copy(),
+                shift=r - lo + 1,  # from a cap's anchor row to the disc's centre row
+                inv_t=np.float32(1.0 / t),
+            )
+    return _Disc(
+        disk / np.float32(t), r + 1, np.float32(2.0 * math.pi * delta_px**4 / t), split
+    )
+
+
+def _disc_mean(src, keep: slice, disc: _Disc) -> np.ndarray:
+    """Mean of ``src`` over the disc at the rows ``keep`` (with ``disc.halo`` rows of context
+    on each side when the disc is split; columns: replicated border)."""
+    if disc.split is None:
+        return cv2.filter2D(src, cv2.CV_32F, disc.kernel, borderType=cv2.BORDER_REPLICATE)[keep]
+    split = disc.split
+    r, lo, shift = split.row.shape[1] // 2, split.top.shape[0], split.shift
+    rows = cv2.filter2D(src, cv2.CV_32F, split.row, borderType=cv2.BORDER_REPLICATE)
+    box = cv2.filter2D(rows, cv2.CV_32F, split.column, borderType=cv2.BORDER_REPLICATE)
+    up = cv2.filter2D(
+        src, cv2.CV_32F, split.top, anchor=(r, lo - 1), borderType=cv2.BORDER_REPLICATE
+    )
+    down = cv2.filter2D(
+        src, cv2.CV_32F, split.bottom, anchor=(r, 0), borderType=cv2.BORDER_REPLICATE
+    )
+    a, b = keep.start, keep.stop
+    mean = box[keep]
+    mean += up[a - shift : b - shift]
+    mean += down[a + shift : b + shift]
+    mean *= split.inv_t
+    return mean
+
+
+def _rectify_strip(img, y0: int, y1: int, disc: _Disc, out, gx=None, gy=None) -> None:
     """Rows ``y0:y1`` of :func:`rectify_coc` into ``out``; ``gx, gy``: the image's Sobel
     derivatives on those rows if known (the strip's own are the same numbers: a 3 x 3 aperture
     inside the halo)."""
-    kernel, halo, coef = setup
+    halo = disc.halo
     rows, cols = img.shape
     a, b = max(0, y0 - halo), min(rows, y1 + halo)
     src = img[a:b]
     keep = slice(y0 - a, y1 - a)
-    mean = cv2.filter2D(src, cv2.CV_32F, kernel, borderType=cv2.BORDER_REPLICATE)[keep]
+    if disc.split is not None and (a > y0 - halo or b < y1 + halo):
+        # the split disc's caps are moved by whole rows: give them the replicated rows
+        src = cv2.copyMakeBorder(src, a - (y0 - halo), y1 + halo - b, 0, 0, cv2.BORDER_REPLICATE)
+        keep = slice(halo, halo + y1 - y0)
+    mean = _disc_mean(src, keep, disc)
     own = gx is None  # derivatives of this strip, free to be overwritten
     if own:
         gx, gy = (g[keep] for g in image_gradients(src))
     here = src[keep]
     # X = 2 pi delta^4 (E_u0 - E_u) / (t E_u0); step = sign(X) sqrt(2 |X|) / |grad|
     x = np.subtract(mean, here)
-    x *= coef
+    x *= disc.coef
     np.maximum(mean, filled(1e-6, mean.shape), out=mean)
     x /= mean
     step = np.abs(x, out=mean)
