@@ -30,6 +30,9 @@ from calstudy.models.exposure import filled
 # ----------------------------------------------------------------------------------------------
 # circle-of-confusion rectification (Eq. 8-11, Fig. 5)
 
+# rectify_coc spreads an image of more rows than this over threads by default
+_ROWS_PER_THREAD = 512
+
 
 def _disk(radius: float) -> np.ndarray:
     r = int(math.floor(radius))
@@ -86,8 +89,8 @@ def rectify_coc(
     strip_rows : int, default 32
         Rows per strip, >= 1.
     workers : int, optional
-        Threads; by default the number of CPUs for an image of more than four strips, one
-        otherwise (a small region is not worth a thread).
+        Threads; by default the number of CPUs for an image of more than 512 rows, one
+        otherwise (a region of interest is not worth a thread).
 
     Returns
     -------
@@ -100,7 +103,7 @@ def rectify_coc(
     rows, cols = img.shape
     starts = range(0, rows, strip_rows)
     if workers is None:
-        workers = (os.cpu_count() or 1) if len(starts) > 4 else 1
+        workers = (os.cpu_count() or 1) if rows > _ROWS_PER_THREAD else 1
     if int(workers) < 1:
         raise CalibrationError(f"workers must be at least 1, got {workers}")
     setup = _rectify_setup(delta_px)
