@@ -38,6 +38,8 @@ _SKEW = np.array(
         [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
     ]
 )
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
 
 
 @dataclass
@@ -72,8 +74,8 @@ def _rodrigues(omega: np.ndarray) -> np.ndarray:
     o0, o1, o2 = omega.tolist()
     k = np.array([[0.0, -o2, o1], [o2, 0.0, -o0], [-o1, o0, 0.0]])
     if angle < 1e-12:
-        return np.eye(3) + k
-    return np.eye(3) + np.sin(angle) / angle * k + (1.0 - np.cos(angle)) / angle**2 * (k @ k)
+        return _EYE3 + k
+    return _EYE3 + np.sin(angle) / angle * k + (1.0 - np.cos(angle)) / angle**2 * (k @ k)
 
 
 def _weighted_rigid_step(
@@ -119,7 +121,7 @@ def _weighted_rigid_step(
         [-(w1 * c21) + w2 * c12, w0 * c20 - w2 * c02, -(w0 * c10) + w1 * c01, *st]
     )
     delta = -np.linalg.solve(h, g)
-    s2 = float(np.sum(r**2 @ w)) / max(3 * n - 6, 1)
+    s2 = float((r**2 @ w).sum()) / max(3 * n - 6, 1)
     rot = _rodrigues(delta[:3])
     # rotation about the centroid, then the translation
     step = np.zeros((4, 4))
