@@ -38,6 +38,8 @@ _SKEW = np.array(
         [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
     ]
 )
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
 
 
 @dataclass
@@ -69,15 +71,16 @@ class IcpResult:
 def _rodrigues(omega: np.ndarray) -> np.ndarray:
     """Rotation matrix ``(3, 3)`` of the rotation vector ``omega`` (rad), without a scipy object."""
     angle = float(np.sqrt(omega @ omega))
-    k = np.array(
-        [[0.0, -omega[2], omega[1]], [omega[2], 0.0, -omega[0]], [-omega[1], omega[0], 0.0]]
-    )
+    o0, o1, o2 = omega.tolist()
+    k = np.array([[0.0, -o2, o1], [o2, 0.0, -o0], [-o1, o0, 0.0]])
     if angle < 1e-12:
-        return np.eye(3) + k
-    return np.eye(3) + np.sin(angle) / angle * k + (1.0 - np.cos(angle)) / angle**2 * (k @ k)
+        return _EYE3 + k
+    return _EYE3 + np.sin(angle) / angle * k + (1.0 - np.cos(angle)) / angle**2 * (k @ k)
 
 
-def _weighted_rigid_step(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, float]:
+def _weighted_rigid_step(
+    p: np.ndarray, q: np.ndarray, w: np.ndarray, c: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
     """One Gauss-Newton step ``(4, 4)`` towards the rigid motion minimising
     ``sum (R p + t - q)^T diag(w) (R p + t - q)`` over fixed pairs ``p -> q`` ``(N, 3)``.
 
@@ -87,10 +90,11 @@ def _weighted_rigid_step(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[n
     pairs, the steps converge quadratically. Also returns ``delta^T H delta / s^2``, the size
     of the step in units of its own standard error, with ``s^2`` the weighted residual variance
     of the pairs (``3 N - 6`` degrees of freedom): below 1, the step is smaller than its
-    standard error.
+    standard error. ``c``: ``p``'s centroid ``p.sum(axis=0) / N`` if already at hand.
     """
     n = p.shape[0]
-    c = p.sum(axis=0) / n
+    if c is None:
+        c = p.sum(axis=0) / n
     x = p - c
     r = p - q
     # the Jacobian of axis j is a_j = [x_k x e_j, e_j] per pair; with sum_k x_k = 0 the normal
@@ -117,10 +121,13 @@ def _weighted_rigid_step(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[n
         [-(w1 * c21) + w2 * c12, w0 * c20 - w2 * c02, -(w0 * c10) + w1 * c01, *st]
     )
     delta = -np.linalg.solve(h, g)
-    s2 = float(np.sum(r**2 @ w)) / max(3 * n - 6, 1)
+    s2 = float((r**2 @ w).sum()) / max(3 * n - 6, 1)
     rot = _rodrigues(delta[:3])
     # rotation about the centroid, then the translation
-    step = geo.make_transform(rot, c - rot @ c + delta[3:])
+    step = np.zeros((4, 4))
+    step[:3, :3] = rot
+    step[:3, 3] = c - rot @ c + delta[3:]
+    step[3, 3] = 1.0
     return step, float(delta @ h @ delta) / max(s2, 1e-300)
 
 
@@ -133,18 +140,23 @@ def _check_cloud(name: str, cloud) -> np.ndarray:
     return geo.check_finite(name, a)
 
 
-def _moves_less_than(step: np.ndarray, cur: np.ndarray, paired: np.ndarray, tol: float) -> bool:
+def _moves_less_than(
+    step: np.ndarray, cur: np.ndarray, paired: np.ndarray, tol: float, c: np.ndarray | None = None
+) -> bool:
     """Whether ``step`` moves every point of ``cur`` by less than ``tol`` (max norm).
 
     The step's mean displacement over the ``paired`` points it was fitted to is its translation
     at their centroid, and no point moves less than that mean in every axis; a step whose
     translation there exceeds ``tol`` (with a margin far above rounding) moves some point by
     more, and the cloud need not be mapped to see it. The margin covers the rounding of both
-    displacements (a few ulps of the largest coordinate).
+    displacements (a few ulps of the largest coordinate). ``c``: the centroid
+    ``paired.sum(axis=0) / len(paired)`` if already at hand.
     """
-    c = paired.sum(axis=0) / paired.shape[0]
+    if c is None:
+        c = paired.sum(axis=0) / paired.shape[0]
     at_centroid = step[:3, :3] @ c + step[:3, 3] - c
-    margin = 1e-9 + 1e-13 * float(np.abs(paired).max())
+    # the largest |coordinate|, without an array of absolute values
+    margin = 1e-9 + 1e-13 * max(float(paired.max()), -float(paired.min()))
     if float(np.abs(at_centroid).max()) > tol + margin:
         return False
     return float(np.abs(geo.apply(step, cur) - cur).max()) < tol
@@ -166,6 +178,7 @@ class _Pairs:
     """
 
     #: neighbours asked of the tree per point: K - 1 candidates and the K-th as the bound
+    #: (``update`` compares the three candidates of K = 4 side by side)
     K = 4
     #: margin (mm) that keeps the tests strict beyond the rounding of the distances
     MARGIN = 1e-9
@@ -190,26 +203,31 @@ class _Pairs:
             self.cand, self.limit, self.paired, self.idx = self._query(cur)
             self.cand = self.cand.copy()
             return self.paired, self.idx
-        x, y, z = cur.T
+        x, y, z = cur.T.copy()
         rx, ry, rz = self.ref
-        # squared distances at ``cur`` of the candidates: the nearest, its index, and the next
-        first = second = np.full(len(cur), np.inf)
-        best = self.idx
-        for c in self.cand:
-            d2 = (x - rx[c]) ** 2 + (y - ry[c]) ** 2 + (z - rz[c]) ** 2
-            closer = d2 < first
-            second = np.minimum(second, np.where(closer, first, d2))
-            best = np.where(closer, c, best)
-            first = np.minimum(first, d2)
-        first, second = np.sqrt(first), np.sqrt(second)
-        moved = np.sqrt(np.sum((cur - self.at) ** 2, axis=1))
-        ok = (first + self.MARGIN < self.limit - moved) & (first + self.MARGIN < second)
-        self.idx[ok] = best[ok]
-        self.paired[ok] = True
-        stale = ~ok
-        if stale.any():
-            self.at[stale] = cur[stale]
-            cand, self.limit[stale], self.paired[stale], self.idx[stale] = self._query(cur[stale])
+        cand = self.cand
+        # squared distances at ``cur`` of the three candidates at once, (3, N), each the same
+        # sum ((x - rx)^2 + (y - ry)^2) + (z - rz)^2 as one candidate at a time
+        d2 = (x - rx.take(cand)) ** 2 + (y - ry.take(cand)) ** 2 + (z - rz.take(cand)) ** 2
+        d0, d1, d2 = d2
+        # the nearest (the first of equals, in candidate order), its index and the next, by
+        # exact comparisons: the values of a pass that keeps the nearest so far
+        near01 = np.minimum(d0, d1)
+        best = np.where(d2 < near01, cand[2], np.where(d1 < d0, cand[1], cand[0]))
+        first = np.sqrt(np.minimum(near01, d2))
+        second = np.sqrt(np.minimum(np.maximum(d0, d1), np.maximum(near01, d2)))
+        # |cur - at| per point, summed (dx^2 + dy^2) + dz^2 as np.sum(..., axis=1) sums a row
+        dx, dy, dz = (cur - self.at).T
+        moved = np.sqrt(dx**2 + dy**2 + dz**2)
+        first += self.MARGIN
+        ok = (first < self.limit - moved) & (first < second)
+        np.copyto(self.idx, best, where=ok)
+        self.paired |= ok
+        stale = np.flatnonzero(~ok)
+        if stale.size:
+            at = cur[stale]
+            self.at[stale] = at
+            cand, self.limit[stale], self.paired[stale], self.idx[stale] = self._query(at)
             self.cand[:, stale] = cand
         return self.paired, self.idx
 
@@ -305,11 +323,16 @@ def weighted_icp(
                 f"ICP lost its pairs: {n_pairs} pairs left at iteration {it} (need {MIN_PAIRS})"
             )
         it += 1
-        pairs = (cur[keep], q[idx[keep]])
-        step, size = _weighted_rigid_step(*pairs, w)
+        rows = np.flatnonzero(keep)
+        pairs = (cur.take(rows, axis=0), q.take(idx.take(rows), axis=0))
+        # the centroid of the moving points, shared by the step and its convergence test
+        centroid = pairs[0].sum(axis=0) / n_pairs
+        step, size = _weighted_rigid_step(*pairs, w, centroid)
         total = step @ total
         last = (step, pairs)
-        if (stop_below_noise and size < NOISE_STEP) or _moves_less_than(step, cur, pairs[0], tol):
+        if (stop_below_noise and size < NOISE_STEP) or _moves_less_than(
+            step, cur, pairs[0], tol, centroid
+        ):
             if stage == 0 and np.isfinite(z_threshold_mm):
                 stage = 1
                 continue
