@@ -25,6 +25,7 @@ from calstudy.core.schema import file_key
 from calstudy.estimators.fitting import solve_pnp
 from calstudy.estimators.sphere_csv import SphereMeasurements
 from calstudy.models.kinematics import Robot
+from calstudy.models.reach import reach_bound
 from calstudy.models.robots import load_robot, perturb_robot, robot_file
 from calstudy.models.sensors import LineLaserSensor, PinholeCamera
 from calstudy.models.targets import HoleTarget, ManufacturedHoleTarget, Sphere
@@ -103,6 +104,15 @@ class HybridStation:
         return self._ik_memo[key].copy()
 
     def _solve_ik(self, robot: Robot, flange2base: np.ndarray, q0, only_q0: bool) -> np.ndarray:
+        # a pose beyond the arm's reach fails from every seed (calstudy.models.reach proves
+        # it): refuse it without the searches, which would only stall
+        bound = reach_bound(robot)
+        excess = bound.excess(flange2base)
+        if excess > bound.margin_mm():
+            raise CalibrationError(
+                f"flange pose out of reach of the {robot.name}: its wrist point lies "
+                f"{excess:.1f} mm beyond the arm's reach"
+            )
         seeds = [] if q0 is None else [np.asarray(q0, dtype=float)]
         yaw = np.arctan2(flange2base[1, 3], flange2base[0, 3])
         for s in np.deg2rad(_IK_SEEDS_DEG) if not (only_q0 and seeds) else []:
