@@ -129,7 +129,7 @@ lint: $(STAMP) ## ruff check of src, tests, notebooks and benchmarks; the import
 	$(BIN)/ruff check src tests notebooks benchmarks
 	$(BIN)/lint-imports
 
-bench: $(STAMP) ## time the speed budgets of the issues (prints; writes nothing)
+bench: $(STAMP) ## time the speed budgets (prints; writes nothing)
 	@for b in $(sort $(wildcard benchmarks/bench_*.py)); do echo "== $$b"; $(BIN)/python $$b; done
 
 clean: ## remove the built book and executed notebooks (results/ and .venv stay)

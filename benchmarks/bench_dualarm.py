@@ -1,9 +1,9 @@
-"""Time the speed budgets of the ``dualarm`` paper (issue 12).
+"""Time the speed budgets of the ``dualarm`` paper.
 
 * One weighted ICP alignment (Eq. 4) of two 1,000-point scans of sphere A (budget 30 ms): the
   median over the 4 alignments of one multi-view scan, each the best of several repeats, with
   the notebook's settings (stop once the update is below the noise) and, for comparison, run to
-  the tolerance (the behaviour before issue 12).
+  the tolerance (the earlier stopping rule; the budget is for the notebook's).
 * One bundle adjustment of the full coded-marker survey (budget 0.5 s), with the analytic sparse
   Jacobian on its normal equations (what the notebook uses), the same Jacobian handed densely
   to scipy's trust region, and finite differences on ``jac_sparsity``, and the whole
@@ -86,7 +86,12 @@ def main() -> None:
     scn = load_scenario()
     print(f"dualarm: best of {REPEATS} repeats")
     for label, (ms, its) in icp_timings(scn).items():
-        print(f"  {label:<55s} {ms:8.1f} ms  (budget {ICP_BUDGET_MS:g} ms; {its:.0f} updates)")
+        if "below the noise" in label:  # the notebook's stopping rule: the budgeted one
+            verdict = "within" if ms <= ICP_BUDGET_MS else "OVER"
+            note = f"budget {ICP_BUDGET_MS:g} ms: {verdict}"
+        else:
+            note = "for comparison"
+        print(f"  {label:<55s} {ms:8.1f} ms  ({note}; {its:.0f} updates)")
     for label, s in bundle_timings(scn).items():
         print(f"  {label:<55s} {s:8.3f} s   (budget {BA_BUDGET_S:g} s for the analytic one)")
 

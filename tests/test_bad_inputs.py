@@ -1,5 +1,5 @@
 # ruff: noqa: E501  (the catalogue is a table: one case per line)
-"""Catalogue of bad inputs (issue 19): each raises CalibrationError (or an OSError naming the path)
+"""Catalogue of bad inputs: each raises CalibrationError (or an OSError naming the path)
 whose message names the key number or name; and a property test of the fitters on random input.
 
 Every case is one bad input through a public function or a user-data reader of core, models,

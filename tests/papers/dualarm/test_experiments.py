@@ -189,7 +189,7 @@ def test_icp_experiment_lowers_the_errors(scenario):
 
 
 def test_the_global_test_floor_lies_far_below_the_claim(scenario):
-    """Issue 17 item 2: with every calibrated transform true, the Tables 1-2 test measures a
+    """With every calibrated transform true, the Tables 1-2 test measures a
     few hundredths of a millimetre, far below the claimed 0.100 mm."""
     rng = np.random.default_rng(21)
     rows = pd.DataFrame(ex.global_rows(scenario, scenario.cam2flange, {}, rng))

@@ -1,5 +1,5 @@
 """The hand-eye maximum likelihood reaches its Cramer-Rao bound under the simulation's own
-sensor noise model (issue 14): the correlated line laser, not an isotropic stand-in.
+sensor noise model: the correlated line laser, not an isotropic stand-in.
 
 One station of the sensor-noise-only scenario (true robot = nominal, no repeatability) and one
 set of calibration moves; then 600 independent laser shots at each pose. The Monte Carlo

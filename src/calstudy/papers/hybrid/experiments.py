@@ -386,7 +386,7 @@ def calibrate(st: HybridStation, rng: np.random.Generator) -> ProductionStation:
 def trial_summary(run: dict, scenario: Scenario, n_values) -> tuple[dict, list[dict]]:
     """The systematic-error figures and the Table 1 figures (one row per ``n``) of one run.
 
-    Systematic size in both readings of "2-4 mm" (issue 14 item 7): the length of the 3-D mean
+    Systematic size in both readings of the paper's "2-4 mm": the length of the 3-D mean
     deviation vector per point (``systematic_median_mm``, median over points) and the mean
     deviation per coordinate, as Fig. 6 plots x, y, z apart (``systematic_coord_median_mm``,
     median |mean| over the coordinates not fixed by the frame; ``coord_above_2mm``, the share of
