@@ -78,7 +78,10 @@ def rectify_coc(
     The image is processed in horizontal strips of ``strip_rows`` rows (with a halo of the
     ``3 delta`` window) so that the working arrays stay in cache; strips are independent and run
     on ``workers`` threads (numpy and OpenCV release the interpreter lock). Each strip writes its
-    own rows, so the result depends neither on the strip height nor on the number of workers.
+    own rows, so the result does not depend on the number of workers. The strip height can
+    move the last bit of a few pixels (below 1e-7): ``cv2.remap`` and ``cv2.magnitude`` round
+    the vector body and the scalar tail of their loops differently, and where the tails fall
+    depends on the shape they are given.
 
     Parameters
     ----------
@@ -220,18 +223,27 @@ def _disc_mean(src, keep: slice, disc: _Disc) -> np.ndarray:
         return cv2.filter2D(src, cv2.CV_32F, disc.kernel, borderType=cv2.BORDER_REPLICATE)[keep]
     split = disc.split
     r, lo, shift = split.row.shape[1] // 2, split.top.shape[0], split.shift
-    rows = cv2.filter2D(src, cv2.CV_32F, split.row, borderType=cv2.BORDER_REPLICATE)
-    box = cv2.filter2D(rows, cv2.CV_32F, split.column, borderType=cv2.BORDER_REPLICATE)
-    up = cv2.filter2D(
-        src, cv2.CV_32F, split.top, anchor=(r, lo - 1), borderType=cv2.BORDER_REPLICATE
-    )
-    down = cv2.filter2D(
-        src, cv2.CV_32F, split.bottom, anchor=(r, 0), borderType=cv2.BORDER_REPLICATE
-    )
     a, b = keep.start, keep.stop
-    mean = box[keep]
-    mean += up[a - shift : b - shift]
-    mean += down[a + shift : b + shift]
+    h = split.column.shape[0] // 2
+    # each piece filtered on the rows its kept sums read, no more: the rows of the box, then
+    # its column sums; each cap from its anchor row back (top) or on (bottom)
+    rows = cv2.filter2D(src[a - h : b + h], cv2.CV_32F, split.row, borderType=cv2.BORDER_REPLICATE)
+    mean = cv2.filter2D(rows, cv2.CV_32F, split.column, borderType=cv2.BORDER_REPLICATE)
+    mean = mean[h : h + b - a]
+    mean += cv2.filter2D(
+        src[a - shift - lo + 1 : b - shift],
+        cv2.CV_32F,
+        split.top,
+        anchor=(r, lo - 1),
+        borderType=cv2.BORDER_REPLICATE,
+    )[lo - 1 :]
+    mean += cv2.filter2D(
+        src[a + shift : b + shift + lo - 1],
+        cv2.CV_32F,
+        split.bottom,
+        anchor=(r, 0),
+        borderType=cv2.BORDER_REPLICATE,
+    )[: b - a]
     mean *= split.inv_t
     return mean
 
@@ -251,8 +263,9 @@ def _rectify_strip(img, y0: int, y1: int, disc: _Disc, out, gx=None, gy=None) ->
         keep = slice(halo, halo + y1 - y0)
     mean = _disc_mean(src, keep, disc)
     own = gx is None  # derivatives of this strip, free to be overwritten
-    if own:
-        gx, gy = (g[keep] for g in image_gradients(src))
+    if own:  # on the kept rows and one more on each side where there is one
+        s0, s1 = max(keep.start - 1, 0), min(keep.stop + 1, src.shape[0])
+        gx, gy = (g[keep.start - s0 : keep.stop - s0] for g in image_gradients(src[s0:s1]))
     here = src[keep]
     # X = 2 pi delta^4 (E_u0 - E_u) / (t E_u0); step = sign(X) sqrt(2 |X|) / |grad|
     x = np.subtract(mean, here)
