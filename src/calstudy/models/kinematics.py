@@ -50,6 +50,8 @@ _LENGTH_FIELDS = ("a", "d")
 FLANGE = "flange"
 DEFAULT_MARGIN = math.radians(5.0)
 _TURN = 2.0 * math.pi
+#: the default convergence threshold of :meth:`Robot.ik` (norm of the error twist)
+IK_TOL = 1e-10
 _MAX_IK_STEP = 0.5  # rad per joint and iteration: a trust region that keeps LM off far branches
 
 
@@ -324,7 +326,7 @@ class Robot:
             self.model, self.data, q, self._flange_id, pin.LOCAL_WORLD_ALIGNED
         )
 
-    def ik(self, flange2base, q0, tol: float = 1e-10, max_iter: int = 200) -> np.ndarray:
+    def ik(self, flange2base, q0, tol: float = IK_TOL, max_iter: int = 200) -> np.ndarray:
         """Joint angles that put the flange at ``flange2base``, by damped least squares.
 
         Levenberg-Marquardt on the SE(3) error ``log6(flange2base_current^-1 flange2base)``

@@ -55,10 +55,8 @@ import weakref
 
 import numpy as np
 
-from calstudy.models.kinematics import Robot
+from calstudy.models.kinematics import IK_TOL, Robot
 
-#: the default convergence threshold of :meth:`Robot.ik`
-IK_TOL = 1e-10
 #: the margin beyond the rounding and the solver tolerance (mm)
 ROUNDING_MARGIN_MM = 1e-3
 

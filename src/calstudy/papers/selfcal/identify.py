@@ -223,8 +223,8 @@ class _Problem:
     parameters; ``iterates`` records the full parameter vector at each Jacobian evaluation.
 
     LM asks for the Jacobian at nearly every point where it evaluated the residuals, so the
-    residuals come with the Jacobian (one kinematic pass, the same points to the bit) and the
-    Jacobian of the last residual evaluation is kept for that request."""
+    residuals come with the Jacobian (one kinematic pass, the same points to the bit), which
+    :meth:`GlobalModel.points_and_jacobian` keeps for that request."""
 
     model: GlobalModel
     meas: Measurements
@@ -233,7 +233,6 @@ class _Problem:
     white: np.ndarray | None
     iterates: list[np.ndarray] = field(default_factory=list)
     mean_errors: dict[bytes, float] = field(default_factory=dict)
-    last_jacobian: tuple[bytes, np.ndarray] | None = None
 
     def full(self, x) -> np.ndarray:
         p = self.start.copy()
@@ -242,10 +241,9 @@ class _Problem:
 
     def fun(self, x) -> np.ndarray:
         meas = self.meas
-        key = np.asarray(x, float).tobytes()
-        points, jac = self.model.points_and_jacobian(self.full(x), meas.Q, meas.C)
-        self.last_jacobian = (key, jac)
+        points, _ = self.model.points_and_jacobian(self.full(x), meas.Q, meas.C)
         d = points - meas.P_ref
+        key = np.asarray(x, float).tobytes()
         self.mean_errors[key] = float(np.sqrt(np.einsum("ij,ij->i", d, d)).mean())
         r = d.ravel()
         return r if self.white is None else self.white @ r
@@ -259,11 +257,7 @@ class _Problem:
 
     def jac(self, x) -> np.ndarray:
         self.iterates.append(self.full(x))
-        last = self.last_jacobian
-        if last is not None and last[0] == np.asarray(x, float).tobytes():
-            j = last[1]
-        else:
-            _, j = self.model.points_and_jacobian(self.full(x), self.meas.Q, self.meas.C)
+        _, j = self.model.points_and_jacobian(self.full(x), self.meas.Q, self.meas.C)
         j = j[:, self.mask]
         return j if self.white is None else self.white @ j
 

@@ -139,6 +139,7 @@ class GlobalModel:
                 parent, _JOINT_TYPES[kind, axis](), pin.SE3.Identity(), f"e{i}", big, big, -big, big
             )
         self.model, self.data, self._last = model, model.createData(), parent
+        self._memory: tuple | None = None  # (key, points, Jacobian) of the last call
         n = len(_CHAIN)
         self._from_params = np.zeros((n, N_PARAMS))
         self._from_q = np.zeros((n, 6))
@@ -181,7 +182,17 @@ class GlobalModel:
         """Points ``(m, 3)`` and their Jacobian ``(3 m, 30)`` with respect to the parameters.
 
         Row ``3 k + i`` is ``dP_k[i] / dparams``: mm per mm for lengths, mm per rad for angles.
+        The answer of the last call is kept (read-only arrays): a least-squares fit that takes
+        its residuals from here asks for the Jacobian at the same point next.
         """
+        key = tuple(np.asarray(a, dtype=float).tobytes() for a in (params, Q, C))
+        if self._memory is None or self._memory[0] != key:
+            points, jac = self._points_and_jacobian(params, Q, C)
+            points.flags.writeable = jac.flags.writeable = False
+            self._memory = (key, points, jac)
+        return self._memory[1], self._memory[2]
+
+    def _points_and_jacobian(self, params, Q, C) -> tuple[np.ndarray, np.ndarray]:
         cfgs = self._configs(params, Q)
         C = np.asarray(C, dtype=float)
         m = len(cfgs)

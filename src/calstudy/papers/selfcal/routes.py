@@ -55,8 +55,6 @@ def _fixed_sphere_fit(meas: Measurements, start, free, model: GlobalModel, centr
     for i, s in enumerate(meas.sphere):
         select[3 * i : 3 * i + 3, 3 * s : 3 * s + 3] = np.eye(3)
     minus_select = -select
-    # the Jacobian of the last residual evaluation: LM asks for it at nearly every such point
-    last: list = [None, None]
 
     def split(x):
         p = start.copy()
@@ -65,16 +63,13 @@ def _fixed_sphere_fit(meas: Measurements, start, free, model: GlobalModel, centr
 
     def fun(x):
         p, centres = split(x)
-        points, last[1] = model.points_and_jacobian(p, meas.Q, meas.C)
-        last[0] = np.asarray(x, float).tobytes()
+        # with the Jacobian, which the model keeps for the request that follows at this point
+        points, _ = model.points_and_jacobian(p, meas.Q, meas.C)
         return points.ravel() - select @ centres
 
     def jac(x):
-        if last[0] == np.asarray(x, float).tobytes():
-            j = last[1]
-        else:
-            p, _ = split(x)
-            _, j = model.points_and_jacobian(p, meas.Q, meas.C)
+        p, _ = split(x)
+        _, j = model.points_and_jacobian(p, meas.Q, meas.C)
         return np.hstack([j[:, mask], minus_select])
 
     est = levenberg_marquardt(fun, x0, jac=jac, max_nfev=200, xtol=1e-10, label="fixed-sphere LM")
