@@ -115,3 +115,20 @@ def test_tables_outside_the_model_raise(scenario, index, value, match):
     vec[index] = value
     with pytest.raises(CalibrationError, match=match):
         parameters_from_robot(scenario.robot.with_parameters(vec), np.eye(4), np.eye(4))
+
+
+def test_points_and_jacobian_keep_the_last_answer_read_only(scenario):
+    rng = np.random.default_rng(4)
+    params = parameters_from_robot(scenario.robot, random_pose(rng), random_pose(rng, 200.0))
+    Q = scenario.robot.random_configurations(rng, 3)
+    C = rng.normal(0.0, 100.0, (3, 3))
+    model = GlobalModel()
+    points, jac = model.points_and_jacobian(params, Q, C)
+    again = model.points_and_jacobian(params.copy(), Q.copy(), C.copy())
+    assert again[0] is points and again[1] is jac  # the same inputs: the kept answer
+    with pytest.raises(ValueError, match="read-only"):
+        jac[0, 0] = 1.0
+    fresh = GlobalModel().points_and_jacobian(params, Q, C)
+    assert fresh[1].tobytes() == jac.tobytes()  # what a new computation gives, to the bit
+    moved = model.points_and_jacobian(params, Q, C + 1.0)  # another input: computed afresh
+    assert not np.array_equal(moved[0], points)
