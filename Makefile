@@ -33,7 +33,7 @@ BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
 	$(wildcard book/_ext/*.py) $(wildcard book/_static/*)
 BOOK_STAMP := book/_build/html/.built
 
-.PHONY: help venv reproduce notebooks run-notebooks test check-book verify lint book bench clean
+.PHONY: help venv browser reproduce notebooks run-notebooks test check-book verify lint book bench clean
 
 help: ## list the targets
 	@echo "calstudy: make <target>"
@@ -114,13 +114,28 @@ $(BOOK_STAMP): $(BOOK_SOURCES) $(EXECUTED) $(RESULTS) | $(STAMP)
 
 book: $(BOOK_STAMP) ## build the book (same as reproduce)
 
-test: $(STAMP) ## ruff, the import layers, then pytest (unit tests, notebook runs, the book in Chromium)
+# The browser check opens the book in Debian's chromium ($$CHROMIUM names another binary). When
+# it is missing, root installs it with apt-get (about a minute); anyone else is told the command.
+CHROMIUM_INSTALL := apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium
+browser: ## install Debian's chromium for the browser check when it is missing (as root)
+	@if [ -n "$${CHROMIUM:-}" ] && command -v "$$CHROMIUM" >/dev/null 2>&1; then exit 0; fi; \
+	if command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1; then exit 0; fi; \
+	if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "browser: installing Debian's chromium for the book check (apt-get)"; \
+		$(CHROMIUM_INSTALL) >/dev/null || { echo "browser: apt-get could not install chromium" >&2; exit 1; }; \
+	else \
+		echo "browser: make test opens the book in Chromium and found none; run" >&2; \
+		echo "    sudo $(CHROMIUM_INSTALL)" >&2; \
+		echo "(or set CHROMIUM to a Chromium binary), then make test again" >&2; exit 1; \
+	fi
+
+test: $(STAMP) browser ## chromium if missing, ruff, the import layers, then pytest (unit tests, notebook runs, the book in Chromium)
 	$(BIN)/ruff check src tests notebooks benchmarks
 	$(BIN)/lint-imports
 	$(BIN)/pytest
 
 # pytest in `make test` runs tests/test_book.py too; this target runs only the browser check.
-check-book: $(STAMP) ## build the book from CI-valued notebook runs in a temporary folder, open every page in headless Chromium
+check-book: $(STAMP) browser ## build the book from CI-valued notebook runs in a temporary folder, open every page in headless Chromium
 	$(BIN)/pytest -m book tests/test_book.py
 
 verify: $(STAMP) ## rerun every notebook at its defaults and compare with the committed results/
