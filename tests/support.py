@@ -102,25 +102,18 @@ def handeye_cell(seed=0, n=15, noise=True, **kw):
     return simulate_cell(np.random.default_rng(seed), n, *s, **kw)
 
 
-def assert_same_table(fresh, committed: Path, *, rtol: float = 2e-5, atol: float = 1e-12) -> None:
+def assert_same_table(fresh, committed: Path, *, rtol: float | None = None) -> None:
     """``fresh`` (a DataFrame, or a CSV path) holds the same table as the committed CSV: the same
-    columns and rows, numbers to ``rtol``/``atol`` (the CSVs keep 6 significant digits), text
-    exactly. A DataFrame goes through CSV first, as the writers store it."""
+    columns and rows, text, counts and verdicts exactly, numbers within the tolerance of their
+    unit plus ``rtol`` relative (:mod:`calstudy.io.tolerance`; by default ``TABLE_RTOL``, the
+    tables keep 6 significant digits). A DataFrame goes through CSV first, as the writers store
+    it."""
+    from calstudy.io.tolerance import TABLE_RTOL, compare_tables
+
     def read(source):
         return pd.read_csv(source, keep_default_na=False, na_values=[""])
 
     if isinstance(fresh, pd.DataFrame):
         fresh = io.StringIO(fresh.to_csv(index=False))
-    new, old = read(fresh), read(committed)
-    name = Path(committed).name
-    assert list(new.columns) == list(old.columns), f"{name}: columns differ"
-    assert len(new) == len(old), f"{name}: {len(new)} rows now, {len(old)} committed"
-    for col in old.columns:
-        a, b = new[col], old[col]
-        if pd.api.types.is_numeric_dtype(a) and pd.api.types.is_numeric_dtype(b):
-            np.testing.assert_allclose(
-                a.to_numpy(float), b.to_numpy(float), rtol=rtol, atol=atol, equal_nan=True,
-                err_msg=f"{name}: column {col!r}",
-            )
-        else:
-            assert a.astype(str).tolist() == b.astype(str).tolist(), f"{name}: column {col!r}"
+    bad = compare_tables(read(fresh), read(committed), TABLE_RTOL if rtol is None else rtol)
+    assert not bad, f"{Path(committed).name}: " + "; ".join(str(m) for m in bad)

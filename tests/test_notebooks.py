@@ -31,9 +31,6 @@ NOTEBOOK_DIR = REPO_ROOT / "notebooks"
 CI_PARAMS = NOTEBOOK_DIR / "ci-params.yml"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("[0-9][0-9]_*.ipynb"))
 ALL = [pytest.param(p, id=p.stem) for p in NOTEBOOKS]
-# CSVs hold 6 significant digits (%.6g): one unit in the last digit is up to 1e-5 relative,
-# which is what another machine's floating point may change; anything larger is a real change.
-RTOL, ATOL = 2e-5, 1e-9
 
 
 
@@ -178,7 +175,7 @@ def test_runs_with_ci_parameters(path, ci_runs):
 
 
 def compare_tables(committed: Path, fresh: Path) -> None:
-    assert_same_table(fresh, committed, rtol=RTOL, atol=ATOL)
+    assert_same_table(fresh, committed)
 
 @pytest.mark.verify
 @pytest.mark.parametrize("path", ALL)

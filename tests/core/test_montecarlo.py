@@ -1,11 +1,10 @@
 """Tests of calstudy.core.montecarlo: the same bytes for any worker count or scheduler, streams
-keyed by (seed, experiment, point, trial), a resumable cache and atomic result folders."""
+keyed by (seed, experiment, trial), a resumable cache and atomic result folders."""
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
-import json
 import os
 import subprocess
 import sys
@@ -34,7 +33,15 @@ from mc_trials import (
 )
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment, run, run_many, trial_rng, trial_rows
+from calstudy.core.montecarlo import (
+    Experiment,
+    child_rng,
+    run,
+    run_many,
+    streams,
+    trial_rng,
+    trial_rows,
+)
 
 # ----------------------------------------------------------------------------------------------
 # rows and streams
@@ -93,22 +100,31 @@ def test_rows_follow_trial_rng():
         assert rows["first"].tolist() == [expected_first(SEED, "solve", point, t) for t in range(4)]
 
 
-def test_different_trials_points_names_and_seeds_get_different_streams():
+def test_different_trials_names_and_seeds_get_different_streams():
     draws = [
-        expected_first(seed, name, point, t)
+        expected_first(seed, name, {}, t)
         for seed in (0, 1)
         for name in ("solve", "solve2")
-        for point in (*POINTS, {})
         for t in range(20)
     ]
     assert len(set(draws)) == len(draws)
-    # the point's key order is not part of its identity
-    a = trial_rng(3, "x", {"sigma": 0.1, "robot": "a"}, 2).random(4)
-    b = trial_rng(3, "x", {"robot": "a", "sigma": 0.1}, 2).random(4)
-    np.testing.assert_array_equal(a, b)
-    # NumPy scalars are the Python numbers they hold
-    c = trial_rng(3, "x", {"sigma": np.float64(0.1), "robot": np.str_("a")}, 2).random(4)
-    np.testing.assert_array_equal(a, c)
+
+
+def test_every_point_of_a_sweep_sees_the_same_draws():
+    """Common random numbers: the point does not key the stream, so a calibrated point value
+    whose last bit differs on another machine draws the same numbers."""
+    value = 0.7164706571379741
+    nudged = np.nextafter(value, 1.0)
+    for point in (*POINTS, {}, {"plate_sigma_px": value}, {"plate_sigma_px": nudged}):
+        np.testing.assert_array_equal(
+            trial_rng(3, "x", point, 2).random(4), trial_rng(3, "x", {}, 2).random(4)
+        )
+    df = run(experiment(n_trials=3), SEED, n_jobs=1, progress=False)
+    firsts_by_point = df[df["k"] == 0].groupby("sigma")["first"].apply(list).tolist()
+    assert firsts_by_point[0] == firsts_by_point[1]
+    # the point is still checked
+    with pytest.raises(CalibrationError, match="use a scalar"):
+        trial_rng(3, "x", {"sigma": np.ones(2)}, 2)
 
 
 def test_trial_rng_follows_documented_formula():
@@ -116,15 +132,50 @@ def test_trial_rng_follows_documented_formula():
         digest = hashlib.sha256(text.encode()).digest()
         return [int(w) for w in np.frombuffer(digest, dtype="<u4")]
 
-    point = {"sigma": 0.05, "n": 3}
-    key = (
-        *words("noise_sweep"),
-        *words(json.dumps(point, sort_keys=True, separators=(",", ":"))),
-        7,
-    )
-    sequence = np.random.SeedSequence(entropy=11, spawn_key=key)
+    sequence = np.random.SeedSequence(entropy=11, spawn_key=(*words("noise_sweep"), 7))
     want = np.random.Generator(np.random.PCG64(sequence)).random(5)
-    np.testing.assert_array_equal(trial_rng(11, "noise_sweep", point, 7).random(5), want)
+    np.testing.assert_array_equal(trial_rng(11, "noise_sweep", {"sigma": 0.05}, 7).random(5), want)
+
+
+def test_child_streams_do_not_depend_on_draws_elsewhere():
+    rng = trial_rng(5, "station", {}, 4)
+    survey = child_rng(rng, "survey").random(6)
+    scans = child_rng(rng, "scans").random(6)
+    rng.random(1000)  # the parent draws: a data-dependent number of draws
+    np.testing.assert_array_equal(child_rng(rng, "survey").random(6), survey)
+    np.testing.assert_array_equal(child_rng(rng, "scans").random(6), scans)
+    assert not np.array_equal(survey, scans)
+    # children of other trials, seeds and experiments differ; a grandchild differs from its parent
+    others = [
+        child_rng(trial_rng(5, "station", {}, 5), "survey").random(6),
+        child_rng(trial_rng(6, "station", {}, 4), "survey").random(6),
+        child_rng(trial_rng(5, "pilot", {}, 4), "survey").random(6),
+        child_rng(child_rng(rng, "survey"), "survey").random(6),
+        trial_rng(5, "station", {}, 4).random(6),
+    ]
+    assert len({tuple(x) for x in [survey, *others]}) == 6
+    # a user's default_rng(seed) has a seed sequence too
+    np.testing.assert_array_equal(
+        child_rng(np.random.default_rng(3), "a").random(2),
+        child_rng(np.random.default_rng(3), "a").random(2),
+    )
+
+
+@pytest.mark.parametrize(
+    ("rng", "component", "match"),
+    [
+        (np.random.default_rng(1), "", "non-empty str"),
+        (np.random.default_rng(1), 3, "non-empty str"),
+        (np.random.Generator(np.random.PCG64(5)), "a", None),
+        (np.random.RandomState(1), "a", "SeedSequence"),
+    ],
+)
+def test_child_rng_refuses_what_it_cannot_derive(rng, component, match):
+    if match is None:  # an integer seed goes through a SeedSequence too
+        child_rng(rng, component)
+        return
+    with pytest.raises(CalibrationError, match=match):
+        child_rng(rng, component)
 
 
 def test_trial_rng_same_in_another_process():
@@ -306,7 +357,7 @@ def test_unstable_scenario_needs_a_key(tmp_path):
 
 @pytest.mark.parametrize("n_jobs", [1, 2])
 def test_trial_exception_names_experiment_point_and_trial(tmp_path, n_jobs):
-    point = {"sigma": 0.2, "robot": "kuka"}
+    point = {"sigma": 0.05, "robot": "ur5"}  # trial 2 of every point draws alike: the first fails
     exp = experiment(
         "boom",
         n_trials=5,
@@ -315,7 +366,7 @@ def test_trial_exception_names_experiment_point_and_trial(tmp_path, n_jobs):
     )
     with pytest.raises(
         CalibrationError,
-        match=r"experiment 'boom', point sigma=0.2 robot=kuka, trial 2 failed: ValueError: kaboom",
+        match=r"experiment 'boom', point sigma=0.05 robot=ur5, trial 2 failed: ValueError: kaboom",
     ) as info:
         run(exp, SEED, n_jobs=n_jobs, progress=False)
     assert isinstance(info.value.__cause__, ValueError)
@@ -395,3 +446,22 @@ def test_run_many_and_single_point():
     assert not np.isin(tables["b"]["u"], tables["a"]["u"]).any()
     with pytest.raises(CalibrationError, match="repeated"):
         run_many([a, a], SEED, n_jobs=1, progress=False)
+
+
+def test_streams_are_new_at_every_call_and_independent_of_draw_counts():
+    rng = trial_rng(5, "station", {}, 4)
+    first = [g.random(3) for g in streams(rng, "robot", "target")]
+    rng.random(777)  # draws between calls change nothing; the call count does
+    second = [g.random(3) for g in streams(rng, "robot", "target")]
+    assert not np.array_equal(first[0], second[0]) and not np.array_equal(first[0], first[1])
+    again = trial_rng(5, "station", {}, 4)
+    np.testing.assert_array_equal(streams(again, "robot", "target")[0].random(3), first[0])
+    # a fresh child of the same name replays its calls: paired draws
+    a = streams(child_rng(rng, "station"), "robot")[0].random(3)
+    b = streams(child_rng(rng, "station"), "robot")[0].random(3)
+    np.testing.assert_array_equal(a, b)
+    for bad in ((), ("a", "a")):
+        with pytest.raises(CalibrationError, match="distinct component names"):
+            streams(rng, *bad)
+    with pytest.raises(CalibrationError, match="SeedSequence"):
+        streams(np.random.RandomState(1), "a")

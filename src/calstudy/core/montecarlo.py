@@ -7,10 +7,17 @@ index added to each row.
 
 Reproducibility
 ---------------
-Each trial draws from its own generator, derived from (seed, experiment name, sweep point, trial
-index) alone (see :func:`trial_rng`), and the rows are sorted by (point order, trial, row order
-within the trial). Serial runs, ``n_jobs`` worker processes and a Dask cluster therefore give
+Each trial draws from its own generator, derived from (seed, experiment name, trial index)
+alone (see :func:`trial_rng`), and the rows are sorted by (point order, trial, row order within
+the trial). Serial runs, ``n_jobs`` worker processes and a Dask cluster therefore give
 byte-identical tables, whatever order the trials finish in.
+
+The sweep point does not key the stream: trial ``t`` sees the same draws at every point of a
+sweep (common random numbers), so that two points are compared on paired trials, and a computed
+point value (a nuisance input calibrated to a baseline figure, whose last bits depend on the
+machine) cannot reseed anything. A trial made of independent random components (a survey, the
+scans, a drift) draws each from its own child stream, :func:`child_rng`, so that a
+data-dependent number of draws in one component cannot shift the draws of another.
 
 Cache
 -----
@@ -54,7 +61,16 @@ from tqdm import tqdm
 from calstudy.core.errors import CalibrationError
 from calstudy.core.trialcache import Rows, TrialCache
 
-__all__ = ["Experiment", "one_opencv_thread", "run", "run_many", "trial_rng", "trial_rows"]
+__all__ = [
+    "Experiment",
+    "child_rng",
+    "one_opencv_thread",
+    "run",
+    "run_many",
+    "streams",
+    "trial_rng",
+    "trial_rows",
+]
 
 _NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 _SCALARS = (type(None), bool, int, float, str, np.bool_, np.integer, np.floating)
@@ -184,16 +200,14 @@ def _check_points(points: object, name: str) -> tuple[dict[str, Any], ...]:
 
 
 def trial_rng(
-    seed: int, experiment: str, point: Mapping[str, Any], trial: int
+    seed: int, experiment: str, point: Mapping[str, Any] | None, trial: int
 ) -> np.random.Generator:
     """The generator that the engine hands to one trial, to reproduce it by hand.
 
     The stream is ``Generator(PCG64(SeedSequence(entropy=seed, spawn_key=key)))`` with ``key``
-    the 8 little-endian uint32 words of the SHA-256 of the UTF-8 ``experiment``, then the 8
-    words of the SHA-256 of ``json.dumps(point, sort_keys=True, separators=(",", ":"))``
-    (NumPy scalars first turned into Python ones; floats are written as their shortest
-    round-trip repr, so ``1`` and ``1.0`` are different points), then ``trial``. It depends on
-    nothing else: not on the worker, the order of trials, Python's ``hash`` or other points.
+    the 8 little-endian uint32 words of the SHA-256 of the UTF-8 ``experiment``, then
+    ``trial``. It depends on nothing else: not on the sweep point (every point of a sweep sees
+    the same draws), the worker, the order of trials, Python's ``hash`` or other points.
 
     Parameters
     ----------
@@ -201,8 +215,9 @@ def trial_rng(
         The run's seed, >= 0.
     experiment : str
         The experiment name.
-    point : mapping
-        The sweep point, ``{}`` for an experiment without sweep.
+    point : mapping or None
+        The sweep point (``{}`` for an experiment without sweep). It is checked (scalar values,
+        str keys) but does not key the stream.
     trial : int
         Trial index, >= 0.
 
@@ -220,13 +235,113 @@ def trial_rng(
     Examples
     --------
     >>> rng = trial_rng(7, "noise_sweep", {"sigma": 0.05}, 3)
+    >>> rng.integers(10**6) == trial_rng(7, "noise_sweep", {"sigma": 0.2}, 3).integers(10**6)
+    True
     """
     seed = _check_index(seed, "seed")
     _check_name(experiment)
-    if not isinstance(point, Mapping):
-        raise CalibrationError(f"point must be a mapping, got {type(point).__name__}")
-    prefix = _spawn_prefix(experiment, _point_json(point))
-    return _rng(seed, prefix, _check_index(trial, "trial"))
+    if point is not None:
+        if not isinstance(point, Mapping):
+            raise CalibrationError(f"point must be a mapping, got {type(point).__name__}")
+        _point_json(point)
+    return _rng(seed, _spawn_prefix(experiment), _check_index(trial, "trial"))
+
+
+def child_rng(rng: np.random.Generator, component: str) -> np.random.Generator:
+    """The stream of one random component of a trial, e.g. ``"survey"``, ``"scans"``, ``"drift"``.
+
+    A child stream is derived from the seed sequence of ``rng`` (its entropy and spawn key) and
+    the component's name alone, not from the state of ``rng``: however many numbers ``rng`` or
+    another child has drawn, the child gives the same draws. Independent components of a trial
+    take one child each, so that a data-dependent number of draws in one (a rejection sampler,
+    a retried pose) cannot shift the draws of the others.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        The trial's generator (from the engine, :func:`trial_rng`, or
+        ``numpy.random.default_rng(seed)``): a PCG64 generator built from a ``SeedSequence``.
+    component : str
+        The component's name; different names give independent streams, the same name the same
+        stream.
+
+    Returns
+    -------
+    numpy.random.Generator
+        A fresh PCG64 generator of the class of ``rng`` (a subclass of
+        :class:`numpy.random.Generator` carries over to the children).
+
+    Raises
+    ------
+    CalibrationError
+        If ``rng`` was not built from a seed sequence or ``component`` is not a non-empty str.
+
+    Examples
+    --------
+    >>> rng = trial_rng(7, "station", {}, 3)
+    >>> a = child_rng(rng, "survey").normal()
+    >>> _ = rng.normal(size=1000)  # draws from the parent do not move the child
+    >>> a == child_rng(rng, "survey").normal()
+    True
+    """
+    if not isinstance(component, str) or not component:
+        raise CalibrationError(f"component must be a non-empty str, got {component!r}")
+    seq = getattr(getattr(rng, "bit_generator", None), "seed_seq", None)
+    if not isinstance(seq, np.random.SeedSequence):
+        raise CalibrationError(
+            f"child_rng needs a generator built from a numpy SeedSequence (as the engine's and "
+            f"numpy.random.default_rng(seed) are), got {type(rng).__name__}"
+        )
+    sequence = np.random.SeedSequence(
+        entropy=seq.entropy, spawn_key=(*seq.spawn_key, *_words("component:" + component))
+    )
+    return type(rng)(np.random.PCG64(sequence))
+
+
+def streams(rng: np.random.Generator, *components: str) -> tuple[np.random.Generator, ...]:
+    """New independent streams for the named random components of one call.
+
+    ``rng`` spawns one child (:meth:`numpy.random.Generator.spawn`, which counts calls, not
+    draws) and each component takes a named child of it (:func:`child_rng`). A function that
+    draws several components (a station's robot, target and mounts) starts with this: every
+    call on the same generator gives new draws, as a plain sequence of draws would, while the
+    number of numbers one component draws cannot shift another's. To give a call the same draws
+    again (a paired comparison), pass it a fresh ``child_rng(trial_rng, name)``.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        The caller's generator, built from a ``SeedSequence``.
+    *components : str
+        Names of the components, at least one, distinct.
+
+    Returns
+    -------
+    tuple of numpy.random.Generator
+        One generator per component, in the order given.
+
+    Raises
+    ------
+    CalibrationError
+        If ``rng`` was not built from a seed sequence, no component is named or a name repeats.
+
+    Examples
+    --------
+    >>> rng = trial_rng(7, "station", {}, 3)
+    >>> robot, target = streams(rng, "robot", "target")
+    >>> again, _ = streams(rng, "robot", "target")  # a second call: new draws
+    >>> bool(robot.normal() != again.normal())
+    True
+    """
+    if not components or len(set(components)) != len(components):
+        raise CalibrationError(f"streams needs distinct component names, got {components!r}")
+    seq = getattr(getattr(rng, "bit_generator", None), "seed_seq", None)
+    if not isinstance(seq, np.random.SeedSequence):
+        raise CalibrationError(
+            f"streams needs a generator built from a numpy SeedSequence, got {type(rng).__name__}"
+        )
+    (base,) = rng.spawn(1)
+    return tuple(child_rng(base, name) for name in components)
 
 
 def _check_index(value: object, what: str) -> int:
@@ -246,14 +361,16 @@ def _words(text: str) -> tuple[int, ...]:
     return tuple(int.from_bytes(digest[i : i + 4], "little") for i in range(0, 32, 4))
 
 
-def _spawn_prefix(experiment: str, point_json: str) -> tuple[int, ...]:
-    return (*_words(experiment), *_words(point_json))
+def _spawn_prefix(experiment: str) -> tuple[int, ...]:
+    return _words(experiment)
 
 
-def _rng(seed: int, prefix: tuple[int, ...], trial: int) -> np.random.Generator:
+def _rng(
+    seed: int, prefix: tuple[int, ...], trial: int, generator: type = np.random.Generator
+) -> np.random.Generator:
     # PCG64 named explicitly: default_rng's bit generator may change between NumPy versions
     sequence = np.random.SeedSequence(entropy=seed, spawn_key=(*prefix, trial))
-    return np.random.Generator(np.random.PCG64(sequence))
+    return generator(np.random.PCG64(sequence))
 
 
 def _point_json(point: Mapping[str, Any]) -> str:
@@ -323,10 +440,12 @@ def one_opencv_thread() -> Iterator[None]:
         cv2.setNumThreads(previous)
 
 
-def _run_trial(job: _PointJob, trial: int, in_worker: bool) -> Outcome:
+def _run_trial(
+    job: _PointJob, trial: int, in_worker: bool, generator: type = np.random.Generator
+) -> Outcome:
     if in_worker:
         _limit_worker_blas()
-    rng = _rng(job.seed, job.prefix, trial)
+    rng = _rng(job.seed, job.prefix, trial, generator)
     try:
         with one_opencv_thread():
             rows = _as_rows(job.trial(job.scenario, rng, **job.point), job.point)
@@ -496,7 +615,7 @@ def run(
     exp = experiment
     point_jsons = [_point_json(point) for point in exp.points]
     jobs = [
-        _PointJob(exp.trial, exp.scenario, seed, _spawn_prefix(exp.name, key), point, i)
+        _PointJob(exp.trial, exp.scenario, seed, _spawn_prefix(exp.name), point, i)
         for i, (point, key) in enumerate(zip(exp.points, point_jsons, strict=True))
     ]
     cache = None if cache_dir is None else TrialCache(Path(cache_dir), exp, seed, point_jsons)
@@ -548,7 +667,14 @@ def _frame(exp: Experiment, done: Mapping[tuple[int, int], Rows]) -> pd.DataFram
     return pd.DataFrame.from_records(records)
 
 
-def trial_rows(experiment: Experiment, seed: int, point: int, trial: int) -> pd.DataFrame:
+def trial_rows(
+    experiment: Experiment,
+    seed: int,
+    point: int,
+    trial: int,
+    *,
+    generator: type[np.random.Generator] = np.random.Generator,
+) -> pd.DataFrame:
     """The rows of one trial, computed here, as :func:`run` would return them.
 
     For spot checks of stored results: rebuild the experiment, pick a (point, trial) pair and
@@ -564,7 +690,13 @@ def trial_rows(experiment: Experiment, seed: int, point: int, trial: int) -> pd.
         Index into ``experiment.points``.
     trial : int
         Trial index, 0 to ``n_trials - 1``.
+    generator : type, optional
+        The class of the trial's generator (and of its children, :func:`child_rng`): a subclass
+        of :class:`numpy.random.Generator` whose draws are moved by a few ulps tests whether the
+        trial absorbs the last-bit differences of another machine.
     """
+    if not (isinstance(generator, type) and issubclass(generator, np.random.Generator)):
+        raise CalibrationError(f"generator must be a numpy Generator class, got {generator!r}")
     if not isinstance(experiment, Experiment):
         raise CalibrationError(f"experiment must be an Experiment, got {type(experiment).__name__}")
     seed = _check_index(seed, "seed")
@@ -578,12 +710,12 @@ def trial_rows(experiment: Experiment, seed: int, point: int, trial: int) -> pd.
         experiment.trial,
         experiment.scenario,
         seed,
-        _spawn_prefix(experiment.name, _point_json(pt)),
+        _spawn_prefix(experiment.name),
         pt,
         point,
     )
     with _one_blas_thread():
-        _, _, rows, error = _run_trial(job, trial, in_worker=False)
+        _, _, rows, error = _run_trial(job, trial, in_worker=False, generator=generator)
     if error is not None:
         raise _trial_error(experiment, seed, point, trial, error) from error
     records = [{**pt, "trial": trial, **row} for row in rows]

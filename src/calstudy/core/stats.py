@@ -36,6 +36,45 @@ def finite_samples(name: str, samples, min_count: int = 1) -> np.ndarray:
     return a
 
 
+def round_to_uncertainty(value: float, std: float) -> float:
+    """``value`` rounded to the decade of its standard uncertainty ``std``.
+
+    A value computed from Monte Carlo trials (a nuisance input calibrated to a baseline figure)
+    knows nothing below its standard uncertainty; its last bits depend on the machine (BLAS and
+    OpenCV kernels). Rounded to ``10**floor(log10(std))`` it is the same number on every machine,
+    except in the rare case that it falls on a rounding boundary, and the rounding moves it by
+    at most half a decade below ``std``.
+
+    Parameters
+    ----------
+    value : float
+        The computed value.
+    std : float
+        Its standard uncertainty, > 0, same unit.
+
+    Returns
+    -------
+    float
+        The rounded value.
+
+    Raises
+    ------
+    CalibrationError
+        If either is not finite or ``std`` is not positive.
+
+    Examples
+    --------
+    >>> round_to_uncertainty(0.7164706571379741, 0.031)
+    0.72
+    """
+    if not (np.isfinite(value) and np.isfinite(std)) or std <= 0:
+        raise CalibrationError(
+            f"cannot round {value!r} to its uncertainty {std!r}: expected finite numbers, std > 0"
+        )
+    digits = -int(np.floor(np.log10(std)))
+    return float(round(float(value), digits))
+
+
 def _check_level(level: float) -> float:
     if not 0.0 < level < 1.0:
         raise CalibrationError(f"interval level {level!r} is not strictly between 0 and 1")

@@ -42,6 +42,8 @@ class TrialCache:
         self.root = root / experiment.name
         base = {
             "format": CACHE_FORMAT,
+            # how the engine derives a trial's stream (rows drawn another way are not reused)
+            "streams": "seed/experiment/trial",
             "seed": seed,
             "experiment": experiment.name,
             "trial_function": _function_fingerprint(experiment.trial, experiment.name),

@@ -26,7 +26,7 @@ def frames():
 
 
 def _same(got: pd.DataFrame, name: str) -> None:
-    assert_same_table(got, OUT / f"{name}.csv", atol=1e-8)  # pandas' default, as before
+    assert_same_table(got, OUT / f"{name}.csv")
 
 
 def test_tables(frames):

@@ -15,7 +15,6 @@ from calstudy.papers.dualarm import report
 from calstudy.papers.dualarm.scenario import load_published
 
 FOLDER = RESULTS_DIR / "05_dualarm_global_calibration"
-RTOL = 2e-5
 
 pytestmark = pytest.mark.skipif(
     not (FOLDER / "trials_station.csv").is_file(), reason="notebook 05 results not committed"
@@ -27,7 +26,8 @@ def _trials(name: str) -> pd.DataFrame:
 
 
 def _compare(fresh: pd.DataFrame, name: str) -> None:
-    assert_same_table(fresh, FOLDER / f"{name}.csv", rtol=RTOL)
+    assert_same_table(fresh, FOLDER / f"{name}.csv")
+
 
 def test_tables_recompute_from_the_trials():
     published = load_published()

@@ -19,7 +19,6 @@ from calstudy.papers.hybrid.scenario import load_scenario
 
 NB01 = RESULTS_DIR / "01_hybrid_global_calibration"
 NB02 = RESULTS_DIR / "02_hybrid_production_compensation"
-RTOL = 2e-5
 
 
 def _trials(folder, name):
@@ -27,7 +26,7 @@ def _trials(folder, name):
 
 
 def _compare(fresh: pd.DataFrame, path) -> None:
-    assert_same_table(fresh, path, rtol=RTOL)
+    assert_same_table(fresh, path)
 
 def _claims_frame(rows):
     return pd.DataFrame([asdict(r) for r in rows])[list(CLAIM_COLUMNS)]

@@ -5,6 +5,7 @@ import pytest
 
 from calstudy import CalibrationError
 from calstudy.core import geometry as geo
+from calstudy.core.montecarlo import streams
 from calstudy.models import robots
 from calstudy.models.reach import reach_bound
 from calstudy.papers.hybrid import simulate
@@ -23,7 +24,9 @@ def test_robot_error_scale_multiplies_the_drawn_link_errors():
     assert np.abs(errors[1.0]).max() > 0.1
     np.testing.assert_allclose(errors[2.0], 2.0 * errors[1.0], atol=1e-12)
     # the default is the robot of the tolerances file, draw for draw (notebook 01 unchanged)
-    default = robots.perturb_robot(robots.load_robot("kuka_kr16_2"), np.random.default_rng(14))
+    names = ("robot", "target", "stationary mounts", "workpiece")  # the station's streams
+    robot_draws = streams(np.random.default_rng(14), *names)[0]
+    default = robots.perturb_robot(robots.load_robot("kuka_kr16_2"), robot_draws)
     assert (errors[1.0] + nominal).tobytes() == default.parameters().tobytes()
     with pytest.raises(CalibrationError, match="robot_error_scale is -1.0"):
         simulate.make_station(np.random.default_rng(14), robot_error_scale=-1.0)

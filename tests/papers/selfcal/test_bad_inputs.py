@@ -211,7 +211,7 @@ UNIT_CASES = [
      r"measurements\.csv: every joint angle of the 34 poses lies within \+-pi .*"
      r"q1_deg \.\.\. q6_deg: radians\?"),
     ("sphere readings in metres", measured.SPHERES_FILE, "x_mm", 3, lambda v: v / 1000,
-     r"spheres\.csv: the 14 sphere placements lie within 1\.617 mm of each other .*metres"),
+     r"spheres\.csv: the 14 sphere placements lie within \d\.\d{3} mm of each other .*metres"),
     ("sensor centres in metres", measured.MEASUREMENTS_FILE, "cx_mm", 3, lambda v: v / 1000,
      r"measurements\.csv: every sensor centre lies within 0\.3\d+ mm of the sensor origin"),
 ]

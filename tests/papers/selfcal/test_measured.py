@@ -96,9 +96,9 @@ def _break(folder, name, old, new):
     [
         (
             measured.MEASUREMENTS_FILE,
-            "1,calibration,1,12.409",
-            "1,calibration,1,12.4x9",
-            "row 3, column 'q1_deg': '12.4x9' is not a number",
+            "1,calibration,1,19.416",
+            "1,calibration,1,19.x16",
+            "row 3, column 'q1_deg': '19.x16' is not a number",
         ),
         (measured.MEASUREMENTS_FILE, "q1_deg", "q1_grad", "joints need columns"),
         (measured.MEASUREMENTS_FILE, "2,calibration,1", "2,calbration,1", "row 4, column 'set'"),
@@ -108,7 +108,7 @@ def _break(folder, name, old, new):
             "2,calibration,99",
             "row 4, column 'sphere': sphere 99 is not in spheres.csv",
         ),
-        (measured.SPHERES_FILE, "2,3684.406", "1,3684.406", "sphere 1 appears more than once"),
+        (measured.SPHERES_FILE, "2,3982.874", "1,3982.874", "sphere 1 appears more than once"),
         (measured.SPHERES_FILE, "x_mm", "x_in", "sphere centres need columns"),
         (measured.CELL_FILE, "zyx_deg = [30", "zyx = [30", "base.zyx_deg: missing"),
     ],

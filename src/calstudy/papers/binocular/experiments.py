@@ -28,7 +28,7 @@ import pandas as pd
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment, one_opencv_thread
+from calstudy.core.montecarlo import Experiment, child_rng, one_opencv_thread, streams
 from calstudy.core.stats import rmse
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import detect_centre
@@ -190,8 +190,9 @@ def transformation_figures(scenario, state, flange, vflange, p7_standard: float)
 def _views(scenario, world, rng, imaging, model1):
     n_cal = scenario.config["station"]["poses"]["n_calibration"]
     n_val = scenario.config["station"]["poses"]["n_validation"]
-    cal = view_calibrator(scenario, world, n_cal, rng, imaging, model1)
-    val = view_calibrator(scenario, world, n_val, rng, imaging, model1)
+    cal_rng, val_rng = streams(rng, "calibration views", "validation views")
+    cal = view_calibrator(scenario, world, n_cal, cal_rng, imaging, model1)
+    val = view_calibrator(scenario, world, n_val, val_rng, imaging, model1)
     return cal, val
 
 
@@ -211,15 +212,18 @@ def binocular_trial(setup: Setup, rng, defocus: bool = True) -> list[dict]:
     ``fig13_updated``; ``fig13_true``: with the true hand-eye matrix, the oracle control),
     the hand-eye errors and the per-pair errors of Tables 2-3 (``err_{raw,rect,mod}_<pair>``).
     ``defocus=False`` switches the defocus off everywhere (a test of the oracle's reach).
+    The world, the calibration and validation views, the tracker and the sharp images draw
+    from their own children of ``rng`` (:func:`calstudy.core.montecarlo.child_rng`).
     """
     scenario = setup.scenario
     imaging = Imaging(defocus=defocus)
-    world = draw_world(scenario, rng, imaging)
+    world = draw_world(scenario, child_rng(rng, "world"), imaging)
     model1 = world.model(scenario, 1.0)
     tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
     cal, val = _views(scenario, world, rng, imaging, model1)
-    p7_standard = tracker_p7_distance(scenario, rng, imaging)
-    sharp = reimage(scenario, cal, rng, Imaging(defocus=False), model1)
+    p7_standard = tracker_p7_distance(scenario, child_rng(rng, "tracker"), imaging)
+    sharp_rng = child_rng(rng, "sharp images")
+    sharp = reimage(scenario, cal, sharp_rng, Imaging(defocus=False), model1)
     cal_scales = sorted({float(c) for c in setup.calibration_scales} | {0.0, 1.0})
     # The ray-gap tolerance guards against wrong matches; the gap of a true match grows with the
     # camera calibration error, so the guard widens with the calibration scale (values unchanged).
@@ -270,13 +274,15 @@ def region_distances(region, pre, upd) -> dict:
 
 def _calibration_views(scenario, rng):
     """One draw of the world at the default errors and its calibration views (steps (a)-(c)):
-    ``(imaging, world, model, ray tolerance, views)``."""
+    ``(imaging, world, model, ray tolerance, views)``, the world and the views each from its own
+    stream of ``rng``."""
     imaging = Imaging()
-    world = draw_world(scenario, rng, imaging)
+    world_rng, cal_rng = streams(rng, "world", "calibration views")
+    world = draw_world(scenario, world_rng, imaging)
     model = world.model(scenario, 1.0)
     tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
     n_cal = scenario.config["station"]["poses"]["n_calibration"]
-    cal = view_calibrator(scenario, world, n_cal, rng, imaging, model)
+    cal = view_calibrator(scenario, world, n_cal, cal_rng, imaging, model)
     return imaging, world, model, tol, cal
 
 
@@ -296,7 +302,13 @@ def field_trial(setup: Setup, rng) -> dict:
     pre = bino.preliminary_handeye(cal.flange2base, poses)
     upd, _ = bino.correct_transformation(cal.flange2base, pre, state["rect8"], state["mod8"])
     regions = [
-        region_distances(observe_field_region(scenario, world, k, rng, imaging, model), pre, upd)
+        region_distances(
+            observe_field_region(
+                scenario, world, k, child_rng(rng, f"field region {k + 1}"), imaging, model
+            ),
+            pre,
+            upd,
+        )
         for k in range(3)
     ]
     row = {}
@@ -415,7 +427,7 @@ def optics_trial(
         dot_diameter_mm=dot_diameter_mm or None,
     )
     imaging, world, model, tol, cal = _calibration_views(scenario, rng)
-    sharp = reimage(scenario, cal, rng, Imaging(defocus=False), model)
+    sharp = reimage(scenario, cal, child_rng(rng, "sharp images"), Imaging(defocus=False), model)
     std = standard_to_p7(world)
     raw, rect = cal.points(model, tol)
     sharp_raw, _ = sharp.points(model, tol)
@@ -423,7 +435,8 @@ def optics_trial(
     for label, pts in (("without", raw), ("with", rect), ("oracle", sharp_raw)):
         d = bino.distances_to_p7(bino.with_virtual(pts)).mean(0)
         row[f"t2_{label}"] = rmse(d - std)
-    row.update(handeye_chain(scenario, world, cal, sharp, model, tol, rng))
+    fig13_rng = child_rng(rng, "fig13 poses")
+    row.update(handeye_chain(scenario, world, cal, sharp, model, tol, fig13_rng))
     return row
 
 

@@ -15,6 +15,12 @@ Carlo and the sweeps.
 The measurements come from :mod:`calstudy.papers.dualarm.simulate`; the tables, figures and
 verdicts built from these experiments are in :mod:`calstudy.papers.dualarm.report`. Millimetres
 and radians.
+
+Random streams: each independent component of a trial (the hand-eye images of each arm, the
+survey, each arm's calibration poses, the plate, each sphere's multi-view scans, each placement's
+global scans) draws from its own stream of the trial's generator
+(:func:`calstudy.core.montecarlo.streams`), named after the component, so that the number of
+draws one of them makes (markers in the field, visible points) cannot shift another's.
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment
+from calstudy.core.montecarlo import Experiment, child_rng, streams
 from calstudy.estimators import sfm as mk
 from calstudy.estimators.bundle import refine_camera_pose
 from calstudy.estimators.fitting import fit_rigid, fit_sphere, solve_pnp, solve_pnp_ransac
@@ -49,9 +55,14 @@ def handeye_data(scn: Scenario, arm: int, rng: np.random.Generator):
 def hand_eyes(scn: Scenario, rng: np.random.Generator) -> np.ndarray:
     """``cam2flange`` ``(2, 4, 4)`` of both arms by Tsai-Lenz (``cv2.calibrateHandEye``, every
     pair of poses), the poses checked for rotation diversity (two motions of at least
-    ``MIN_PAIR_ROTATION`` about axes that far apart)."""
+    ``MIN_PAIR_ROTATION`` about axes that far apart). Each arm draws from its own stream of
+    ``rng``."""
+    arm_rngs = streams(rng, *(f"hand-eye arm {arm}" for arm in ARMS))
     return np.stack(
-        [opencv_handeye(*handeye_data(scn, arm, rng), "Tsai", MIN_PAIR_ROTATION) for arm in ARMS]
+        [
+            opencv_handeye(*handeye_data(scn, arm, r), "Tsai", MIN_PAIR_ROTATION)
+            for arm, r in zip(ARMS, arm_rngs, strict=True)
+        ]
     )
 
 
@@ -118,9 +129,13 @@ def _chain(scn: Scenario, rng: np.random.Generator):
     """Steps 1-3 with what the error budget needs: ``(cam2flange_est, reconstruction,
     base2_to_base1, arm data, the same arm data exact, survey views)``."""
     cam2flange = hand_eyes(scn, rng)
-    views = sim.survey_views(scn, rng)
+    survey, *arm_rngs = streams(rng, "survey", *(f"calibration poses arm {arm}" for arm in ARMS))
+    views = sim.survey_views(scn, survey)
     recon = survey_markers(scn, views)
-    pairs = [sim.arm_world_views(scn, arm, rng, exact=True) for arm in ARMS]
+    pairs = [
+        sim.arm_world_views(scn, arm, r, exact=True)
+        for arm, r in zip(ARMS, arm_rngs, strict=True)
+    ]
     noisy, exact = [p[0] for p in pairs], [p[1] for p in pairs]
     ours = marker_base_to_base(scn, cam2flange, recon.bundle.points, noisy)
     return cam2flange, recon, ours, noisy, exact, views
@@ -181,9 +196,10 @@ def plate_base_to_base(
 ) -> np.ndarray:
     """Baseline: a circle plate halfway between the arms (overlapping field), each arm images it
     from ``calibration_poses`` poses from its own side, circle centres to ``sigma_px``;
-    RANSAC-PnP poses; Eq. 11."""
+    RANSAC-PnP poses; Eq. 11. The plate draws from its own stream of ``rng``."""
     flanges, plate2cams = [], []
-    for reported, uvs in sim.circular_plate_images(scn, rng, sigma_px):
+    (plate_rng,) = streams(rng, "plate")
+    for reported, uvs in sim.circular_plate_images(scn, plate_rng, sigma_px):
         k = scn.rig.left.K
         p2c = [solve_pnp_ransac(scn.plate_points, uv, k, scn.ransac_threshold_px) for uv in uvs]
         flanges.append(reported)
@@ -241,14 +257,17 @@ def icp_rows(scn: Scenario, cam2flange_est, rng: np.random.Generator, icp: bool 
     """Figs. 5-6: per arm, sphere and view 1.., the centre-distance error before ICP, after it
     (``icp``), and with the errors between views removed from the simulation (``oracle_mm``:
     the clouds mapped with the true flange poses and hand-eye, what a perfect correction
-    reaches)."""
+    reaches). Each arm's scan of each sphere draws from its own stream of ``rng``."""
     rows = []
+    names = [f"multi-view scans arm {arm} sphere {s}" for arm in ARMS for s in SPHERES]
+    scan_rngs = iter(streams(rng, *names))
     for arm in ARMS:
         for s in SPHERES:
             r = scn.sphere_radius[s]
             place = sim.sphere_place(scn, arm, r)
+            scan_rng = next(scan_rngs)
             clouds, exact = scans_in_base(
-                scn, arm, place, r, scn.icp_views, rng, cam2flange_est[arm - 1]
+                scn, arm, place, r, scn.icp_views, scan_rng, cam2flange_est[arm - 1]
             )
             before = centre_errors(clouds)
             after = centre_errors(icp_correct(scn, clouds)) if icp else before * np.nan
@@ -314,14 +333,24 @@ def global_rows(scn: Scenario, cam2flange_est, b2b1: dict, rng, oracle: bool = T
     base 2 with each estimate in ``b2b1`` (name -> base2_to_base1, or ``(base2_to_base1,
     cam2flange (2, 4, 4))`` for a method whose scans are mapped (Eq. 3) with other hand-eyes than
     ``cam2flange_est``). With ``oracle``, also the method ``true calibration``: the same scans
-    with every calibrated transform true and the poses exact (the test's measurement floor)."""
+    with every calibrated transform true and the poses exact (the test's measurement floor).
+    Each arm's scans of each placement draw from their own stream of ``rng``."""
     r = scn.sphere_radius["A"]
     rows = []
+    (scans_rng,) = streams(rng, "global scans")
     for g, off in enumerate(scn.placement_offsets_mm[: scn.global_groups]):
         centre = sim.global_sphere_place(scn, off, r)
         truth = geo.apply(scn.world2base[1], centre)
         scans = [
-            sim.sphere_scans(scn, arm, centre, r, scn.global_poses, rng, drift=False)
+            sim.sphere_scans(
+                scn,
+                arm,
+                centre,
+                r,
+                scn.global_poses,
+                child_rng(scans_rng, f"placement {g + 1} arm {arm}"),
+                drift=False,
+            )
             for arm in (2, 1)
         ]
         centres: dict = {}

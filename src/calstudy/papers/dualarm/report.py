@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.claims import claim_row, control_rows
-from calstudy.core.stats import median_and_spread
+from calstudy.core.stats import median_and_spread, round_to_uncertainty
 from calstudy.core.verdicts import judge_controls, oracle_gate
 from calstudy.papers.dualarm.experiments import marker_error
 from calstudy.papers.dualarm.scenario import SPHERES, Published, Scenario
@@ -40,14 +40,19 @@ def part(trials: pd.DataFrame, name: str) -> pd.DataFrame:
 def calibrated_value(pilot: pd.DataFrame, x: str, y: str, target: float) -> float:
     """Rule 11: the value of the nuisance input ``x`` at which the mean over trials of the
     baseline figure ``y`` meets ``target``, by linear interpolation between the swept points
-    (the figure must rise with ``x``).
+    (the figure must rise with ``x``), rounded to the decade of its standard uncertainty
+    (:func:`calstudy.core.stats.round_to_uncertainty`): the larger standard error of the mean
+    of the two bracketing points, divided by the slope between them. So rounded, the value is
+    the same on every machine, and the experiments it feeds draw the same numbers.
 
     Raises
     ------
     ValueError
         If the curve does not rise or the target lies outside the swept range.
     """
-    means = pilot.groupby(x)[y].mean().sort_index()
+    groups = pilot.groupby(x)[y]
+    means = groups.mean().sort_index()
+    sems = groups.sem().reindex(means.index)
     xs, ys = means.index.to_numpy(float), means.to_numpy(float)
     if np.any(np.diff(ys) <= 0):
         raise ValueError(f"{y} does not rise with {x}: {np.round(ys, 4).tolist()}")
@@ -55,7 +60,14 @@ def calibrated_value(pilot: pd.DataFrame, x: str, y: str, target: float) -> floa
         raise ValueError(
             f"target {target:g} of {y} outside the swept range {ys[0]:.4g}-{ys[-1]:.4g}; widen {x}"
         )
-    return float(np.interp(target, ys, xs))
+    value = float(np.interp(target, ys, xs))
+    i = min(int(np.searchsorted(ys, target, side="right")), len(ys) - 1)
+    i = max(i, 1)
+    slope = (ys[i] - ys[i - 1]) / (xs[i] - xs[i - 1])
+    sem = np.nanmax(sems.to_numpy(float)[i - 1 : i + 1])
+    if not np.isfinite(sem) or sem <= 0:  # one trial per point: no spread to round to
+        sem = abs(ys[i] - ys[i - 1])
+    return round_to_uncertainty(value, float(sem / slope))
 
 
 def calibration_table(pilot: pd.DataFrame, x: str, y: str, target: float) -> pd.DataFrame:

@@ -27,7 +27,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment, trial_rng
+from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
 from calstudy.estimators.fitting import fit_homography, homography_to_pose, solve_pnp
 from calstudy.estimators.handeye import (
     sphere_handeye,
@@ -266,10 +266,10 @@ def stationary_run(
     station = make_station(rng, pixel_sigma=pixel_sigma, **_check_scenario(scenario))
     meas, _ = simulate_sphere_measurements(station, *paper_moves(station), rng)
     s2f = sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
-    rows = stationary_trial(station, s2f, rng)
+    rows = stationary_trial(station, s2f, child_rng(rng, "stationary sensors"))
     out = [{"step": "stationary"} | {c: r[c] for c in r if c != "estimate"} for r in rows]
     calibrated = np.array([r["estimate"] for r in rows if r["variant"] == "homography"])
-    out += [{"step": "rps"} | r for r in rps_trial(station, calibrated, rng)]
+    out += [{"step": "rps"} | r for r in rps_trial(station, calibrated, child_rng(rng, "datums"))]
     return out
 
 
@@ -299,7 +299,6 @@ def rps_penalty_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     """
     penalties = [float(m) for m in setup["penalties"]]
     station = make_station(rng)
-    datum_seed = int(rng.integers(2**63))
     rows = []
     for start_name, start in (
         ("nominal fixture pose", station.base2work_nominal),
@@ -307,9 +306,7 @@ def rps_penalty_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     ):
         st = replace(station, base2work_nominal=start)
         try:
-            trial = rps_trial(
-                st, station.statcam2base_true, np.random.default_rng(datum_seed), penalties
-            )
+            trial = rps_trial(st, station.statcam2base_true, child_rng(rng, "datums"), penalties)
         except CalibrationError:
             trial = []
         so3 = next((r for r in trial if r["solver"] == "SO(3)"), None)
@@ -341,8 +338,10 @@ def robot_accuracy_run(setup: dict, rng: np.random.Generator) -> dict:
     """Absolute accuracy of one drawn "true" robot against the nominal model (what the
     controller computes with), over ``setup["n_configs"]`` random configurations."""
     nominal = load_robot("kuka_kr16_2")
-    true = perturb_robot(nominal, rng)
-    pos, rot = pose_errors(nominal, true, nominal.random_configurations(rng, setup["n_configs"]))
+    true = perturb_robot(nominal, child_rng(rng, "robot"))
+    draws = child_rng(rng, "configurations")
+    configurations = nominal.random_configurations(draws, setup["n_configs"])
+    pos, rot = pose_errors(nominal, true, configurations)
     return {
         "position_error_rms_mm": float(np.sqrt(np.mean(pos**2))),
         "position_error_max_mm": float(pos.max()),
@@ -378,7 +377,7 @@ def calibrate(st: HybridStation, rng: np.random.Generator) -> ProductionStation:
     features = load_features(station_config=st.config)
     meas, _ = simulate_sphere_measurements(st, *paper_moves(st), rng)
     s2f = sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
-    rows = stationary_trial(st, s2f, rng, variants=("homography",))
+    rows = stationary_trial(st, s2f, child_rng(rng, "stationary sensors"), variants=("homography",))
     cams = np.array([r["estimate"] for r in rows])
     return ProductionStation(st, features, teach_program(st, features), s2f, cams)
 
@@ -433,8 +432,8 @@ def production_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     """One drawn and calibrated station run through the paper's protocol: one row per ``n`` of
     ``setup["n_values"]`` with the before-compensation figures and the Table 1 figures."""
     scenario = setup["scenario"]
-    ps = calibrated_station(rng)
-    run = simulate_run(ps, scenario, rng)
+    ps = calibrated_station(child_rng(rng, "station"))
+    run = simulate_run(ps, scenario, child_rng(rng, "production"))
     system, rows = trial_summary(run, scenario, setup["n_values"])
     return [system | r for r in rows]
 
@@ -450,8 +449,8 @@ def first_station_run(seed: int, n_values=(3, 5, 10, 15, 20), scenario_toml: str
     single-station tables): the same generator, so the same station and products."""
     setup = _production_setup(n_values, scenario_toml)
     rng = trial_rng(seed, "production", {}, 0)
-    ps = calibrated_station(rng)
-    return simulate_run(ps, setup["scenario"], rng)
+    ps = calibrated_station(child_rng(rng, "station"))
+    return simulate_run(ps, setup["scenario"], child_rng(rng, "production"))
 
 
 def sensitivity_run(setup: dict, rng: np.random.Generator) -> list[dict]:
@@ -459,14 +458,15 @@ def sensitivity_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     one row per assumption and value with the two headline shares, the share within +-0.3 mm
     uncompensated and with the drift removed (the controls of ``hybrid.deviation``), the
     Kolmogorov distance of the correlation bins and the deviation bin counts. The station keeps its
-    systematic error; the panels, readings and drift are drawn anew for each value."""
+    systematic error; the panels, readings and drift are drawn from the same child stream for
+    every value (paired: only the assumption differs between two values of a trial)."""
     scenario = setup["scenario"]
-    ps = calibrated_station(rng)
+    ps = calibrated_station(child_rng(rng, "station"))
     rows = []
     for name, values in setup["values"].items():
         for v in values:
             sc = scenario.with_(**{name: float(v)})
-            a = analyse_run(simulate_run(ps, sc, rng), sc.n_compensation)
+            a = analyse_run(simulate_run(ps, sc, child_rng(rng, "production")), sc.n_compensation)
             row = {"parameter": name, "value": float(v)}
             for key in ("within_0p3", "within_0p3_uncompensated", "within_0p3_oracle"):
                 row[key] = a[key]
@@ -501,15 +501,15 @@ def sensitivity_experiment(n_trials: int = 30, scenario_toml: str = "") -> Exper
 
 def robot_error_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     """One station at every factor on the robot's kinematic tolerances: the station's draws
-    are the same at every factor (one child seed), so its robot errors keep their direction
-    and only their size changes. One row per factor with the figures of :func:`trial_summary`."""
+    are the same at every factor (the same child streams), so its robot errors keep their
+    direction and only their size changes. One row per factor with the figures of
+    :func:`trial_summary`."""
     scenario = setup["scenario"]
-    child = int(rng.integers(2**63))
     rows = []
     for scale in setup["scales"]:
-        r = np.random.default_rng(child)
-        ps = calibrated_station(r, robot_error_scale=float(scale))
-        run = simulate_run(ps, scenario, r)
+        # a fresh child of the same name: the same station draws at every factor
+        ps = calibrated_station(child_rng(rng, "station"), robot_error_scale=float(scale))
+        run = simulate_run(ps, scenario, child_rng(rng, "production"))
         system, (table,) = trial_summary(run, scenario, [scenario.n_compensation])
         rows.append({"robot_error_scale": float(scale)} | system | table)
     return rows

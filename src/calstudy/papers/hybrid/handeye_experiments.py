@@ -16,7 +16,7 @@ import pandas as pd
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment, trial_rng
+from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
 from calstudy.estimators.handeye import (
     OPENCV_METHODS,
     opencv_handeye,
@@ -122,7 +122,7 @@ def handeye_trial(
     out["oracle control"] = err(oracle.value)
     if baselines:
         target2base = geo.make_transform(np.eye(3), station.sphere.centre)
-        t2s = station.observe_target_pose(actual, target2base, rng)
+        t2s = station.observe_target_pose(actual, target2base, child_rng(rng, "target images"))
         for name in OPENCV_METHODS:
             out[name] = err(opencv_handeye(meas.flange2base, t2s, name))
     return out

@@ -21,6 +21,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.core.montecarlo import streams
 from calstudy.core.schema import file_key
 from calstudy.estimators.fitting import solve_pnp
 from calstudy.estimators.sphere_csv import SphereMeasurements
@@ -168,16 +169,20 @@ class HybridStation:
         orientation, restricted to +-``across_plane_range_mm`` across the laser plane so the
         stripe stays on its side. Pose changes: the sensor tilted about the sphere centre by
         ``rotation_min_deg`` to ``rotation_range_deg`` about random axes, each taught on the true
-        robot (all four from ``[calibration_moves]`` of ``station.toml``).
+        robot (all four from ``[calibration_moves]`` of ``station.toml``). Translations and
+        pose changes draw from their own streams of ``rng``: a pose change drawn again because
+        the robot cannot reach it does not shift the translations.
         """
         cfg = self.config["calibration_moves"]
+        trans_rng, rot_rng = streams(rng, "translation moves", "rotation moves")
         ref = self.sphere_reference_pose()
         s2f = self.sensor2flange_true
         q_ref = self.solve_ik(self.true, ref @ geo.invert(s2f))
         f_ref = self.nominal.fk(q_ref)
         span = cfg["translation_range_mm"]
         across = cfg["across_plane_range_mm"]
-        shifts_sensor = rng.uniform(-1.0, 1.0, (n_trans, 3)) * np.array([span, across, span])
+        shifts = trans_rng.uniform(-1.0, 1.0, (n_trans, 3))
+        shifts_sensor = shifts * np.array([span, across, span])
         shifts_sensor[0] = 0.0
         shifts_base = shifts_sensor @ ref[:3, :3].T
         q_trans = np.array(
@@ -191,6 +196,7 @@ class HybridStation:
         about = geo.make_transform(np.eye(3), self.sphere.centre)
         q_rot = []
         attempts = 0
+        rng = rot_rng
         while len(q_rot) < n_rot:
             # an operator teaches only poses the robot reaches: draw again when it cannot
             attempts += 1
@@ -300,7 +306,9 @@ def make_station(
     Parameters
     ----------
     rng
-        Source of every draw.
+        Source of every draw: the robot, the target, the stationary mounts and the workpiece
+        placement each draw from their own stream of it
+        (:func:`calstudy.core.montecarlo.streams`).
     robot_errors
         If False the true robot equals the nominal one (no kinematic model error).
     sigma_point_mm, pixel_sigma, repeatability_mm
@@ -318,7 +326,10 @@ def make_station(
             f"robot_error_scale is {robot_error_scale!r}; expected a finite factor >= 0"
         )
     cfg = load_station()
-    nominal, true = _draw_robots(rng, robot_errors, robot_error_scale)
+    robot_rng, target_rng, mount_rng, place_rng = streams(
+        rng, "robot", "target", "stationary mounts", "workpiece"
+    )
+    nominal, true = _draw_robots(robot_rng, robot_errors, robot_error_scale)
     hand = np.array(cfg["handeye"]["matrix"], dtype=float)
     sensor2flange = geo.make_transform(geo.project_to_so3(hand[:3, :3]), hand[:3, 3])
     cam = cfg["cameras"]
@@ -328,12 +339,12 @@ def make_station(
         else LineLaserSensor(sigma_point_mm=sigma_point_mm)
     )
     sphere = Sphere(centre=np.array(cfg["sphere"]["centre_mm"], dtype=float))
-    target, made, back2front_cmm = _make_target(cfg["target"], rng)
+    target, made, back2front_cmm = _make_target(cfg["target"], target_rng)
     statcam2base_design = _stationary_sensors(cfg["stationary"])
-    statcam2base_true = _mount_stationary(statcam2base_design, cfg["stationary"], rng)
+    statcam2base_true = _mount_stationary(statcam2base_design, cfg["stationary"], mount_rng)
     standoff = cfg["sensor"]["standoff_mm"]
     wcfg = cfg["workpiece"]
-    base2work_nominal, work2base_true = _place_workpiece(wcfg, rng)
+    base2work_nominal, work2base_true = _place_workpiece(wcfg, place_rng)
     station = HybridStation(
         nominal=nominal,
         true=true,
@@ -468,10 +479,12 @@ def repeatability_joint_sigma(station: HybridStation, sigma_pos: float) -> float
 def simulate_sphere_measurements(
     station: HybridStation, n_trans: int, n_rot: int, rng: np.random.Generator
 ) -> tuple[SphereMeasurements, np.ndarray]:
-    """One fixed-sphere calibration run: the measurements and the actual flange poses."""
-    q_t, q_r = station.sphere_moves(n_trans, n_rot, rng)
+    """One fixed-sphere calibration run: the measurements and the actual flange poses. The
+    moves and the measurements draw from their own streams of ``rng``."""
+    moves, noise = streams(rng, "moves", "measurements")
+    q_t, q_r = station.sphere_moves(n_trans, n_rot, moves)
     q = np.concatenate([q_t, q_r])
-    reported, centres, actual = station.measure_sphere(q, rng)
+    reported, centres, actual = station.measure_sphere(q, noise)
     meas = SphereMeasurements(
         ids=np.arange(len(q)),
         group=np.array(["translation"] * n_trans + ["rotation"] * n_rot),

@@ -18,6 +18,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.core.montecarlo import streams
 from calstudy.estimators.workpiece import rps_frame_batch
 from calstudy.papers.hybrid.scenario import Features, Scenario
 from calstudy.papers.hybrid.simulate import HybridStation, repeatability_joint_sigma
@@ -129,7 +130,8 @@ def simulate_products(
     are, each reading with ``feature_sigma`` noise (datums: ``datum_sigma``); the station maps
     readings to the base frame with the nominal robot and its calibrations, builds the 3-2-1 frame
     from its datum readings and reports WF coordinates, plus ``drift`` ``(F, 3)`` if given. The
-    CMM reports the true WF coordinates with ``cmm_sigma`` noise.
+    CMM reports the true WF coordinates with ``cmm_sigma`` noise. Panels, flexible readings,
+    stationary readings and the CMM draw from their own streams of ``rng``.
 
     Returns
     -------
@@ -140,19 +142,23 @@ def simulate_products(
     n = int(n_products)
     if n < 1:
         raise CalibrationError(f"n_products is {n_products}; at least 1 panel needed")
-    truth_work, truth_base = _draw_panels(ps, scenario, n, rng)
+    panels, flexible, stationary, cmm_rng = streams(
+        rng, "panels", "flexible readings", "stationary readings", "cmm"
+    )
+    truth_work, truth_base = _draw_panels(ps, scenario, n, panels)
     measured_base = np.empty_like(truth_base)
     fl = f.flexible
-    measured_base[:, fl] = _flexible_readings(ps, scenario, truth_base[:, fl], rng)
+    measured_base[:, fl] = _flexible_readings(ps, scenario, truth_base[:, fl], flexible)
     sn = f.stationary
-    measured_base[:, sn] = _stationary_readings(ps, scenario, truth_base[:, sn], rng)
+    measured_base[:, sn] = _stationary_readings(ps, scenario, truth_base[:, sn], stationary)
     base2work = rps_frame_batch(measured_base[:, sn[:3]], st.datums_work, st.base2work_nominal)
     hybrid = _transform_points(base2work[:, None], measured_base)
     # the frame is defined by these coordinates: exactly CAD in both systems
     hybrid[:, f.fixed] = f.cad[f.fixed]
     if drift is not None:
         hybrid += np.where(f.fixed, 0.0, np.asarray(drift, dtype=float))
-    cmm = truth_work + rng.normal(0.0, scenario.cmm_sigma_mm, truth_work.shape)
+    cmm_noise = cmm_rng.normal(0.0, scenario.cmm_sigma_mm, truth_work.shape)
+    cmm = truth_work + cmm_noise
     cmm[:, f.fixed] = f.cad[f.fixed]
     return hybrid, cmm
 
@@ -210,10 +216,12 @@ def simulate_run(ps: ProductionStation, scenario: Scenario, rng: np.random.Gener
     (the first ``n_before`` are the ones of Fig. 6), then, after a drift of ``drift_sigma`` per
     coordinate, ``n_follow_up`` products. Returns ``{phase: (hybrid, cmm)}`` for :data:`PHASES`
     and ``"drift"``, the ``(F, 3)`` shift added to the follow-up readings (0 at the coordinates
-    fixed by the frame), which a measured station does not know."""
-    comp = simulate_products(ps, scenario, scenario.n_compensation_max, rng)
-    drift = rng.normal(0.0, scenario.drift_sigma_mm, (len(ps.features.ids), 3))
-    follow = simulate_products(ps, scenario, scenario.n_follow_up, rng, drift=drift)
+    fixed by the frame), which a measured station does not know. The products before the drift,
+    the drift and the follow-up products draw from their own streams of ``rng``."""
+    before, drift_rng, after = streams(rng, "compensation products", "drift", "follow-up products")
+    comp = simulate_products(ps, scenario, scenario.n_compensation_max, before)
+    drift = drift_rng.normal(0.0, scenario.drift_sigma_mm, (len(ps.features.ids), 3))
+    follow = simulate_products(ps, scenario, scenario.n_follow_up, after, drift=drift)
     drift = np.where(ps.features.fixed, 0.0, drift)
     return {"compensation": comp, "follow-up": follow, "drift": drift}
 

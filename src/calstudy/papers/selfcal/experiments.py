@@ -34,7 +34,7 @@ import pandas as pd
 
 from calstudy.core.config import read_toml, scenario_file
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment, trial_rng
+from calstudy.core.montecarlo import Experiment, child_rng, streams, trial_rng
 from calstudy.papers.selfcal.design import (
     candidate_jacobians,
     observability,
@@ -142,11 +142,15 @@ def _experiment(name, trial, scenario_toml, n_trials, points=({},)) -> Experimen
 
 
 def _cell(scenario: Scenario, rng: np.random.Generator, compliance_scale: float):
-    """Draw a true cell, its 24 calibration measurements and 10 validation measurements."""
-    st = draw_station(scenario, rng)
-    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, rng, compliance_scale)
-    val_sites = draw_placements(scenario, scenario.n_validation, rng)
-    val = simulate(scenario, st, val_sites, 1, rng, compliance_scale)
+    """Draw a true cell, its 24 calibration measurements and 10 validation measurements (each
+    from its own child stream of ``rng``)."""
+    st = draw_station(scenario, child_rng(rng, "station"))
+    views = scenario.views_per_sphere
+    cal = child_rng(rng, "calibration measurements")
+    meas = simulate(scenario, st, st.spheres_base, views, cal, compliance_scale)
+    val_sites = draw_placements(scenario, scenario.n_validation, child_rng(rng, "validation sites"))
+    val_rng = child_rng(rng, "validation measurements")
+    val = simulate(scenario, st, val_sites, 1, val_rng, compliance_scale)
     return st, meas, val
 
 
@@ -253,7 +257,7 @@ def calibration_trial(
     scale = scenario.compliance_scale if compliance_scale is None else compliance_scale
     st, meas, val = _cell(scenario, rng, scale)
     good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
-    start = poor_start(scenario, st, rng)
+    start = poor_start(scenario, st, child_rng(rng, "poor start"))
     try:
         poor = identify(meas, start, max_evaluations=MAX_EVALUATIONS)
     except CalibrationError:
@@ -315,11 +319,12 @@ def basin_trial(scenario: Scenario, rng: np.random.Generator, start_scale: float
     Returns whether the far start converged, to the same solution as the good start, and its
     iterations (a failure counts as :data:`MAX_EVALUATIONS`).
     """
-    st = draw_station(scenario, rng)
-    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, rng)
+    st = draw_station(scenario, child_rng(rng, "station"))
+    cal = child_rng(rng, "calibration measurements")
+    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, cal)
     good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
     try:
-        start = poor_start(scenario, st, rng, start_scale)
+        start = poor_start(scenario, st, child_rng(rng, "poor start"), start_scale)
         far = identify(meas, start, max_evaluations=MAX_EVALUATIONS)
     except CalibrationError:
         far = None
@@ -346,8 +351,9 @@ def basin_experiment(scenario_toml: str = "", n_trials: int = 30) -> Experiment:
 def example_station(scenario: Scenario, seed: int) -> tuple[Station, Measurements]:
     """The station and measurements of trial 0 of :func:`calibration_experiment`."""
     rng = trial_rng(seed, "calibration", {}, 0)
-    st = draw_station(scenario, rng)
-    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, rng)
+    st = draw_station(scenario, child_rng(rng, "station"))
+    cal = child_rng(rng, "calibration measurements")
+    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, cal)
     return st, meas
 
 
@@ -411,7 +417,11 @@ RANDOM = "random"
 def candidate_views(scenario: Scenario, spheres_base, per_sphere: int, rng) -> tuple:
     """Candidate joint angles (k per_sphere, 6) and their sphere index: ``per_sphere`` reachable
     views of each placement, planned with the nominal robot and sensor (:func:`plan_views`)."""
-    views = [plan_views(scenario, c, per_sphere, rng) for c in np.asarray(spheres_base, float)]
+    (views_rng,) = streams(rng, "candidate views")
+    views = [
+        plan_views(scenario, c, per_sphere, child_rng(views_rng, str(k)))
+        for k, c in enumerate(np.asarray(spheres_base, float))
+    ]
     return np.vstack(views), np.repeat(np.arange(len(views)), per_sphere)
 
 
@@ -476,20 +486,23 @@ def pose_selection_trial(
     ``sizes`` is the list of ``N`` as one string of integers ("12 18 24 36": the engine's sweep
     points hold scalars).
     """
-    st = draw_station(scenario, rng)
-    Q, sphere = candidate_views(scenario, st.spheres_base, per_sphere, rng)
+    st = draw_station(scenario, child_rng(rng, "station"))
+    Q, sphere = candidate_views(scenario, st.spheres_base, per_sphere, child_rng(rng, "candidates"))
     blocks, _ = candidate_jacobians(st.nominal_params, Q, st.spheres_part, sphere)
-    val = simulate(scenario, st, draw_placements(scenario, scenario.n_validation, rng), 1, rng)
+    sites = draw_placements(scenario, scenario.n_validation, child_rng(rng, "validation sites"))
+    val = simulate(scenario, st, sites, 1, child_rng(rng, "validation measurements"))
     rows = []
     sizes_n = [int(v) for v in sizes.split()]
-    optimised = select_poses_sizes(blocks, sizes_n)  # draws nothing: the stream is unchanged
+    optimised = select_poses_sizes(blocks, sizes_n)
     for n in sizes_n:
+        draws = child_rng(rng, f"random selection {n}")
         picks = {
             OPTIMISED: optimised[n],
-            RANDOM: np.sort(rng.choice(len(Q), int(n), replace=False)),
+            RANDOM: np.sort(draws.choice(len(Q), int(n), replace=False)),
         }
         for name, chosen in picks.items():
-            meas = _measure_selection(scenario, st, Q, sphere, chosen, rng)
+            noise = child_rng(rng, f"measurements {name} {n}")
+            meas = _measure_selection(scenario, st, Q, sphere, chosen, noise)
             row = _selection_row(scenario, st, meas, val, blocks[chosen])
             rows.append({"n_poses": int(n), "selection": name, **row})
     return rows

@@ -20,6 +20,7 @@ import numpy as np
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import look_at, make_transform, rotvec_to_matrix
+from calstudy.core.montecarlo import child_rng, streams
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import perturb_robot
 from calstudy.papers.selfcal.identify import Measurements, check_sphere_layout, fit_sphere_cap
@@ -168,14 +169,19 @@ def draw_station(scenario: Scenario, rng: np.random.Generator) -> Station:
     ``d2``
     along the axis of joint 2 is then set back to 0 because Eq. 2 has no such parameter (for
     parallel axes 2 and 3 it is carried by ``d3``), so the true system lies in the model class.
+    The robot, the base, the sensor and the sphere placements draw from their own streams of
+    ``rng`` (:func:`calstudy.core.montecarlo.streams`).
     """
-    true_robot = perturb_robot(scenario.robot, rng)
+    robot_rng, base_rng, sensor_rng, sites_rng = streams(
+        rng, "robot", "base", "sensor", "sphere placements"
+    )
+    true_robot = perturb_robot(scenario.robot, robot_rng)
     vec = true_robot.parameters()
     vec[5 + 2] = 0.0  # d of link 2
     true_robot = true_robot.with_parameters(vec)
-    part2base = scenario.base_rough @ _random_motion(rng, *scenario.base_sigma)
-    sensor2flange = scenario.sensor_design @ _random_motion(rng, *scenario.sensor_sigma)
-    spheres = draw_placements(scenario, scenario.n_spheres, rng)
+    part2base = scenario.base_rough @ _random_motion(base_rng, *scenario.base_sigma)
+    sensor2flange = scenario.sensor_design @ _random_motion(sensor_rng, *scenario.sensor_sigma)
+    spheres = draw_placements(scenario, scenario.n_spheres, sites_rng)
     check_sphere_layout(spheres, scenario.radius_mm)
     return Station(
         true_robot,
@@ -373,20 +379,24 @@ def simulate(
     by :func:`joint_deflection`, repeatability); the scanner returns a noisy cap whose LLS fit
     gives ``C``; the tracker reads each placement once with its noise. The measurements record
     the commanded joint angles ``Q`` (what the controller reports) and, for scoring, ``Q_true``.
+    The tracker readings, each placement's planned views and each placement's scans draw from
+    their own streams of ``rng`` (a new set at every call).
     """
     model = default_model()
+    tracker_rng, views_rng, scans_rng = streams(rng, "tracker", "views", "scans")
     placements = np.asarray(placements_base, float)
     parts = station.part2base[:3, :3] @ placements.T
     truth_part = parts.T + station.part2base[:3, 3]
     reading = (
         truth_part
-        + rng.normal(size=truth_part.shape) * tracker_sigma(scenario, truth_part)[:, None]
+        + tracker_rng.normal(size=truth_part.shape)
+        * tracker_sigma(scenario, truth_part)[:, None]
     )
     Q, Q_true, C, C_true, idx, cov, shared = [], [], [], [], [], [], []
     repeat = scenario.repeatability_mm**2 * np.eye(3)
     for k, centre in enumerate(placements):
         if views is None:
-            planned = plan_views(scenario, centre, views_per_sphere, rng)
+            planned = plan_views(scenario, centre, views_per_sphere, child_rng(views_rng, str(k)))
         elif len(views[k]) == 0:
             continue
         else:
@@ -394,9 +404,10 @@ def simulate(
         stood = planned + joint_deflection(scenario, station.true_robot, planned, compliance_scale)
         poses = model.sensor2part(station.true_params, stood)
         tracker = tracker_sigma(scenario, truth_part[k]) ** 2 * np.eye(3)
+        scans = child_rng(scans_rng, str(k))
         for q, q_true, pose in zip(planned, stood, poses, strict=True):
             centre_fit, c_true, cov_view = _measure_view(
-                scenario, pose, truth_part[k], rng, repeat, tracker
+                scenario, pose, truth_part[k], scans, repeat, tracker
             )
             Q.append(q)
             Q_true.append(q_true)
