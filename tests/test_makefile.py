@@ -51,3 +51,37 @@ def test_each_notebook_gets_its_share_of_the_cores(jobs):
     cores = os.cpu_count() or 1
     shares = {int(share) for share, _ in _planned("NOTEBOOK_LINES=1", f"NOTEBOOK_JOBS={jobs}")}
     assert shares == {max(1, cores // jobs)}
+
+
+def _fake_path(tmp_path, uid: int) -> str:
+    """A PATH with bash and a fake ``id`` reporting ``uid`` and no Chromium."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for tool in ("bash", "make"):
+        (bin_dir / tool).symlink_to(shutil.which(tool))
+    fake_id = bin_dir / "id"
+    fake_id.write_text(f"#!/bin/sh\necho {uid}\n")
+    fake_id.chmod(0o755)
+    return str(bin_dir)
+
+
+def test_make_browser_without_chromium_and_root_stops_with_the_command(tmp_path):
+    out = subprocess.run(
+        ["make", "--no-print-directory", "browser"],
+        cwd=REPO_ROOT,
+        env={"PATH": _fake_path(tmp_path, 1000), "HOME": str(tmp_path)},
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode != 0
+    assert "apt-get install -y -qq chromium" in out.stderr
+    assert "found none" in out.stderr
+
+
+def test_make_browser_accepts_a_named_chromium(tmp_path):
+    env = {"PATH": _fake_path(tmp_path, 1000), "HOME": str(tmp_path), "CHROMIUM": "bash"}
+    out = subprocess.run(
+        ["make", "--no-print-directory", "browser"], cwd=REPO_ROOT, env=env, capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0, out.stderr

@@ -246,6 +246,7 @@ def binocular_trial(setup: Setup, rng, defocus: bool = True) -> list[dict]:
         row, state = figures[c]
         out = {"robot_scale": r, "calibration_scale": c, **row}
         out["t3_holdout_truecam"] = figures[0.0][0]["t3_holdout_without"]
+        out["redrawn_views"] = cal.redrawn + val.redrawn
         out.update(transformation_figures(scenario, state, *reported[r], p7_standard))
         rows.append(out)
     return rows
@@ -435,6 +436,7 @@ def optics_trial(
     for label, pts in (("without", raw), ("with", rect), ("oracle", sharp_raw)):
         d = bino.distances_to_p7(bino.with_virtual(pts)).mean(0)
         row[f"t2_{label}"] = rmse(d - std)
+    row["redrawn_views"] = cal.redrawn
     fig13_rng = child_rng(rng, "fig13 poses")
     row.update(handeye_chain(scenario, world, cal, sharp, model, tol, fig13_rng))
     return row

@@ -19,6 +19,7 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError
+from calstudy.core.montecarlo import child_rng, streams
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import (
     detect_centre,
@@ -431,13 +432,15 @@ class Views:
     """Views of one target: joint angles ``q`` (n, 6) the controller commanded, the flange poses
     it reports ``flange2base`` (nominal model), the true flange poses ``true_flange2base``, the
     observations and the true sensor poses ``sensor2base`` (n, 4, 4) they were imaged from
-    (repeatability included)."""
+    (repeatability included); ``redrawn``: viewpoints drawn again because a dot of their images
+    could not be detected (an operator takes another view)."""
 
     q: np.ndarray
     flange2base: np.ndarray
     true_flange2base: np.ndarray
     observations: list
     sensor2base: np.ndarray | None = None
+    redrawn: int = 0
 
     def reported(self, scenario: Scenario, world: World, robot_scale: float) -> np.ndarray:
         """Reported flange poses ``(n, 4, 4)`` had the true robot's errors been ``robot_scale``
@@ -473,18 +476,45 @@ class Views:
         return np.array(raw), np.array(rect)
 
 
+#: viewpoints drawn again, at most, for one view whose dots cannot be detected
+MAX_REDRAWS = 5
+
+
 def view_target(scenario, world, target2base, dots, normal, n, rng, imaging, model) -> Views:
-    """``n`` views of dots ``(m, 3)`` (base frame) on a target frame ``target2base``."""
-    q, flange = viewpoints(scenario, target2base, n, rng)
+    """``n`` views of dots ``(m, 3)`` (base frame) on a target frame ``target2base``.
+
+    The viewpoints, the repeatability of each view and its images draw from their own streams of
+    ``rng``. A view in which a dot cannot be detected (a strongly blurred dot whose edge the
+    detector loses in the image noise) is replaced by another viewpoint, as an operator takes
+    another view, at most :data:`MAX_REDRAWS` times per view; ``Views.redrawn`` counts them.
+    """
+    poses, repeat, images = streams(rng, "viewpoints", "repeatability", "images")
     true1 = world.robot(scenario, 1.0)
-    true_flange = np.array([true1.fk(qi) for qi in q])
-    obs, sensors = [], []
-    for t in true_flange:
-        t = geo.perturb(t, 0.0, world.repeatability_mm, rng) if world.repeatability_mm else t
-        sensor2base = t @ scenario.sensor2flange
-        obs.append(observe(scenario, model, sensor2base, dots, normal, rng, imaging))
+    qs, flanges, true_flanges, obs, sensors, redrawn = [], [], [], [], [], 0
+    for i in range(int(n)):
+        for attempt in range(MAX_REDRAWS + 1):
+            (q,), (flange,) = viewpoints(scenario, target2base, 1, poses)
+            t0 = true1.fk(q)
+            sigma = world.repeatability_mm
+            t = geo.perturb(t0, 0.0, sigma, repeat) if sigma else t0
+            sensor2base = t @ scenario.sensor2flange
+            noise = child_rng(images, f"view {i} attempt {attempt}")
+            try:
+                o = observe(scenario, model, sensor2base, dots, normal, noise, imaging)
+            except CalibrationError:
+                if attempt == MAX_REDRAWS:
+                    raise
+                redrawn += 1
+                continue
+            break
+        qs.append(q)
+        flanges.append(flange)
+        true_flanges.append(t0)
+        obs.append(o)
         sensors.append(sensor2base)
-    return Views(q, flange, true_flange, obs, np.array(sensors))
+    return Views(
+        np.array(qs), np.array(flanges), np.array(true_flanges), obs, np.array(sensors), redrawn
+    )
 
 
 def view_calibrator(scenario, world, n, rng, imaging, model) -> Views:
@@ -503,7 +533,9 @@ def reimage(scenario, views: Views, rng, imaging, model) -> Views:
         observe(scenario, model, None, None, None, rng, imaging, rendered=o.rendered)
         for o in views.observations
     ]
-    return Views(views.q, views.flange2base, views.true_flange2base, obs, views.sensor2base)
+    return Views(
+        views.q, views.flange2base, views.true_flange2base, obs, views.sensor2base, views.redrawn
+    )
 
 
 def tracker_p7_distance(scenario: Scenario, rng, imaging: Imaging) -> float:
