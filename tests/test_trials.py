@@ -35,9 +35,9 @@ class NudgedGenerator(np.random.Generator):
     down (integers and choices stay exact: they are the discrete inputs of a trial)."""
 
     def _nudge(self, x):
-        a = np.asarray(x, dtype=float)
+        a = np.asarray(x)
         signs = np.where(np.arange(a.size).reshape(a.shape) % 2 == 0, 1.0, -1.0)
-        out = a * (1.0 + NUDGE * signs)
+        out = (a * (1.0 + NUDGE * signs)).astype(a.dtype)  # float32 draws stay float32
         return float(out) if np.ndim(x) == 0 else out
 
     def normal(self, *args, **kwargs):
