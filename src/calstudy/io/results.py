@@ -62,8 +62,29 @@ _CLAIM_FLOAT_COLUMNS = ("reproduced", "ci_low", "ci_high", "replication_rate")
 # atomic files
 
 
-def _atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
-    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``."""
+def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``.
+
+    An interrupted or failing ``write`` leaves ``path`` as it was (old content or absent) and
+    no temporary file behind; the written file is readable by all (mode 0644).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Destination file; missing parent folders are created.
+    write : callable
+        ``write(tmp)`` writes the whole content to the file ``tmp`` (a pathlib.Path).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    Exception
+        Whatever ``write`` raises (the temporary file is removed first).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -104,7 +125,7 @@ def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FO
     """
     if not isinstance(df, pd.DataFrame):
         raise CalibrationError(f"write_table needs a pandas DataFrame, got {type(df).__name__}")
-    return _atomic_write(
+    return atomic_write(
         path,
         lambda tmp: df.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n"),
     )
@@ -134,7 +155,7 @@ def write_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     import matplotlib.pyplot as plt
 
     try:
-        _atomic_write(
+        atomic_write(
             path,
             lambda tmp: fig.savefig(
                 tmp, format="png", dpi=dpi, metadata={"Software": None}, backend="agg"
@@ -412,7 +433,7 @@ def write_run_json(
         text = json.dumps(record, indent=2, sort_keys=True, default=_json_default) + "\n"
     except (TypeError, ValueError) as exc:
         raise CalibrationError(f"run.json parameters cannot be written as JSON: {exc}") from exc
-    return _atomic_write(Path(out_dir) / "run.json", lambda tmp: tmp.write_text(text))
+    return atomic_write(Path(out_dir) / "run.json", lambda tmp: tmp.write_text(text))
 
 
 def write_claims(
