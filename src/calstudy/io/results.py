@@ -31,6 +31,7 @@ import pandas as pd
 from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS, VERDICTS, ClaimRow, claim_ids
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
+from calstudy.io.dependencies import label, notebook_inputs
 
 NOTEBOOKS_DIR = REPO_ROOT / "notebooks"
 SOURCE_DIR = Path(__file__).resolve().parents[1]
@@ -332,19 +333,14 @@ def _resolve_notebook(notebook: str | Path) -> Path:
     return path.resolve()
 
 
-def _label(path: Path) -> str:
-    try:
-        return path.resolve().relative_to(REPO_ROOT).as_posix()
-    except ValueError:
-        return path.name
-
-
 def source_files(notebook: str | Path | None = None) -> list[Path]:
-    """Files whose bytes define a run: ``src/calstudy/**/*.py``, ``data/**`` and the notebook.
-
-    Hidden files and ``__pycache__`` folders under ``data/`` are skipped. The list is sorted by
-    the path relative to the repository.
-    """
+    """Files whose bytes define a run of ``notebook``: the notebook, its library modules and its
+    data (:func:`calstudy.io.dependencies.notebook_inputs`, the list the Makefile reruns the
+    notebook on). Without a notebook: every ``src/calstudy/**/*.py`` and every file under
+    ``data/`` (hidden files and ``__pycache__`` folders skipped). Sorted by the path relative to
+    the repository."""
+    if notebook is not None:
+        return notebook_inputs(_resolve_notebook(notebook))
     files = [p for p in SOURCE_DIR.rglob("*.py") if "__pycache__" not in p.parts]
     if DATA_DIR.is_dir():
         files += [
@@ -353,9 +349,7 @@ def source_files(notebook: str | Path | None = None) -> list[Path]:
             if p.is_file()
             and not any(part.startswith(".") or part == "__pycache__" for part in p.parts)
         ]
-    if notebook is not None:
-        files.append(_resolve_notebook(notebook))
-    return sorted(files, key=_label)
+    return sorted(files, key=label)
 
 
 def source_digest(notebook: str | Path | None = None) -> str:
@@ -363,7 +357,7 @@ def source_digest(notebook: str | Path | None = None) -> str:
     h = hashlib.sha256()
     for path in source_files(notebook):
         content = path.read_bytes()
-        h.update(_label(path).encode() + b"\0" + len(content).to_bytes(8, "big"))
+        h.update(label(path).encode() + b"\0" + len(content).to_bytes(8, "big"))
         h.update(content)
     return "sha256:" + h.hexdigest()
 
