@@ -1,7 +1,7 @@
-"""The library uses public names only: no module imports a private name (one with a leading
-underscore, dunders aside) of another module, of numpy or scipy, nor reaches one through an
-imported module (``np.linalg._umath_linalg``, ``estimation._fit``). A name a second module needs
-is public in its own home."""
+"""The library, the benchmarks and the notebooks use public names only: none imports a private
+name (one with a leading underscore, dunders aside) of another module, of numpy or scipy, nor
+reaches one through an imported module (``np.linalg._umath_linalg``, ``estimation._fit``). A name
+a second module needs is public in its own home. (Tests may reach private helpers to test them.)"""
 
 from __future__ import annotations
 
@@ -11,7 +11,10 @@ from pathlib import Path
 import pytest
 from support import REPO_ROOT
 
+from calstudy.io.dependencies import notebook_code
+
 SOURCE = REPO_ROOT / "src" / "calstudy"
+NOTEBOOKS = REPO_ROOT / "notebooks"
 
 #: private names still used, by file, each with its reason: statsmodels keeps the table of
 #: Lilliefors p-values private (its public ``lilliefors`` tests one column per call, and the
@@ -66,6 +69,17 @@ def test_no_private_name_of_another_module(path):
         f"{path.relative_to(REPO_ROOT)} uses private names: {uses}"
     )
     assert allowed <= {name for _, name in uses}, f"{allowed} is no longer used: drop it"
+
+
+@pytest.mark.parametrize(
+    "path",
+    [*sorted((REPO_ROOT / "benchmarks").glob("*.py")), *sorted(NOTEBOOKS.glob("*.ipynb"))],
+    ids=lambda p: p.name,
+)
+def test_benchmarks_and_notebooks_use_public_names(path):
+    source = notebook_code(path) if path.suffix == ".ipynb" else path.read_text()
+    uses = private_uses(ast.parse(source))
+    assert not uses, f"{path.relative_to(REPO_ROOT)} uses private names: {uses}"
 
 
 @pytest.mark.parametrize(
