@@ -39,7 +39,18 @@ DATA_OF_MODULE = {
 
 
 def label(path: Path) -> str:
-    """``path`` relative to the repository (``src/calstudy/...``, ``data/...``), else its name."""
+    """How a file is named in make rules and digests.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        A file.
+
+    Returns
+    -------
+    str
+        ``path`` relative to the repository (``src/calstudy/...``, ``data/...``), else its name.
+    """
     try:
         return path.resolve().relative_to(REPO_ROOT).as_posix()
     except ValueError:
@@ -47,8 +58,19 @@ def label(path: Path) -> str:
 
 
 def module_file(module: str) -> Path | None:
-    """The file of the calstudy module ``module`` (``a.b`` -> ``a/b.py`` or
-    ``a/b/__init__.py``), None if it is not one."""
+    """The file of a calstudy module.
+
+    Parameters
+    ----------
+    module : str
+        Dotted name, e.g. ``"calstudy.core.geometry"`` or ``"calstudy.papers.hybrid"``.
+
+    Returns
+    -------
+    pathlib.Path or None
+        ``.../core/geometry.py`` or ``.../papers/hybrid/__init__.py``; None if ``module`` is not
+        a calstudy module (another package, or a name defined inside a module).
+    """
     parts = module.split(".")
     if parts[0] != ROOT_PACKAGE:
         return None
@@ -60,10 +82,23 @@ def module_file(module: str) -> Path | None:
 
 
 def imported_modules(tree: ast.AST, module: str = "", is_package: bool = False) -> set[str]:
-    """The calstudy modules an import statement of ``tree`` names, anywhere in it.
+    """The calstudy modules that the import statements of ``tree`` name, anywhere in it
+    (inside functions too).
 
-    ``from p import name`` names ``p.name`` where that is a module, else ``p``. ``module`` (the
-    importing module, a package if ``is_package``) resolves relative imports.
+    Parameters
+    ----------
+    tree : ast.AST
+        Parsed source of a module or of a notebook's code.
+    module : str, optional
+        Dotted name of the importing module, to resolve relative imports.
+    is_package : bool, optional
+        True if ``module`` is a package (its ``__init__``).
+
+    Returns
+    -------
+    set of str
+        ``import p.q`` names ``p.q``; ``from p import name`` names ``p`` and ``p.name`` where
+        that is a module. Only calstudy modules are kept.
     """
     found: set[str] = set()
     for node in ast.walk(tree):
@@ -92,8 +127,24 @@ _IMPORTS: dict[tuple[Path, int, int], set[str]] = {}
 
 
 def module_imports(module: str) -> set[str]:
-    """The calstudy modules that the calstudy module ``module`` imports (read once per version
-    of its file)."""
+    """The calstudy modules that a calstudy module imports (its file is read once per version).
+
+    Parameters
+    ----------
+    module : str
+        Dotted name of a calstudy module.
+
+    Returns
+    -------
+    set of str
+        See :func:`imported_modules`.
+
+    Raises
+    ------
+    CalibrationError
+        If ``module`` is not a calstudy module, or its file is not valid Python (the message
+        names the file and line).
+    """
     path = module_file(module)
     if path is None:
         raise CalibrationError(f"module {module!r} is not a calstudy module")
@@ -106,8 +157,24 @@ def module_imports(module: str) -> set[str]:
 
 
 def module_closure(starts: Iterable[str]) -> set[str]:
-    """``starts`` and every calstudy module they import, directly or through others, with the
-    packages that hold each (``calstudy.a.b`` brings ``calstudy`` and ``calstudy.a``)."""
+    """Modules and every calstudy module they import, directly or through others.
+
+    Parameters
+    ----------
+    starts : iterable of str
+        Dotted names of calstudy modules.
+
+    Returns
+    -------
+    set of str
+        ``starts``, the modules they reach, and the packages that hold each (``calstudy.a.b``
+        brings ``calstudy`` and ``calstudy.a``: importing it runs their ``__init__``).
+
+    Raises
+    ------
+    CalibrationError
+        As :func:`module_imports`.
+    """
     todo, seen = set(starts), set()
     while todo:
         module = todo.pop()
@@ -121,8 +188,23 @@ def module_closure(starts: Iterable[str]) -> set[str]:
 
 
 def notebook_code(notebook: Path) -> str:
-    """The code cells of ``notebook`` (a Jupyter ``.ipynb``), joined; IPython's ``%`` magics and
-    ``!`` shell lines are left out."""
+    """The code of a notebook's code cells.
+
+    Parameters
+    ----------
+    notebook : pathlib.Path
+        A Jupyter notebook (``.ipynb``).
+
+    Returns
+    -------
+    str
+        The code cells joined by new lines, without IPython's ``%`` magics and ``!`` shell lines.
+
+    Raises
+    ------
+    CalibrationError
+        If the file is not a JSON object.
+    """
     try:
         cells = json.loads(notebook.read_text(encoding="utf-8")).get("cells", [])
     except (ValueError, AttributeError) as exc:
@@ -139,7 +221,18 @@ def notebook_code(notebook: Path) -> str:
 
 
 def notebook_paper(notebook: Path) -> str:
-    """The paper a notebook ``NN_<paper>_<topic>.ipynb`` belongs to (``""`` for another name)."""
+    """The paper a notebook belongs to, by its name.
+
+    Parameters
+    ----------
+    notebook : pathlib.Path
+        A notebook ``NN_<paper>_<topic>.ipynb``.
+
+    Returns
+    -------
+    str
+        ``<paper>``; ``""`` for a name of another form.
+    """
     parts = notebook.stem.split("_")
     return parts[1] if len(parts) > 2 and parts[0].isdigit() else ""
 
@@ -170,7 +263,24 @@ def _data_files(parts: Sequence[str]) -> list[Path]:
 
 
 def notebook_modules(notebook: Path) -> set[str]:
-    """The calstudy modules a run of ``notebook`` may execute (see the module docstring)."""
+    """The calstudy modules a run of a notebook may execute: its paper's package and the
+    modules these and the notebook's code cells reach (:func:`module_closure`).
+
+    Parameters
+    ----------
+    notebook : pathlib.Path
+        A notebook file.
+
+    Returns
+    -------
+    set of str
+        Dotted module names.
+
+    Raises
+    ------
+    CalibrationError
+        If the notebook is not JSON, or its code or a module is not valid Python.
+    """
     tree = _parse_code(notebook)
     paper = notebook_paper(notebook)
     starts = imported_modules(tree) | _package_modules(f"{PAPERS_PACKAGE}.{paper}" if paper else "")
@@ -221,7 +331,26 @@ def notebook_inputs(notebook: str | Path) -> list[Path]:
 
 
 def make_rules(notebooks: Sequence[str | Path], target_dir: str) -> str:
-    """Make rules ``<target_dir>/<notebook name>: <its inputs but itself>``, one a notebook."""
+    """Make rules listing what each notebook depends on.
+
+    Parameters
+    ----------
+    notebooks : sequence of str or pathlib.Path
+        Notebook files.
+    target_dir : str
+        Folder of the executed copies, the rules' targets.
+
+    Returns
+    -------
+    str
+        One rule a notebook, ``<target_dir>/<notebook name>: <its inputs>`` (its inputs but
+        the notebook itself, by :func:`label`), after a comment line.
+
+    Raises
+    ------
+    FileNotFoundError, CalibrationError
+        As :func:`notebook_inputs`.
+    """
     out = ["# What each notebook depends on: python -m calstudy.io.dependencies (do not edit)"]
     for notebook in notebooks:
         path = Path(notebook)
@@ -231,7 +360,19 @@ def make_rules(notebooks: Sequence[str | Path], target_dir: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m calstudy.io.dependencies TARGET_DIR NOTEBOOK...`` prints :func:`make_rules`."""
+    """``python -m calstudy.io.dependencies TARGET_DIR NOTEBOOK...``: print :func:`make_rules`.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments (default: the command line's).
+
+    Returns
+    -------
+    int
+        Exit status: 0, 1 on a missing or unreadable notebook or module (the message goes to
+        standard error), 2 without arguments.
+    """
     args = list(sys.argv[1:] if argv is None else argv)
     if len(args) < 2:
         print("usage: python -m calstudy.io.dependencies TARGET_DIR NOTEBOOK...", file=sys.stderr)
