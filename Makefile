@@ -33,11 +33,36 @@ BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
 	$(wildcard book/_ext/*.py) $(wildcard book/_static/*)
 BOOK_STAMP := book/_build/html/.built
 
-.PHONY: help venv browser reproduce notebooks run-notebooks test check-book verify lint book bench clean
+.PHONY: help venv browser reproduce notebooks run-notebooks test check-book verify lint book bench clean FORCE
+
+# What each notebook depends on: itself, its paper's package, the library modules these import
+# and its data (calstudy.io.dependencies, the same list run.json's digest covers), as one rule
+# a notebook in NOTEBOOK_RULES. The module needs the standard library only, so $(PYTHON) writes
+# the rules before the venv exists; they are written again when a library, data or notebook
+# file changes, appears or goes (NOTEBOOK_RULES_FROM, the file list they were written from).
+# Without them (writing failed) every notebook depends on the whole library and data.
+NOTEBOOK_RULES := book/notebooks/.inputs.mk
+RULES_INPUTS := $(LIBRARY) $(DATA) $(NOTEBOOKS)
+-include $(NOTEBOOK_RULES)
+ifeq ($(NOTEBOOK_RULES_FROM),)
+$(EXECUTED): $(LIBRARY) $(DATA)
+endif
+
+RULES_CHANGED := $(strip $(filter-out $(RULES_INPUTS),$(NOTEBOOK_RULES_FROM)) \
+	$(filter-out $(NOTEBOOK_RULES_FROM),$(RULES_INPUTS)))
+
+$(NOTEBOOK_RULES): $(RULES_INPUTS) $(if $(RULES_CHANGED),FORCE)
+	@mkdir -p $(@D); rm -f $@; tmp=$@.tmp-$$$$; \
+	if PYTHONPATH=src $(PYTHON) -m calstudy.io.dependencies $(@D) $(NOTEBOOKS) > $$tmp; \
+	then echo 'NOTEBOOK_RULES_FROM := $(RULES_INPUTS)' >> $$tmp && mv $$tmp $@; \
+	else rm -f $$tmp; echo "make: no $@: every notebook depends on all of src and data" >&2; \
+		exit 1; fi
+
+FORCE: ;
 
 help: ## list the targets
 	@echo "calstudy: make <target>"
-	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/^([a-z-]+):.*## /  \1\t/' | expand -t 14
+	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/^([a-z-]+):.*## /  \1\t/' | expand -t 14
 
 venv: $(STAMP) ## create .venv with the pinned dependencies and calstudy (editable)
 
@@ -84,9 +109,9 @@ run-notebooks: $(RUN_ORDER)
 	@:
 
 # An executed copy is the record that its notebook ran with default parameters; the notebook
-# writes results/<stem>/ itself. Output goes to a temporary name first, so a failed run leaves
+# writes results/<stem>/ itself. Its inputs besides the notebook are in NOTEBOOK_RULES. Output goes to a temporary name first, so a failed run leaves
 # no executed copy and is retried next time.
-book/notebooks/%.ipynb: notebooks/%.ipynb $(LIBRARY) $(DATA) $(STAMP)
+book/notebooks/%.ipynb: notebooks/%.ipynb $(STAMP)
 	@mkdir -p $(@D)
 ifeq ($(NOTEBOOK_LINES),)
 	$(BIN)/papermill --cwd notebooks --progress-bar $< $(@D)/.tmp-$*.ipynb

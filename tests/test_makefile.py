@@ -85,3 +85,90 @@ def test_make_browser_accepts_a_named_chromium(tmp_path):
         text=True,
     )
     assert out.returncode == 0, out.stderr
+
+
+# ----------------------------------------------------------------------------------------------
+# what an edit reruns: a copy of the repository whose executed notebooks are up to date
+
+OLD, NEW = 1_600_000_000, 1_700_000_000  # modification times (s): inputs, executed notebooks
+#: (touched file, the notebooks it reruns)
+EDITS = [
+    ("src/calstudy/papers/dualarm/report_design.py", {"05"}),
+    ("src/calstudy/papers/hybrid/compensation.py", {"01", "02"}),
+    ("src/calstudy/papers/selfcal/__init__.py", {"03"}),
+    ("data/selfcal/scenario.toml", {"03"}),
+    ("data/dualarm/published.toml", {"05"}),
+    ("data/robots/kuka_kr16_2.toml", {"01", "02", "03", "04"}),
+    ("notebooks/06_handeye_your_cell.ipynb", {"06"}),
+    ("src/calstudy/estimators/handeye_cell.py", {"06"}),
+    ("src/calstudy/core/errors.py", {"01", "02", "03", "04", "05", "06"}),
+    ("src/calstudy/io/book.py", set()),
+]
+
+
+@pytest.fixture(scope="module")
+def checkout(tmp_path_factory):
+    """A copy of the sources, data and notebooks, every notebook executed after its inputs."""
+    root = tmp_path_factory.mktemp("checkout")
+    skip = shutil.ignore_patterns("__pycache__", "*.egg-info")
+    for name in ("src", "data", "notebooks"):
+        shutil.copytree(REPO_ROOT / name, root / name, symlinks=True, ignore=skip)
+    for name in ("Makefile", "environment.txt", "pyproject.toml"):
+        shutil.copy2(REPO_ROOT / name, root / name)
+    for path in root.rglob("*"):
+        os.utime(path, (OLD, OLD), follow_symlinks=False)
+    stamp = root / ".venv" / ".installed"
+    stamp.parent.mkdir()
+    executed = root / "book" / "notebooks"
+    executed.mkdir(parents=True)
+    for path in [stamp, *(executed / p.name for p in (root / "notebooks").glob("*.ipynb"))]:
+        path.touch()
+        os.utime(path, (NEW, NEW))
+    return root
+
+
+def _reruns(root) -> set[str]:
+    out = subprocess.run(
+        ["make", "-n", "--no-print-directory", "NOTEBOOK_LINES=1", "run-notebooks"],
+        cwd=root, capture_output=True, text=True, check=True,
+    ).stdout
+    return set(re.findall(r"papermill .*?notebooks/(\d\d)_\w+\.ipynb", out))
+
+
+@pytest.mark.parametrize(("edited", "expected"), EDITS, ids=[e for e, _ in EDITS])
+def test_an_edit_reruns_the_notebooks_that_depend_on_it(checkout, edited, expected):
+    from calstudy.io.dependencies import label, notebook_inputs
+
+    assert _reruns(checkout) == set(), "nothing changed, nothing runs"
+    path = checkout / edited
+    os.utime(path, (NEW + 10, NEW + 10))
+    try:
+        assert _reruns(checkout) == expected
+    finally:
+        os.utime(path, (OLD, OLD))
+    # the notebooks whose run.json digest covers the file
+    covered = {
+        nb.name[:2]
+        for nb in sorted((REPO_ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
+        if edited in {label(p) for p in notebook_inputs(nb)}
+    }
+    assert covered == expected
+    assert (checkout / "book" / "notebooks" / ".inputs.mk").is_file()
+
+
+def test_without_the_rules_every_notebook_depends_on_everything(checkout):
+    """If the rules cannot be written, make says so and falls back to the whole library."""
+    rules = checkout / "book" / "notebooks" / ".inputs.mk"
+    rules.unlink(missing_ok=True)
+    path = checkout / "src" / "calstudy" / "io" / "book.py"
+    os.utime(path, (NEW + 10, NEW + 10))
+    try:
+        run = subprocess.run(
+            ["make", "-n", "PYTHON=false", "NOTEBOOK_LINES=1", "run-notebooks"],
+            cwd=checkout, capture_output=True, text=True, check=True,
+        )
+    finally:
+        os.utime(path, (OLD, OLD))
+    assert "every notebook depends on all of src and data" in run.stderr
+    assert len(set(re.findall(r"papermill .*?notebooks/(\d\d)_\w+\.ipynb", run.stdout))) == 6
+    assert not rules.exists()

@@ -47,6 +47,18 @@ def test_minpack_lm_respects_the_evaluation_limit():
     assert not np.allclose(capped, [2.0, 1.3, 0.5], atol=1e-6)
 
 
+def test_minpack_lm_names_improper_input():
+    t = np.linspace(0.0, 4.0, 2)  # two residuals for three parameters
+    y = _exp_model(np.array([2.0, 1.3, 0.5]), t, 0.0)
+    x0 = np.array([1.0, 0.5, 0.0])
+    with pytest.raises(CalibrationError, match=r"MINPACK rejected the problem \(3 parameters\)"):
+        minpack_lm(_exp_model, x0, _exp_jac, (t, y))
+    t = np.linspace(0.0, 4.0, 40)
+    y = _exp_model(np.array([2.0, 1.3, 0.5]), t, 0.0)
+    with pytest.raises(CalibrationError, match="MINPACK rejected.*Improper input"):
+        minpack_lm(_exp_model, x0, _exp_jac, (t, y), xtol=-1.0)
+
+
 def _noisy_exp(seed):
     rng = np.random.default_rng(seed)
     t = np.linspace(0.0, 4.0, 40)

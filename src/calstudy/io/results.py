@@ -31,6 +31,7 @@ import pandas as pd
 from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS, VERDICTS, ClaimRow, claim_ids
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
+from calstudy.io.dependencies import label, notebook_inputs
 
 NOTEBOOKS_DIR = REPO_ROOT / "notebooks"
 SOURCE_DIR = Path(__file__).resolve().parents[1]
@@ -62,8 +63,29 @@ _CLAIM_FLOAT_COLUMNS = ("reproduced", "ci_low", "ci_high", "replication_rate")
 # atomic files
 
 
-def _atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
-    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``."""
+def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``.
+
+    An interrupted or failing ``write`` leaves ``path`` as it was (old content or absent) and
+    no temporary file behind; the written file is readable by all (mode 0644).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Destination file; missing parent folders are created.
+    write : callable
+        ``write(tmp)`` writes the whole content to the file ``tmp`` (a pathlib.Path).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    Exception
+        Whatever ``write`` raises (the temporary file is removed first).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -104,7 +126,7 @@ def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FO
     """
     if not isinstance(df, pd.DataFrame):
         raise CalibrationError(f"write_table needs a pandas DataFrame, got {type(df).__name__}")
-    return _atomic_write(
+    return atomic_write(
         path,
         lambda tmp: df.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n"),
     )
@@ -134,7 +156,7 @@ def write_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     import matplotlib.pyplot as plt
 
     try:
-        _atomic_write(
+        atomic_write(
             path,
             lambda tmp: fig.savefig(
                 tmp, format="png", dpi=dpi, metadata={"Software": None}, backend="agg"
@@ -311,19 +333,14 @@ def _resolve_notebook(notebook: str | Path) -> Path:
     return path.resolve()
 
 
-def _label(path: Path) -> str:
-    try:
-        return path.resolve().relative_to(REPO_ROOT).as_posix()
-    except ValueError:
-        return path.name
-
-
 def source_files(notebook: str | Path | None = None) -> list[Path]:
-    """Files whose bytes define a run: ``src/calstudy/**/*.py``, ``data/**`` and the notebook.
-
-    Hidden files and ``__pycache__`` folders under ``data/`` are skipped. The list is sorted by
-    the path relative to the repository.
-    """
+    """Files whose bytes define a run of ``notebook``: the notebook, its library modules and its
+    data (:func:`calstudy.io.dependencies.notebook_inputs`, the list the Makefile reruns the
+    notebook on). Without a notebook: every ``src/calstudy/**/*.py`` and every file under
+    ``data/`` (hidden files and ``__pycache__`` folders skipped). Sorted by the path relative to
+    the repository."""
+    if notebook is not None:
+        return notebook_inputs(_resolve_notebook(notebook))
     files = [p for p in SOURCE_DIR.rglob("*.py") if "__pycache__" not in p.parts]
     if DATA_DIR.is_dir():
         files += [
@@ -332,9 +349,7 @@ def source_files(notebook: str | Path | None = None) -> list[Path]:
             if p.is_file()
             and not any(part.startswith(".") or part == "__pycache__" for part in p.parts)
         ]
-    if notebook is not None:
-        files.append(_resolve_notebook(notebook))
-    return sorted(files, key=_label)
+    return sorted(files, key=label)
 
 
 def source_digest(notebook: str | Path | None = None) -> str:
@@ -342,7 +357,7 @@ def source_digest(notebook: str | Path | None = None) -> str:
     h = hashlib.sha256()
     for path in source_files(notebook):
         content = path.read_bytes()
-        h.update(_label(path).encode() + b"\0" + len(content).to_bytes(8, "big"))
+        h.update(label(path).encode() + b"\0" + len(content).to_bytes(8, "big"))
         h.update(content)
     return "sha256:" + h.hexdigest()
 
@@ -412,7 +427,7 @@ def write_run_json(
         text = json.dumps(record, indent=2, sort_keys=True, default=_json_default) + "\n"
     except (TypeError, ValueError) as exc:
         raise CalibrationError(f"run.json parameters cannot be written as JSON: {exc}") from exc
-    return _atomic_write(Path(out_dir) / "run.json", lambda tmp: tmp.write_text(text))
+    return atomic_write(Path(out_dir) / "run.json", lambda tmp: tmp.write_text(text))
 
 
 def write_claims(

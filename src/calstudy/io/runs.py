@@ -22,7 +22,7 @@ import pandas as pd
 from calstudy.core import montecarlo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import RESULTS_DIR
-from calstudy.io.results import _atomic_write, write_table
+from calstudy.io.results import atomic_write, write_table
 
 #: Float format of the stored trial rows: enough digits to recompute every table from them.
 TRIALS_FLOAT_FORMAT = "%.10g"
@@ -120,7 +120,7 @@ def run_experiments(
         }
     record = {"seed": seed, "experiments": dict(sorted(entries.items()))}
     body = json.dumps(record, indent=2, sort_keys=True) + "\n"
-    _atomic_write(manifest_path, lambda tmp: tmp.write_text(body))
+    atomic_write(manifest_path, lambda tmp: tmp.write_text(body))
     return frames
 
 

@@ -38,7 +38,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
-from numpy.linalg import _umath_linalg
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import check_transform
@@ -71,20 +70,6 @@ def _trans(axis: int, length: float) -> np.ndarray:
     out = np.eye(4)
     out[axis, 3] = length
     return out
-
-
-def _raise_singular(err, flag):
-    raise np.linalg.LinAlgError("Singular matrix")
-
-
-def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.linalg.solve(a, b)`` for a float64 matrix (n, n) and vector (n,): the same LAPACK
-    gufunc under the same error state (the same bytes; LinAlgError on a singular matrix),
-    without the argument handling, which costs four times the solve of a 6 x 6 system."""
-    with np.errstate(
-        call=_raise_singular, invalid="call", over="ignore", divide="ignore", under="ignore"
-    ):
-        return _umath_linalg.solve1(a, b, signature="dd->d")
 
 
 def _se3(transform: np.ndarray) -> pin.SE3:
@@ -375,7 +360,7 @@ class Robot:
             jtj, jte = jt @ jac, jt @ err
             while True:
                 try:
-                    step = -_solve(jtj + damping * eye, jte)
+                    step = -np.linalg.solve(jtj + damping * eye, jte)
                 except np.linalg.LinAlgError:  # numerically singular: damp more, or give up
                     trial_cost = cost
                     if damping > 1e12:

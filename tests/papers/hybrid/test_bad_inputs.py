@@ -13,7 +13,12 @@ import pytest
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
 from calstudy.estimators import sphere_csv
-from calstudy.papers.hybrid import compensation, experiments, scenario, simulate
+from calstudy.papers.hybrid import (
+    compensation,
+    handeye_experiments,
+    scenario,
+    simulate,
+)
 
 STATION = data_path("hybrid", "station.toml").read_text()
 PRODUCTION = data_path("hybrid", "production.toml").read_text()
@@ -271,17 +276,17 @@ def sphere_files(tmp_path_factory):
 def test_sphere_that_moved_is_refused_naming_the_ids(sphere_files):
     good, moved = sphere_files
     # the robot's pose error is part of a measured centre's scatter: 0.3 mm
-    experiments.calibrate_handeye(str(good), 0, 0.3)
+    handeye_experiments.calibrate_handeye(str(good), 0, 0.3)
     with pytest.raises(
         CalibrationError, match=r"chi2/dof = \d+(\.\d+)? .* disagree most: id \d+ \(RMS"
     ):
-        experiments.calibrate_handeye(str(moved), 0, 0.3)
+        handeye_experiments.calibrate_handeye(str(moved), 0, 0.3)
 
 
 def test_sphere_that_moved_may_be_flagged(sphere_files):
     _, moved = sphere_files
     with pytest.warns(UserWarning, match=r"disagree most: id \d+"):
-        *_, ml, _ = experiments.calibrate_handeye(str(moved), 0, 0.3, misfit="flag")
+        *_, ml, _ = handeye_experiments.calibrate_handeye(str(moved), 0, 0.3, misfit="flag")
     assert any("disagree most" in f for f in ml.flags)
 
 

@@ -48,14 +48,16 @@ def test_systematic_error_disappears_when_true_and_nominal_robots_coincide():
 
 
 def test_trials_are_deterministic_per_seed_and_reject_unknown_scenarios():
-    exp = experiments.handeye_noise_experiment([0.02], n_trials=2)
+    exp = handeye_experiments.handeye_noise_experiment([0.02], n_trials=2)
     a = montecarlo.run(exp, 2, n_jobs=1, progress=False)
     b = montecarlo.run(exp, 2, n_jobs=1, progress=False)
     c = montecarlo.run(exp, 3, n_jobs=1, progress=False)
     assert a.equals(b)
     assert not a.equals(c)
     with pytest.raises(CalibrationError, match="unknown scenario 'lab'"):
-        experiments.handeye_run({"n_trans": 4, "n_rot": 6, "baselines": False}, rng(1), "lab")
+        handeye_experiments.handeye_run(
+            {"n_trans": 4, "n_rot": 6, "baselines": False}, rng(1), "lab"
+        )
 
 
 def rng(seed):
@@ -67,7 +69,9 @@ def test_calibrate_from_user_csv(tmp_path):
     meas, _ = simulate.simulate_sphere_measurements(s, 4, 6, rng)
     path = tmp_path / "mine.csv"
     sphere_csv.write_sphere_measurements(meas, path)
-    source, _, paper, ml, table = experiments.calibrate_handeye(str(path), 0, [0.01, 0.02, 0.01])
+    source, _, paper, ml, table = handeye_experiments.calibrate_handeye(
+        str(path), 0, [0.01, 0.02, 0.01]
+    )
     assert source.startswith(f"user measurements from {path}")
     assert "truth" not in table
     assert geo.translation_error(paper.value, s.sensor2flange_true) < 1e-6

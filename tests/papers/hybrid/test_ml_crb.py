@@ -11,14 +11,14 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.estimators import handeye as he
-from calstudy.papers.hybrid import experiments, simulate
+from calstudy.papers.hybrid import handeye_experiments, simulate
 
 N = 600
 
 
 def _runs():
     rng = np.random.default_rng(2024)
-    station = simulate.make_station(rng, **experiments.SCENARIOS["sensor noise only"])
+    station = simulate.make_station(rng, **handeye_experiments.SCENARIOS["sensor noise only"])
     q_t, q_r = station.sphere_moves(4, 6, rng)
     q = np.concatenate([q_t, q_r])
     reported, _, actual = station.measure_sphere(q, rng)

@@ -7,8 +7,7 @@ stream numbers here. A trial function is ``trial(setup, rng, **point) -> list[di
 values; ``setup`` is a plain dict of the notebook's settings (its cache fingerprint).
 
 Notebook 01 (the station's calibration): the hand-eye of the flexible sensor from the fixed sphere
-(:mod:`calstudy.papers.hybrid.handeye_experiments`, whose factories this module passes on:
-:func:`handeye_experiment` and the sweeps of noise, pose changes and move ranges), the stationary
+(its factories are in :mod:`calstudy.papers.hybrid.handeye_experiments`), the stationary
 sensors by the homography chain with its null and oracle controls and the 3-2-1 frame
 (:func:`stationary_experiment`, :func:`rps_penalty_experiment`), the robot's absolute accuracy
 (:func:`robot_accuracy_experiment`).
@@ -38,16 +37,7 @@ from calstudy.models.robots import load_robot, perturb_robot, pose_errors
 from calstudy.papers.hybrid.compensation import analyse_run, before_compensation
 from calstudy.papers.hybrid.handeye_experiments import (
     SCENARIOS,
-    _check_scenario,
-    calibrate_handeye,
-    design_mounting,
-    handeye_experiment,
-    handeye_moves_experiment,
-    handeye_noise_experiment,
-    handeye_ranges_experiment,
-    handeye_run,
-    handeye_trial,
-    load_station_moves,
+    check_scenario,
     paper_moves,
 )
 from calstudy.papers.hybrid.scenario import (
@@ -68,21 +58,6 @@ from calstudy.papers.hybrid.simulate_production import (
     simulate_run,
     teach_program,
 )
-
-#: the hand-eye experiments live in :mod:`calstudy.papers.hybrid.handeye_experiments`; notebook 01
-#: reaches them through this module, as it reaches every experiment
-REEXPORTED = (
-    calibrate_handeye,
-    design_mounting,
-    handeye_experiment,
-    handeye_moves_experiment,
-    handeye_noise_experiment,
-    handeye_ranges_experiment,
-    handeye_run,
-    handeye_trial,
-    load_station_moves,
-)
-
 
 #: the variants of :func:`stationary_trial`, in the order of its rows
 STATIONARY_VARIANTS = (
@@ -263,7 +238,7 @@ def stationary_run(
     ``step == "stationary"``: ``sensor, variant`` and the errors of :func:`stationary_trial`;
     rows with ``step == "rps"``: the columns of :func:`rps_trial`.
     """
-    station = make_station(rng, pixel_sigma=pixel_sigma, **_check_scenario(scenario))
+    station = make_station(rng, pixel_sigma=pixel_sigma, **check_scenario(scenario))
     meas, _ = simulate_sphere_measurements(station, *paper_moves(station), rng)
     s2f = sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
     rows = stationary_trial(station, s2f, child_rng(rng, "stationary sensors"))

@@ -41,7 +41,24 @@ SCENARIOS = {
 }
 
 
-def _check_scenario(name: str) -> dict:
+def check_scenario(name: str) -> dict:
+    """The station settings of the scenario ``name`` (a key of :data:`SCENARIOS`).
+
+    Parameters
+    ----------
+    name : str
+        ``"station"`` or ``"sensor noise only"``.
+
+    Returns
+    -------
+    dict
+        Keyword arguments of :func:`calstudy.papers.hybrid.simulate.make_station`.
+
+    Raises
+    ------
+    CalibrationError
+        If ``name`` is not a scenario (the message lists them).
+    """
     if name not in SCENARIOS:
         raise CalibrationError(f"unknown scenario {name!r}; use one of {list(SCENARIOS)}")
     return SCENARIOS[name]
@@ -144,7 +161,7 @@ def handeye_run(
     rotation_error_deg, translation_error_mm, laser_sigma_mm, n_translations, n_pose_changes``
     (``CRB`` rows hold the bound's expected RMS of the trial's poses).
     """
-    station = make_station(rng, sigma_point_mm=sigma_point_mm, **_check_scenario(scenario))
+    station = make_station(rng, sigma_point_mm=sigma_point_mm, **check_scenario(scenario))
     station = with_move_ranges(station, translation_range_mm, across_plane_range_mm)
     n_trans = int(setup["n_trans"])
     n_rot = int(setup["n_rot"] if n_rot is None else n_rot)

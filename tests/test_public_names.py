@@ -1,0 +1,105 @@
+"""The library, the benchmarks and the notebooks use public names only: none imports a private
+name (one with a leading underscore, dunders aside) of another module, of numpy or scipy, nor
+reaches one through an imported module (``np.linalg._umath_linalg``, ``estimation._fit``). A name
+a second module needs is public in its own home. (Tests may reach private helpers to test them.)"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+from support import REPO_ROOT
+
+from calstudy.io.dependencies import notebook_code
+
+SOURCE = REPO_ROOT / "src" / "calstudy"
+NOTEBOOKS = REPO_ROOT / "notebooks"
+
+#: private names still used, by file, each with its reason: statsmodels keeps the table of
+#: Lilliefors p-values private (its public ``lilliefors`` tests one column per call, and the
+#: vectorised test of every column at once needs the table itself)
+ALLOWED = {"core/stats.py": {"statsmodels.stats._lilliefors"}}
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def private_uses(tree: ast.Module) -> list[tuple[int, str]]:
+    """(line, dotted name) of every private name of another module that ``tree`` imports or
+    reaches as an attribute of a module it imported."""
+    found: list[tuple[int, str]] = []
+    modules: set[str] = set()  # local names bound to imported modules
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                found += [(node.lineno, alias.name) for p in parts if _private(p)][:1]
+                modules.add(alias.asname or parts[0])
+        elif isinstance(node, ast.ImportFrom):
+            base = "." * node.level + (node.module or "")
+            if any(_private(p) for p in (node.module or "").split(".")):
+                found.append((node.lineno, base))
+            for alias in node.names:
+                if _private(alias.name):
+                    found.append((node.lineno, f"{base}.{alias.name}"))
+                else:
+                    # a bound name may be a module (``from scipy import linalg``): follow it
+                    modules.add(alias.asname or alias.name)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and _private(node.attr):
+            root = node.value
+            while isinstance(root, ast.Attribute):
+                root = root.value
+            if isinstance(root, ast.Name) and root.id in modules:
+                found.append((node.lineno, f"{ast.unparse(node.value)}.{node.attr}"))
+    return sorted(set(found))
+
+
+def _files() -> list[Path]:
+    return sorted(p for p in SOURCE.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+@pytest.mark.parametrize("path", _files(), ids=lambda p: p.relative_to(SOURCE).as_posix())
+def test_no_private_name_of_another_module(path):
+    allowed = ALLOWED.get(path.relative_to(SOURCE).as_posix(), set())
+    uses = private_uses(ast.parse(path.read_text(), filename=str(path)))
+    assert not [u for u in uses if u[1] not in allowed], (
+        f"{path.relative_to(REPO_ROOT)} uses private names: {uses}"
+    )
+    assert allowed <= {name for _, name in uses}, f"{allowed} is no longer used: drop it"
+
+
+@pytest.mark.parametrize(
+    "path",
+    [*sorted((REPO_ROOT / "benchmarks").glob("*.py")), *sorted(NOTEBOOKS.glob("*.ipynb"))],
+    ids=lambda p: p.name,
+)
+def test_benchmarks_and_notebooks_use_public_names(path):
+    source = notebook_code(path) if path.suffix == ".ipynb" else path.read_text()
+    uses = private_uses(ast.parse(source))
+    assert not uses, f"{path.relative_to(REPO_ROOT)} uses private names: {uses}"
+
+
+@pytest.mark.parametrize(
+    ("source", "expected"),
+    [
+        ("from scipy.optimize import _minpack", [(1, "scipy.optimize._minpack")]),
+        ("from numpy.linalg import _umath_linalg as u", [(1, "numpy.linalg._umath_linalg")]),
+        ("import scipy.optimize._minpack", [(1, "scipy.optimize._minpack")]),
+        ("from calstudy.io.results import _atomic_write, write_table",
+         [(1, "calstudy.io.results._atomic_write")]),
+        ("from calstudy.papers.hybrid import _experiments",
+         [(1, "calstudy.papers.hybrid._experiments")]),
+        ("import numpy as np\nnp.linalg._umath_linalg.solve1(a, b)",
+         [(2, "np.linalg._umath_linalg")]),
+        ("from calstudy.core import estimation\nestimation._fit(x)", [(2, "estimation._fit")]),
+        # public names, dunders, and private attributes of objects (not modules) pass
+        ("from __future__ import annotations\nimport numpy as np\nnp.__version__", []),
+        ("def f(self):\n    return self._cache", []),
+        ("from calstudy.io.results import atomic_write", []),
+    ],
+)
+def test_the_check_finds_private_names(source, expected):
+    assert private_uses(ast.parse(source)) == expected
