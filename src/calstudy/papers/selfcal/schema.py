@@ -173,6 +173,7 @@ class CellFile(Documented):
     """``cell.toml`` of a measurement folder (:mod:`calstudy.papers.selfcal.measured`)."""
 
     robot: RobotName
+    flange: RobotName | None = None
     base: Pose
     sensor: Pose
     noise: Noise | None = None
