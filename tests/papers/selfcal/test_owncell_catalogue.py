@@ -34,7 +34,12 @@ NOISE = {"sensor_mm": 0.02, "repeatability_mm": 0.01, "tracker_mm": 0.005}
 BASE = make_transform(euler_zyx_to_matrix(30.0, 0.0, 0.0), [1500.0, -800.0, -600.0])
 SENSOR = make_transform(euler_zyx_to_matrix(90.0, -20.0, 0.0), [0.0, -80.0, 120.0])
 SPHERES = np.array(
-    [[1700.0, -700.0, 0.0], [1200.0, -300.0, 400.0], [1900.0, -1100.0, 500.0], [1400.0, -500.0, -300.0]]
+    [
+        [1700.0, -700.0, 0.0],
+        [1200.0, -300.0, 400.0],
+        [1900.0, -1100.0, 500.0],
+        [1400.0, -500.0, -300.0],
+    ]
 )
 URDF_JOINT = """  <joint name="j{i}" type="revolute"><parent link="l{p}"/><child link="l{i}"/>
     <origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>
@@ -47,7 +52,10 @@ def _urdf(joints, flange) -> str:
     links = "".join(f'  <link name="l{i}"/>\n' for i in range(8))
     body = "".join(
         URDF_JOINT.format(
-            i=i + 1, p=i, xyz=" ".join(map(str, xyz)), rpy=" ".join(map(str, rpy)),
+            i=i + 1,
+            p=i,
+            xyz=" ".join(map(str, xyz)),
+            rpy=" ".join(map(str, rpy)),
             axis=" ".join(map(str, axis)),
         )
         for i, (xyz, rpy, axis) in enumerate(joints)
@@ -77,8 +85,14 @@ UR_URDF = _urdf(
 
 def _ur_table() -> Robot:
     """The same UR-type arm as a DH table (UR5 numbers, mm)."""
-    rows = [(0, 90, 89.159), (-425.0, 0, 0), (-392.25, 0, 0), (0, 90, 109.15), (0, -90, 94.65),
-            (0, 0, 82.3)]
+    rows = [
+        (0, 90, 89.159),
+        (-425.0, 0, 0),
+        (-392.25, 0, 0),
+        (0, 90, 109.15),
+        (0, -90, 94.65),
+        (0, 0, 82.3),
+    ]
     links = [Link("dh", a, math.radians(al), d, 0.0) for a, al, d in rows]
     return Robot("UR-type", links, [-math.pi] * 6, [math.pi] * 6)
 
