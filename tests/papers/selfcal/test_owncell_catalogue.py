@@ -176,6 +176,7 @@ def test_one_point_probe_identifies_27_and_names_the_sensor_rotations(fanuc, dec
     with pytest.warns(CalibrationWarning, match="identify 27 parameters"):
         fit = measured.identify_cell(meas, nominal, NOISE if declared else None)
     assert fit.n_identified == 27
+    assert fit.notes[0].startswith("at the start: the poses identify 27")
     table = fit.identifiability.set_index("name")
     lost = set(table.index[table["status"] == measured.NOT_IDENTIFIABLE])
     assert len(lost) == 3 and lost <= {"x1", "y1", "z1", "gamma1", "phi1", "eps1"}
