@@ -108,8 +108,8 @@ def _cell(robot, rng, n=40, sigma=0.02, declared=False, probe=False, Q=None, sph
     sphere = np.arange(len(Q)) % 4 if sphere is None else sphere
     if probe:  # one point of the sensor frame: the tracker reads where it is
         C = np.tile([0.0, 0.0, 300.0], (len(Q), 1))
-        P = model.points(truth, Q, C)
-        P_ref = P + rng.normal(0, sigma, P.shape)
+        P_ref = model.points(truth, Q, C) + rng.normal(0, sigma, C.shape)
+        C = C + rng.normal(0, sigma, C.shape)  # the reading of the point is noisy too
     else:
         poses = model.sensor2part(truth, Q)
         P_ref = SPHERES[sphere]
