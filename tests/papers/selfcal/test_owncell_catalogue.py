@@ -323,3 +323,31 @@ def test_urdf_with_a_prismatic_joint_is_refused(tmp_path):
     with pytest.raises(CalibrationError, match="no frame 'tool9'"):
         (tmp_path / "ur.urdf").write_text(UR_URDF)
         robot_from_urdf(tmp_path / "ur.urdf", flange="tool9")
+
+
+# ---------------------------------------------------------------------------------------------
+# 6-D pose readings (a camera on the flange)
+
+
+def test_one_target_read_in_6d_identifies_all_30(fanuc):
+    rng = np.random.default_rng(12)
+    model = default_model()
+    nominal = parameters_from_robot(fanuc, BASE, SENSOR)
+    truth = nominal + np.where(
+        IS_LENGTH, rng.normal(0, 0.5, 30), np.radians(rng.normal(0, 0.05, 30))
+    )
+    Q = rng.uniform(-2.0, 2.0, (15, 6))
+    target2part = make_transform(euler_zyx_to_matrix(10.0, 5.0, -3.0), SPHERES[0])[None]
+    sensor2part = model.sensor2part(truth, Q)
+    target2sensor = np.linalg.inv(sensor2part) @ target2part[0]
+    meas = measured.measurements_from_poses(Q, target2sensor, target2part, np.zeros(15, int))
+    meas.C[:] += rng.normal(0, 0.01, meas.C.shape)
+    assert len(meas) == 60 and set(meas.sphere) == {0, 1, 2, 3}
+    fit = measured.identify_cell(meas, nominal)
+    assert fit.n_identified == 30 and not fit.notes
+    assert np.abs(fit.params - truth)[IS_LENGTH].max() < 0.2
+    # the same robot poses seeing only the target's origin (one sphere) lose the base rotation
+    origin = measured.subset(meas, np.arange(0, 60, 4))
+    assert _quiet(measured.identify_cell, origin, nominal).n_identified == 27
+    with pytest.raises(CalibrationError, match="target indices must be integers in 0..0"):
+        measured.measurements_from_poses(Q, target2sensor, target2part, np.ones(15, int))

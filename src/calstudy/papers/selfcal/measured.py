@@ -308,6 +308,76 @@ def _measurements(rows: pd.DataFrame, noise: dict | None, readings: np.ndarray) 
     )
 
 
+#: a 6-D pose reading stands for four points of the target frame: its origin and the points this
+#: far (mm) along its x, y and z axes
+POSE_ARM_MM = 100.0
+
+
+def measurements_from_poses(
+    Q, target2sensor, target2part, target, arm_mm: float = POSE_ARM_MM
+) -> Measurements:
+    """6-D pose readings (a camera on the flange seeing a target, a marker board or a tracker's
+    6-D probe, whose pose in the part frame is known) as point measurements of the model.
+
+    Each reading becomes four rows: the target's origin and the points ``arm_mm`` along its x,
+    y and z axes, in the sensor frame (``C``) and in the part frame (``P_ref``). Four points of
+    a rigid frame fix its position and orientation, so the identification sees the full pose:
+    one target identifies all 30 parameters where one sphere leaves the base rotation about it
+    free. Row ``4 i + k`` is point ``k`` of reading ``i``; its ``sphere`` is ``4 target + k``
+    (the part-frame reading of a target point is shared by every view of that target).
+
+    Parameters
+    ----------
+    Q : array_like, shape (m, 6)
+        Joint angles, rad.
+    target2sensor : array_like, shape (m, 4, 4)
+        The target's pose in the sensor frame at each robot pose (what the camera reads), mm.
+    target2part : array_like, shape (k, 4, 4)
+        The pose of each target in the part frame (the tracker's reading), mm.
+    target : array_like of int, shape (m,)
+        Which target each reading saw.
+    arm_mm : float
+        Distance of the axis points from the target's origin; about the target's size.
+
+    Raises
+    ------
+    CalibrationError
+        Shapes that disagree, a target index out of range, non-finite values or an
+        ``arm_mm`` that is not positive.
+    """
+    Q = np.asarray(Q, float)
+    t2s = np.asarray(target2sensor, float)
+    t2p = np.asarray(target2part, float)
+    target = np.asarray(target)
+    m = len(Q)
+    if Q.shape != (m, 6) or t2s.shape != (m, 4, 4) or target.shape != (m,):
+        raise CalibrationError(
+            f"pose readings: joint angles {Q.shape}, target poses {t2s.shape} and target "
+            f"indices {target.shape} must be (m, 6), (m, 4, 4) and (m,) for one m"
+        )
+    if t2p.ndim != 3 or t2p.shape[1:] != (4, 4):
+        raise CalibrationError(f"target poses in the part frame have shape {t2p.shape}")
+    if m and (target.min() < 0 or target.max() >= len(t2p) or np.any(target != target // 1)):
+        raise CalibrationError(
+            f"target indices must be integers in 0..{len(t2p) - 1}; found {target.min()} to "
+            f"{target.max()}"
+        )
+    if not (np.isfinite(Q).all() and np.isfinite(t2s).all() and np.isfinite(t2p).all()):
+        raise CalibrationError("pose readings hold non-finite values")
+    if not (math.isfinite(arm_mm) and arm_mm > 0):
+        raise CalibrationError(f"arm_mm = {arm_mm} must be a positive length")
+    target = target.astype(int)
+    local = np.vstack([np.zeros(3), arm_mm * np.eye(3)])  # (4, 3) points of the target frame
+    C = np.einsum("mij,kj->mki", t2s[:, :3, :3], local) + t2s[:, None, :3, 3]
+    P = np.einsum("mij,kj->mki", t2p[target, :3, :3], local) + t2p[target][:, None, :3, 3]
+    return Measurements(
+        np.repeat(Q, 4, axis=0),
+        C.reshape(4 * m, 3),
+        P.reshape(4 * m, 3),
+        (4 * target[:, None] + np.arange(4)).reshape(4 * m),
+    )
+
+
 def read_cell(folder) -> MeasuredCell:
     """Read and check a measurement folder (format in the module docstring).
 
