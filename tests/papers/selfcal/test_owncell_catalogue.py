@@ -10,6 +10,7 @@ between axes 3 and 4 fixes only d3 + d4).
 from __future__ import annotations
 
 import math
+import shutil
 import warnings
 
 import numpy as np
@@ -22,6 +23,7 @@ from calstudy.models.kinematics import Link, Robot
 from calstudy.models.robots import load_robot
 from calstudy.models.urdf import robot_from_urdf
 from calstudy.papers.selfcal import design, measured
+from calstudy.papers.selfcal.experiments import suggest_poses
 from calstudy.papers.selfcal.identify import Measurements
 from calstudy.papers.selfcal.model import (
     IS_LENGTH,
@@ -29,6 +31,7 @@ from calstudy.papers.selfcal.model import (
     default_model,
     parameters_from_robot,
 )
+from calstudy.papers.selfcal.scenario import load_scenario
 
 NOISE = {"sensor_mm": 0.02, "repeatability_mm": 0.01, "tracker_mm": 0.005}
 BASE = make_transform(euler_zyx_to_matrix(30.0, 0.0, 0.0), [1500.0, -800.0, -600.0])
@@ -351,3 +354,42 @@ def test_one_target_read_in_6d_identifies_all_30(fanuc):
     assert _quiet(measured.identify_cell, origin, nominal).n_identified == 27
     with pytest.raises(CalibrationError, match="target indices must be integers in 0..0"):
         measured.measurements_from_poses(Q, target2sensor, target2part, np.ones(15, int))
+
+
+# ---------------------------------------------------------------------------------------------
+# poses planned for your sensor
+
+
+def _example_cell(tmp_path, sensor_lines: str = ""):
+    from calstudy.core.paths import data_path
+
+    folder = tmp_path / "cell"
+    shutil.copytree(data_path("selfcal", "example_measurements"), folder)
+    text = (folder / measured.CELL_FILE).read_text()
+    marker = "zyx_deg = [90.0000, -20.0000, 0.0000]\n"
+    assert marker in text
+    (folder / measured.CELL_FILE).write_text(text.replace(marker, marker + sensor_lines, 1))
+    return measured.read_cell(folder)
+
+
+def test_planning_uses_your_sensor_and_is_compared_with_your_poses(tmp_path):
+    scenario = load_scenario()
+    own = _example_cell(tmp_path, "standoff_mm = 150.0\nfield_mm = 20.0\ndepth_mm = 20.0\n")
+    assert own.sensor_geometry == {"standoff_mm": 150.0, "field_mm": 20.0, "depth_mm": 20.0}
+    suggested, compare, random = suggest_poses(scenario, own, 15, np.random.default_rng(1))
+    assert random["standoff_mm"] == 150.0 and len(suggested) == len(own.calibration) == 24
+    # the candidates really stand at 150 mm: the spheres lie near the sensor's z = 150 mm
+    model = default_model()
+    q = np.radians(suggested[[f"q{i}_deg" for i in range(1, 7)]].to_numpy())
+    spheres = own.spheres[[list(own.sphere_ids).index(s) for s in suggested["sphere"]]]
+    poses = model.sensor2part(own.start, q)
+    local = np.einsum("mji,mj->mi", poses[:, :3, :3], spheres - poses[:, :3, 3])
+    assert np.abs(local[:, 2] - 150.0).max() < 25.0
+    # planned for a worse sensor than the one that measured, the selection is not better
+    yours, selected = compare.set_index("poses").loc[["yours", "selected"], "predicted_std"]
+    assert compare["better"].tolist() == [False, bool(selected < yours)]
+    assert random["ratio_ci_low"] > 1.0  # planned beats random selections of the same number
+    with pytest.raises(CalibrationError, match="25 poses asked for from 24 candidates"):
+        suggest_poses(scenario, own, 6, np.random.default_rng(1), n_poses=25)
+    with pytest.raises(CalibrationError, match="standoff_mm = -1.0 must be a positive"):
+        suggest_poses(scenario, own, 6, np.random.default_rng(1), standoff_mm=-1.0)

@@ -447,8 +447,9 @@ def suggest_poses(
 
     Candidates: ``per_sphere`` reachable views of each sphere the calibration used, planned with
     the cell's nominal robot and sensor mounting, the sphere within ``field_mm`` of the optical
-    axis and ``depth_mm`` of the working distance ``standoff_mm`` (defaults: the scenario's
-    scanner). From them, ``n_poses`` (default: as many as the calibration has) D-optimal ones
+    axis and ``depth_mm`` of the working distance ``standoff_mm`` (defaults: the cell's
+    ``[sensor]`` geometry, else the scenario's scanner). From them, ``n_poses`` (default: as
+    many as the calibration has) D-optimal ones
     (:func:`calstudy.papers.selfcal.design.select_poses`) in the parameters ``free`` (default
     all; pass :attr:`CellFit.free` to plan for what the poses can identify).
 
@@ -471,10 +472,11 @@ def suggest_poses(
         Fewer candidates than poses asked for (plan more views per sphere), or a sensor
         geometry that is not positive.
     """
+    given = {"standoff_mm": standoff_mm, "field_mm": field_mm, "depth_mm": depth_mm}
+    own = cell.sensor_geometry or {}
     sensor = {
-        "standoff_mm": scenario.standoff_mm if standoff_mm is None else float(standoff_mm),
-        "field_mm": scenario.field_mm if field_mm is None else float(field_mm),
-        "depth_mm": scenario.depth_mm if depth_mm is None else float(depth_mm),
+        k: float(v if v is not None else own.get(k, getattr(scenario, k)))
+        for k, v in given.items()
     }
     for key, value in sensor.items():
         if not (math.isfinite(value) and value > 0):

@@ -10,6 +10,9 @@ and checks them; every message names the file, and the row and column where ther
     frame, default the last joint's frame) or the stem of one of the library's; ``[base]`` and
     ``[sensor]``: the nominal robot base in the part (tracker) frame and the sensor frame in the
     flange frame, ``xyz_mm = [x, y, z]`` and ``zyx_deg = [rz, ry, rx]`` (``R = Rz Ry Rx``);
+    optional in ``[sensor]``: ``standoff_mm``, ``field_mm``, ``depth_mm``, the sensor's working
+    distance and the half-widths of its field across and along the optical axis (the pose
+    planning of :func:`calstudy.papers.selfcal.experiments.suggest_poses` plans for them);
     optional ``[noise]``: standard deviations per axis ``sensor_mm`` (fitted sphere centre),
     ``repeatability_mm`` and ``tracker_mm``. Without ``[noise]`` the covariance of the parameters
     is scaled by the residual chi-square, and the report says so.
@@ -109,6 +112,9 @@ class MeasuredCell:
     spheres : (k, 3) tracker readings in the part frame, mm; ``sphere_ids`` their ids.
     pose_ids : dict of the ``pose`` ids of each set.
     part2base, sensor2flange : (4, 4) the nominal base placement and sensor mounting.
+    sensor_geometry : dict or None
+        The ``[sensor]`` keys ``standoff_mm``, ``field_mm``, ``depth_mm`` the file gives (for
+        the pose planning); None if it gives none.
     noise : dict or None
         Declared standard deviations per axis (``sensor_mm``, ``repeatability_mm``,
         ``tracker_mm``); None if the file declares none.
@@ -127,6 +133,7 @@ class MeasuredCell:
     source: str
     part2base: np.ndarray
     sensor2flange: np.ndarray
+    sensor_geometry: dict | None = None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -417,7 +424,14 @@ def read_cell(folder) -> MeasuredCell:
         str(folder),
         part2base,
         sensor2flange,
+        _sensor_geometry(table),
     )
+
+
+def _sensor_geometry(table: dict) -> dict | None:
+    keys = ("standoff_mm", "field_mm", "depth_mm")
+    found = {k: float(table["sensor"][k]) for k in keys if table["sensor"].get(k) is not None}
+    return found or None
 
 
 # ----------------------------------------------------------------------------------------------
