@@ -393,3 +393,29 @@ def test_planning_uses_your_sensor_and_is_compared_with_your_poses(tmp_path):
         suggest_poses(scenario, own, 6, np.random.default_rng(1), n_poses=25)
     with pytest.raises(CalibrationError, match="standoff_mm = -1.0 must be a positive"):
         suggest_poses(scenario, own, 6, np.random.default_rng(1), standoff_mm=-1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# the covariance without declared noise
+
+
+def test_shared_error_covariance_recovers_the_sandwich_of_the_true_variances():
+    rng = np.random.default_rng(13)
+    m, p, k = 96, 5, 8  # views, parameters, spheres
+    sphere = np.arange(m) % k
+    # three columns move every view alike (a translation), as the base position does
+    jac = np.column_stack([np.tile(np.eye(3), (m, 1)), rng.normal(size=(3 * m, p - 3))])
+    var_e, var_t = 0.02**2, 0.015**2
+    same = np.kron((sphere[:, None] == sphere[None, :]).astype(float), np.eye(3))
+    v = var_e * np.eye(3 * m) + var_t * same
+    info_inv = np.linalg.inv(jac.T @ jac)
+    truth = info_inv @ jac.T @ v @ jac @ info_inv
+    estimates = []
+    for _ in range(40):
+        noise = rng.normal(0, 0.02, 3 * m) + rng.normal(0, 0.015, (k, 3))[sphere].ravel()
+        r = noise - jac @ (info_inv @ jac.T @ noise)
+        estimates.append(measured.shared_error_covariance(jac, r, sphere))
+    ratio = np.diag(np.mean(estimates, axis=0)) / np.diag(truth)
+    assert np.all(np.abs(ratio - 1.0) < 0.3)
+    # the views of one sphere are not independent: s^2 (J^T J)^-1 is far too small
+    assert np.all(np.diag(truth)[:3] > 3.0 * (var_e + var_t) * np.diag(info_inv)[:3])

@@ -15,7 +15,8 @@ and checks them; every message names the file, and the row and column where ther
     planning of :func:`calstudy.papers.selfcal.experiments.suggest_poses` plans for them);
     optional ``[noise]``: standard deviations per axis ``sensor_mm`` (fitted sphere centre),
     ``repeatability_mm`` and ``tracker_mm``. Without ``[noise]`` the covariance of the parameters
-    is scaled by the residual chi-square, and the report says so.
+    comes from the residuals (the error of each view and the one shared by the views of a
+    sphere), and the report says so.
 ``spheres.csv``
     One row per sphere placement: ``sphere`` (an integer id), ``x_<u>, y_<u>, z_<u>``: the
     tracker's (or CMM's) reading of its centre in the part frame.
@@ -96,6 +97,9 @@ START_SIGMA_MM = 0.01
 #: largest share of the calibration rows the rejection rule may set aside
 MAX_OUTLIER_SHARE = 0.25
 IDENTIFIED, FIXED_BY_YOU, NOT_IDENTIFIABLE = "identified", "fixed by you", "not identifiable"
+#: the two bases of the covariance of :func:`identify_cell`
+DECLARED = "declared noise"
+RESIDUAL = "residual variances (per view and per sphere)"
 
 
 @dataclass
@@ -483,7 +487,7 @@ def write_cell(
     if noise is None:
         text.append(
             "# no [noise] table (sensor_mm, repeatability_mm, tracker_mm): the covariance of the\n"
-            "# parameters is then scaled by the residual chi-square"
+            "# parameters then comes from the residuals"
         )
     else:
         text.append("[noise]  # standard deviations per axis, mm")
@@ -525,9 +529,9 @@ class CellFit:
     covariance : (30, 30) mm and rad; zero in the rows and columns of the fixed parameters: the
         covariance of the identified ones only (the subspace the poses fix).
     covariance_basis : str
-        ``"declared noise"`` (maximum likelihood, covariance from the declared standard
-        deviations) or ``"residual chi-square"`` (least squares, ``s^2 (J^T J)^-1`` with ``s^2``
-        the residual sum of squares over its degrees of freedom).
+        :data:`DECLARED` (maximum likelihood, covariance from the declared standard deviations)
+        or :data:`RESIDUAL` (least squares; the error of each view and the error shared by the
+        views of one sphere estimated from the residuals, :func:`shared_error_covariance`).
     sigma_mm : float
         Per-axis residual scale used by the rejection rule and the noise-aware rank.
     residuals : pandas.DataFrame
@@ -732,7 +736,8 @@ def identify_cell(
     first fit do not push good measurements over the threshold; at the end a measurement set
     aside whose residual is within the threshold at the final fit is taken back (one refit).
     With ``noise`` the fit is maximum likelihood and the covariance follows from the declared
-    noise; without, least squares and the covariance scaled by the residual chi-square.
+    noise; without, least squares and the covariance from the residuals, with the tracker error
+    shared by the views of one sphere (:func:`shared_error_covariance`).
 
     Parameters
     ----------
@@ -843,11 +848,57 @@ def identify_cell(
     _, jac = model.points_and_jacobian(params, kept.Q, kept.C)
     s = np.linalg.svd(scaled_jacobian(jac)[:, free], compute_uv=False)
     cov = np.zeros((N_PARAMS, N_PARAMS))
-    cov[np.ix_(free, free)] = fit.estimate.covariance
-    basis = "declared noise" if weighted else "residual chi-square"
+    if weighted:
+        cov[np.ix_(free, free)] = fit.estimate.covariance
+        basis = DECLARED
+    else:
+        r = (model.points(params, kept.Q, kept.C) - kept.P_ref).ravel()
+        cov[np.ix_(free, free)] = shared_error_covariance(jac[:, free], r, kept.sphere)
+        basis = RESIDUAL
     return CellFit(
         fit, cov, basis, sigma, residuals, float(s[0] / s[-1]), rounds, free, table, notes
     )
+
+
+def shared_error_covariance(jac: np.ndarray, residuals: np.ndarray, sphere) -> np.ndarray:
+    """Covariance of least-squares parameters when each view has its own error and all views of
+    a sphere share the error of its one tracker reading, both variances estimated from the
+    residuals.
+
+    The residual covariance is modelled as ``s_e^2 I + s_t^2 S`` (``S`` joins the three axes of
+    two views of the same sphere); with ``M = I - J (J^T J)^-1 J^T`` the expected values of
+    ``r^T r`` and ``r^T S r`` are linear in the two variances (``tr(M V)`` and ``tr(M S M V)``),
+    which the observed values solve (method of moments; ``s_t^2`` clipped at 0). The
+    covariance is then the sandwich ``(J^T J)^-1 J^T V J (J^T J)^-1``: unlike ``s^2 (J^T J)^-1``
+    it does not treat the views of one sphere as independent.
+
+    Parameters
+    ----------
+    jac : (3 m, p) Jacobian of the residuals in the identified parameters (mm per mm or rad).
+    residuals : (3 m,) residuals at the solution, mm.
+    sphere : (m,) sphere of each view.
+
+    Returns
+    -------
+    (p, p) covariance, mm and rad.
+    """
+    jac = np.asarray(jac, float)
+    r = np.asarray(residuals, float)
+    sphere = np.asarray(sphere)
+    n, p = jac.shape
+    same = np.kron((sphere[:, None] == sphere[None, :]).astype(float), np.eye(3))
+    q, _ = np.linalg.qr(jac)
+    resid_maker = np.eye(n) - q @ q.T
+    ms = resid_maker @ same
+    msm = ms @ resid_maker
+    a = np.array([[np.trace(resid_maker), np.trace(ms)], [np.trace(msm), np.sum(msm * same)]])
+    b = np.array([r @ r, r @ same @ r])
+    var_e, var_t = np.linalg.solve(a, b)
+    if var_t <= 0 or var_e <= 0:
+        var_t, var_e = 0.0, float(r @ r) / (n - p)
+    v = var_e * np.eye(n) + var_t * same
+    info_inv = np.linalg.inv(jac.T @ jac)
+    return info_inv @ (jac.T @ v @ jac) @ info_inv
 
 
 def _shifted_rms(a: np.ndarray, b: np.ndarray) -> float:
