@@ -184,6 +184,8 @@ def _noise_pivots(js, piv, rank: int, sigma_mm: float, std_limit_mm: float):
     floor = sigma_mm / std_limit_mm
     s = np.linalg.svd(js, compute_uv=False)
     target = min(rank, int(np.sum(s > floor)))
+    if target and np.linalg.svd(js[:, piv[:target]], compute_uv=False)[-1] > floor:
+        return piv, target  # the QR pivots already span well-fixed directions
     chosen: list[int] = []
     for c in piv:
         if len(chosen) == target:
