@@ -139,6 +139,16 @@ def fanuc():
     return load_robot("fanuc_m710ic_50")
 
 
+@pytest.fixture(scope="module", params=["table", "urdf"])
+def arm(request, fanuc, tmp_path_factory):
+    """The FANUC of the paper from its table and from a URDF of it."""
+    if request.param == "table":
+        return fanuc
+    path = tmp_path_factory.mktemp("urdf") / "fanuc.urdf"
+    path.write_text(_table_as_urdf(fanuc))
+    return robot_from_urdf(path, flange="l7")
+
+
 # ---------------------------------------------------------------------------------------------
 # outliers
 
@@ -164,8 +174,8 @@ def test_declared_noise_far_too_small_is_refused(fanuc):
 # identifiable-parameter counts
 
 
-def test_scanner_on_a_6r_arm_identifies_30(fanuc):
-    nominal, truth, meas = _cell(fanuc, np.random.default_rng(3))
+def test_scanner_on_a_6r_arm_identifies_30(arm):
+    nominal, truth, meas = _cell(arm, np.random.default_rng(3))
     with warnings.catch_warnings():
         warnings.simplefilter("error", CalibrationWarning)
         fit = measured.identify_cell(meas, nominal)
@@ -174,8 +184,8 @@ def test_scanner_on_a_6r_arm_identifies_30(fanuc):
 
 
 @pytest.mark.parametrize("declared", [False, True])
-def test_one_point_probe_identifies_27_and_names_the_sensor_rotations(fanuc, declared):
-    nominal, truth, meas = _cell(fanuc, np.random.default_rng(4), probe=True, declared=declared)
+def test_one_point_probe_identifies_27_and_names_the_sensor_rotations(arm, declared):
+    nominal, truth, meas = _cell(arm, np.random.default_rng(4), probe=True, declared=declared)
     with pytest.warns(CalibrationWarning, match="identify 27 parameters"):
         fit = measured.identify_cell(meas, nominal, NOISE if declared else None)
     assert fit.n_identified == 27
@@ -190,6 +200,15 @@ def test_one_point_probe_identifies_27_and_names_the_sensor_rotations(fanuc, dec
     model = default_model()
     tip = model.sensor2part(fit.params, meas.Q[:5])[:, :3] @ [0, 0, 300.0, 1]
     true_tip = model.sensor2part(truth, meas.Q[:5])[:, :3] @ [0, 0, 300.0, 1]
+    assert np.abs(tip - true_tip).max() < 0.1
+    # the guidance: hold the sensor rotations yourself, and nothing more is lost or warned of
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CalibrationWarning)
+        held = measured.identify_cell(
+            meas, nominal, NOISE if declared else None, fixed=["gamma1", "phi1", "eps1"]
+        )
+    assert held.n_identified == 27 and not held.notes
+    tip = model.sensor2part(held.params, meas.Q[:5])[:, :3] @ [0, 0, 300.0, 1]
     assert np.abs(tip - true_tip).max() < 0.1
 
 
@@ -419,3 +438,27 @@ def test_shared_error_covariance_recovers_the_sandwich_of_the_true_variances():
     assert np.all(np.abs(ratio - 1.0) < 0.3)
     # the views of one sphere are not independent: s^2 (J^T J)^-1 is far too small
     assert np.all(np.diag(truth)[:3] > 3.0 * (var_e + var_t) * np.diag(info_inv)[:3])
+
+
+def test_a_cell_folder_may_name_a_urdf(tmp_path, fanuc):
+    from calstudy.core.paths import data_path
+
+    folder = tmp_path / "cell"
+    shutil.copytree(data_path("selfcal", "example_measurements"), folder)
+    (folder / "arm.urdf").write_text(_table_as_urdf(fanuc))
+    text = (folder / measured.CELL_FILE).read_text()
+    old = 'robot = "fanuc_m710ic_50.toml"'
+    assert old in text
+    (folder / measured.CELL_FILE).write_text(
+        text.replace(old, 'robot = "arm.urdf"\nflange = "l7"', 1)
+    )
+    from_urdf = measured.read_cell(folder)
+    from_table = measured.read_cell(data_path("selfcal", "example_measurements"))
+    model = default_model()
+    Q = from_table.calibration.Q
+    np.testing.assert_allclose(
+        model.sensor2part(from_urdf.start, Q), model.sensor2part(from_table.start, Q), atol=1e-6
+    )
+    (folder / measured.CELL_FILE).write_text(text.replace(old, 'robot = "gone.urdf"', 1))
+    with pytest.raises(CalibrationError, match="gone.urdf does not exist"):
+        measured.read_cell(folder)
