@@ -960,7 +960,8 @@ def check_sensor_columns(meas: Measurements, start, model: GlobalModel | None = 
             f"the sensor-frame columns cx, cy, cz look swapped or negated: read with "
             f"{_column_variant(perm, signs)} the identification leaves a median residual of "
             f"{fits['variant']:.4g} mm, as written {fits['written']:.4g} mm; check the order of "
-            "the columns and the direction of the sensor's axes (a left-handed sensor frame?)"
+            "the columns and the direction of the sensor's axes (a left-handed sensor frame?), "
+            "or the nominal sensor mounting in cell.toml (a quarter or half turn off?)"
         )
 
 
