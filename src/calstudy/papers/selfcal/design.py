@@ -162,7 +162,7 @@ def _null_combinations(js: np.ndarray, rank: int, names) -> list[str]:
     each written with its entries above ``NULL_TERM`` (scaled units)."""
     if rank >= js.shape[1]:
         return []
-    vt = np.linalg.svd(js, full_matrices=True)[2]
+    vt = np.linalg.svd(js, full_matrices=js.shape[0] < js.shape[1])[2]  # all n rows of V^T
     out = []
     for v in vt[rank:]:
         v = v * np.sign(v[np.argmax(np.abs(v))])
