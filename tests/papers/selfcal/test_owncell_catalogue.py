@@ -462,3 +462,19 @@ def test_a_cell_folder_may_name_a_urdf(tmp_path, fanuc):
     (folder / measured.CELL_FILE).write_text(text.replace(old, 'robot = "gone.urdf"', 1))
     with pytest.raises(CalibrationError, match="gone.urdf does not exist"):
         measured.read_cell(folder)
+
+
+def test_noise_aware_rank_drops_a_direction_the_noise_hides():
+    rng = np.random.default_rng(14)
+    jac = rng.normal(size=(60, 4)) * 10.0
+    jac = np.column_stack([jac, jac[:, 0] + 1e-4 * rng.normal(size=60)])  # nearly column 0
+    names, length = ("a", "b", "c", "d", "e"), np.ones(5, bool)
+    assert design.base_parameters(jac, names, length).rank == 5  # round-off: all 5
+    # the direction a - e moves the points by ~1e-3 mm per mm: at 0.05 mm of noise its
+    # standard deviation is ~50 mm, beyond the 10 mm limit
+    noisy = design.base_parameters(jac, names, length, sigma_mm=0.05)
+    assert noisy.rank == 4 and len(noisy.unidentified) == 1
+    assert {"a", "e"} <= set(noisy.unidentified[0].split())
+    assert design.base_parameters(jac, names, length, sigma_mm=1e-6).rank == 5
+    with pytest.raises(CalibrationError, match="sigma_mm = -1.0 must be positive"):
+        design.base_parameters(jac, names, length, sigma_mm=-1.0)
