@@ -46,7 +46,7 @@ def test_noise_free_files_identify_the_truth(tmp_path, scenario, noise_free):
     fit = measured.identify_cell(cell.calibration, cell.start)
     assert np.abs(angle_wrap(fit.params - station.true_params)).max() < 1e-8
     assert not fit.outliers.any()
-    assert fit.covariance_basis == "residual chi-square"
+    assert fit.covariance_basis == measured.RESIDUAL
     table, summary = measured.validation_report(cell.validation, cell.start, fit.params)
     assert summary["after_max_mm"] < 1e-6 < summary["before_max_mm"]
     assert summary["meets_requirement"] and table["within"].all()

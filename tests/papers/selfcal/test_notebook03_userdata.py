@@ -25,7 +25,7 @@ def test_notebook03_runs_on_the_example_measurements(tmp_path, monkeypatch):
     out_nb = tmp_path / NOTEBOOK.name
     text = json.dumps(json.loads(out_nb.read_text()))
     assert f"calibrated from: {folder} (24 calibration, 10 validation measurements)" in text
-    assert "covariance from the residual chi-square (no noise declared" in text
+    assert "covariance from the residual variances (per view and per sphere) (no noise" in text
     out = tmp_path / "out" / NOTEBOOK.stem
     residuals = pd.read_csv(out / "cell_residuals.csv")
     assert set(residuals.loc[residuals["outlier"], "pose"]) == {r + 1 for r, _ in EXAMPLE_OUTLIERS}

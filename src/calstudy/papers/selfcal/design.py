@@ -18,7 +18,7 @@ scaled_jacobian` (1 rad counts as ``ANGLE_SCALE_MM`` mm).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -36,6 +36,13 @@ from calstudy.papers.selfcal.model import (
 
 #: a coefficient of a base-parameter combination smaller than this (scaled units) is dropped
 COMBINATION_TOL = 1e-6
+#: an entry of an unidentified direction (unit vector, scaled units) shown when above this
+NULL_TERM = 0.1
+#: noise-aware rank: a direction of the parameters that the data fix with a standard deviation
+#: above this (scaled units: mm for lengths, mm at 1 m for angles, so 10 mrad = 0.57 deg) is not
+#: identified; that is 20 times a robot's manufacturing tolerance of 0.5 mm and 0.05 deg, so the
+#: data would fix it worse than the drawing does
+STD_LIMIT_MM = 10.0
 
 ALONE = "identifiable alone"
 COMBINED = "only in combination"
@@ -60,11 +67,16 @@ class BaseParameters:
         One row per parameter: ``name``, ``status`` (:data:`ALONE`, :data:`COMBINED` or
         :data:`NONE`), ``pivot`` (QR order), ``r_diag`` (relative ``|R_kk|`` at its pivot) and
         ``combination`` (the identifiable combination it enters, physical units).
+    unidentified : list of str
+        The ``n - rank`` directions the data do not fix: the weakest right singular vectors of
+        the scaled Jacobian, each with its entries above :data:`NULL_TERM` (scaled units:
+        lengths in mm, angles in mm at 1 m).
     """
 
     rank: int
     base: list[str]
     table: pd.DataFrame
+    unidentified: list[str] = field(default_factory=list)
 
 
 def _term(coef: float, name: str) -> str:
@@ -74,7 +86,12 @@ def _term(coef: float, name: str) -> str:
 
 
 def base_parameters(
-    jac, names=PARAM_NAMES, is_length=IS_LENGTH, rtol: float = RANK_RTOL
+    jac,
+    names=PARAM_NAMES,
+    is_length=IS_LENGTH,
+    rtol: float = RANK_RTOL,
+    sigma_mm: float | None = None,
+    std_limit_mm: float = STD_LIMIT_MM,
 ) -> BaseParameters:
     """Base parameters of an identification Jacobian by column-pivoted QR.
 
@@ -93,6 +110,22 @@ def base_parameters(
     names : sequence of str, length n
     is_length : array_like of bool, length n
         Lengths stay as given, angles are multiplied by ``ANGLE_SCALE_MM``.
+    rtol : float
+        Round-off rank tolerance on the QR diagonal, relative to the largest.
+    sigma_mm : float, optional
+        Standard deviation per axis of the residuals (mm; the declared noise or the residual
+        scale of a fit). Given, the rank is also noise-aware: the first ``r`` pivots are kept
+        only while the smallest singular value of their scaled columns exceeds
+        ``sigma_mm / std_limit_mm``, i.e. while every direction they span is fixed with a
+        standard deviation within ``std_limit_mm`` (scaled units).
+    std_limit_mm : float
+        Largest standard deviation of an identified direction (scaled units).
+
+    Raises
+    ------
+    CalibrationError
+        Shapes that disagree, a non-finite Jacobian, or a ``sigma_mm`` that is not a positive
+        finite number.
     """
     jac = np.asarray(jac, float)
     length = np.asarray(is_length, bool)
@@ -112,10 +145,55 @@ def base_parameters(
     _, r, piv = scipy.linalg.qr(jn, mode="economic", pivoting=True)
     diag = np.abs(np.diag(r))
     rank = int(np.sum(diag > rtol * diag[0])) if diag.size and diag[0] > 0 else 0
+    if sigma_mm is not None:
+        piv, rank = _noise_pivots(js, piv, rank, sigma_mm, std_limit_mm)
+        r = scipy.linalg.qr(jn[:, piv], mode="economic")[1]
+        diag = np.abs(np.diag(r))
     beta = scipy.linalg.solve_triangular(r[:rank, :rank], r[:rank, rank:])
     # in normalised units; back to physical: theta_b + sum beta (s_d n_d / (s_b n_b)) theta_d
     beta[np.abs(beta) < COMBINATION_TOL] = 0.0
-    return _base_table(names, piv, rank, beta, diag / max(diag[0], 1e-300), zero, norms, unit)
+    out = _base_table(names, piv, rank, beta, diag / max(diag[0], 1e-300), zero, norms, unit)
+    out.unidentified = _null_combinations(js, rank, names)
+    return out
+
+
+def _null_combinations(js: np.ndarray, rank: int, names) -> list[str]:
+    """The ``n - rank`` weakest directions of the scaled columns (right singular vectors),
+    each written with its entries above ``NULL_TERM`` (scaled units)."""
+    if rank >= js.shape[1]:
+        return []
+    vt = np.linalg.svd(js, full_matrices=js.shape[0] < js.shape[1])[2]  # all n rows of V^T
+    out = []
+    for v in vt[rank:]:
+        v = v * np.sign(v[np.argmax(np.abs(v))])
+        terms = [(c, n) for c, n in zip(v, names, strict=True) if abs(c) > NULL_TERM]
+        out.append(" ".join(f"{'-' if c < 0 else '+'} {abs(c):.2f} {n}" for c, n in terms)[2:])
+    return out
+
+
+def _noise_pivots(js, piv, rank: int, sigma_mm: float, std_limit_mm: float):
+    """Column order and rank under the noise-aware tolerance.
+
+    The rank is the number of singular values of the scaled columns above both the round-off
+    rank and ``sigma_mm / std_limit_mm``; the base columns are taken in QR pivot order,
+    skipping any that would bring the smallest singular value of those chosen below that
+    floor, so that every direction they span is fixed within ``std_limit_mm``.
+    """
+    if not (math.isfinite(sigma_mm) and sigma_mm > 0):
+        raise CalibrationError(f"the residual scale sigma_mm = {sigma_mm} must be positive")
+    floor = sigma_mm / std_limit_mm
+    s = np.linalg.svd(js, compute_uv=False)
+    target = min(rank, int(np.sum(s > floor)))
+    if target and np.linalg.svd(js[:, piv[:target]], compute_uv=False)[-1] > floor:
+        return piv, target  # the QR pivots already span well-fixed directions
+    chosen: list[int] = []
+    for c in piv:
+        if len(chosen) == target:
+            break
+        if np.linalg.svd(js[:, [*chosen, c]], compute_uv=False)[-1] > floor:
+            chosen.append(int(c))
+    rest = [int(c) for c in piv if c not in chosen]
+    return np.array(chosen + rest, dtype=int), len(chosen)
 
 
 def _base_table(names, piv, rank, beta, rel, zero, norms, unit) -> BaseParameters:
@@ -218,6 +296,12 @@ def select_poses(blocks, n: int, exchange_rounds: int = 2, ridge: float = 1e-6) 
         Scaled Jacobian blocks of the candidates (:func:`candidate_jacobians`).
     n : int
         Poses to choose, ``3 n >= p`` and ``n <= k``.
+
+    Raises
+    ------
+    CalibrationError
+        Blocks of the wrong shape, a block with non-finite entries or all zero (its index in
+        the message), or a size that cannot be chosen.
     """
     return select_poses_sizes(blocks, [n], exchange_rounds, ridge)[n]
 
@@ -242,6 +326,18 @@ def select_poses_sizes(
                 f"cannot choose {n} poses from {k} candidates for {p} parameters "
                 f"(need {math.ceil(p / 3)} <= n <= {k})"
             )
+    bad = np.flatnonzero(~np.isfinite(b).all(axis=(1, 2)))
+    if bad.size:
+        raise CalibrationError(
+            f"candidate block {int(bad[0])} (of {k}) has non-finite entries ({bad.size} such "
+            "blocks): a pose the model cannot evaluate; drop it from the candidates"
+        )
+    zero = np.flatnonzero(~b.any(axis=(1, 2)))
+    if zero.size:
+        raise CalibrationError(
+            f"candidate block {int(zero[0])} (of {k}) is all zero ({zero.size} such blocks): "
+            "a pose that moves no measured point with any parameter; drop it"
+        )
     full = np.einsum("kap,kaq->pq", b, b)
     reg = ridge * max(float(np.trace(full)) / p / k, 1e-300) * np.eye(p)
     info = reg.copy()

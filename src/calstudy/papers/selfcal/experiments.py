@@ -35,6 +35,7 @@ import pandas as pd
 from calstudy.core.config import read_toml, scenario_file
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, child_rng, streams, trial_rng
+from calstudy.core.verdicts import median_interval
 from calstudy.papers.selfcal.design import (
     candidate_jacobians,
     observability,
@@ -425,33 +426,113 @@ def candidate_views(scenario: Scenario, spheres_base, per_sphere: int, rng) -> t
     return np.vstack(views), np.repeat(np.arange(len(views)), per_sphere)
 
 
-def suggest_poses(
-    scenario: Scenario, cell: MeasuredCell, per_sphere: int, rng: np.random.Generator
-) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Poses to measure next time on a user's cell: D-optimal from ``per_sphere`` reachable
-    candidate views of each sphere the calibration used, as many as the calibration has.
+#: random selections of the same size that the planned poses are compared with
+RANDOM_SELECTIONS = 200
 
-    Returns the suggested joint angles (deg, with the sphere id) and the observability of the
-    user's own poses beside that of the selection.
+
+def predicted_std(blocks) -> float:
+    """RMS standard deviation of the parameters (scaled units) per mm of measurement noise that
+    a selection of scaled Jacobian blocks (k, 3, p) predicts: ``sqrt(trace((J^T J)^-1) / p)``
+    (A-optimality); inf if the selection does not fix every parameter."""
+    b = np.asarray(blocks, float)
+    j = b.reshape(-1, b.shape[-1])
+    s = np.linalg.svd(j, compute_uv=False)
+    if len(s) < b.shape[-1] or s[-1] <= s[0] * 1e-12:
+        return math.inf
+    return float(np.sqrt(np.mean(1.0 / s**2)))
+
+
+def suggest_poses(
+    scenario: Scenario,
+    cell: MeasuredCell,
+    per_sphere: int,
+    rng: np.random.Generator,
+    n_poses: int | None = None,
+    standoff_mm: float | None = None,
+    field_mm: float | None = None,
+    depth_mm: float | None = None,
+    free=None,
+) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
+    """Poses to measure next time on a user's cell, planned for the user's sensor.
+
+    Candidates: ``per_sphere`` reachable views of each sphere the calibration used, planned with
+    the cell's nominal robot and sensor mounting, the sphere within ``field_mm`` of the optical
+    axis and ``depth_mm`` of the working distance ``standoff_mm`` (defaults: the cell's
+    ``[sensor]`` geometry, else the scenario's scanner). From them, ``n_poses`` (default: as
+    many as the calibration has) D-optimal ones
+    (:func:`calstudy.papers.selfcal.design.select_poses`) in the parameters ``free`` (default
+    all; pass :attr:`CellFit.free` to plan for what the poses can identify).
+
+    Returns
+    -------
+    suggested : pandas.DataFrame
+        The joint angles (deg) with the sphere id, ``n_poses`` rows.
+    compare : pandas.DataFrame
+        Observability (:func:`observability`) and :func:`predicted_std` of your poses and of the
+        selection; ``better`` is True on the selection only if its predicted standard deviation
+        is below that of your poses (else keep yours).
+    random : dict
+        The selection against :data:`RANDOM_SELECTIONS` random choices of ``n_poses`` from the
+        same candidates: median of the ratio random / planned of :func:`predicted_std` with its
+        95 % order-statistic interval (``ratio_median``, ``ratio_ci_low``, ``ratio_ci_high``).
+
+    Raises
+    ------
+    CalibrationError
+        Fewer candidates than poses asked for (plan more views per sphere), or a sensor
+        geometry that is not positive.
     """
-    plan = scenario.with_(robot=cell.robot, sensor_design=cell.sensor2flange)
+    given = {"standoff_mm": standoff_mm, "field_mm": field_mm, "depth_mm": depth_mm}
+    own = cell.sensor_geometry or {}
+    sensor = {
+        k: float(v if v is not None else own.get(k, getattr(scenario, k)))
+        for k, v in given.items()
+    }
+    for key, value in sensor.items():
+        if not (math.isfinite(value) and value > 0):
+            raise CalibrationError(f"the sensor's {key} = {value} must be a positive length")
+    n = len(cell.calibration) if n_poses is None else int(n_poses)
+    free = np.ones(N_PARAMS, bool) if free is None else np.asarray(free, bool)
+    plan = scenario.with_(robot=cell.robot, sensor_design=cell.sensor2flange, **sensor)
     used = np.unique(cell.calibration.sphere)
     base2part = np.linalg.inv(cell.part2base)
     spheres_base = cell.spheres[used] @ base2part[:3, :3].T + base2part[:3, 3]
     cand_q, cand_s = candidate_views(plan, spheres_base, per_sphere, rng)
+    if n > len(cand_q):
+        raise CalibrationError(
+            f"{n} poses asked for from {len(cand_q)} candidates ({per_sphere} per sphere of "
+            f"{len(used)}); plan at least {math.ceil(n / len(used))} views per sphere"
+        )
     blocks, _ = candidate_jacobians(cell.start, cand_q, cell.spheres[used], cand_s)
-    chosen = select_poses(blocks, min(len(cell.calibration), len(cand_q)))
+    blocks = blocks[:, :, free]
+    chosen = select_poses(blocks, n)
     _, own = default_model().points_and_jacobian(cell.start, cell.calibration.Q, cell.calibration.C)
+    own_blocks = scaled_jacobian(own).reshape(len(cell.calibration), 3, -1)[:, :, free]
     suggested = pd.DataFrame(np.degrees(cand_q[chosen]), columns=[f"q{i}_deg" for i in range(1, 7)])
     suggested.insert(0, "sphere", cell.sphere_ids[used][cand_s[chosen]])
-    own_blocks = scaled_jacobian(own).reshape(len(cell.calibration), 3, -1)
+    own_std, planned_std = predicted_std(own_blocks), predicted_std(blocks[chosen])
     compare = pd.DataFrame(
         [
-            {"poses": "yours", **observability(own_blocks)},
-            {"poses": "selected", **observability(blocks[chosen])},
+            {"poses": "yours", **observability(own_blocks), "predicted_std": own_std},
+            {"poses": "selected", **observability(blocks[chosen]), "predicted_std": planned_std},
         ]
     )
-    return suggested, compare
+    compare["better"] = [False, bool(planned_std < own_std)]
+    ratios = [
+        predicted_std(blocks[rng.choice(len(cand_q), n, replace=False)]) / planned_std
+        for _ in range(RANDOM_SELECTIONS)
+    ]
+    med, lo, hi = median_interval(np.asarray(ratios, float))
+    random = {
+        "n_poses": n,
+        "candidates": len(cand_q),
+        "draws": RANDOM_SELECTIONS,
+        "ratio_median": med,
+        "ratio_ci_low": lo,
+        "ratio_ci_high": hi,
+        **sensor,
+    }
+    return suggested, compare, random
 
 
 def _measure_selection(scenario, st, Q, sphere, chosen, rng) -> Measurements:

@@ -5,12 +5,18 @@ and checks them; every message names the file, and the row and column where ther
 
 ``cell.toml``
     ``robot``: the nominal robot, a file in the ``data/robots/*.toml`` form (a path ending in
-    ``.toml``, relative to the folder) or the stem of one of the library's; ``[base]`` and
+    ``.toml``, relative to the folder), a URDF file (a path ending in ``.urdf``, read by
+    :func:`calstudy.models.urdf.robot_from_urdf`; optional ``flange``: the name of its flange
+    frame, default the last joint's frame) or the stem of one of the library's; ``[base]`` and
     ``[sensor]``: the nominal robot base in the part (tracker) frame and the sensor frame in the
     flange frame, ``xyz_mm = [x, y, z]`` and ``zyx_deg = [rz, ry, rx]`` (``R = Rz Ry Rx``);
+    optional in ``[sensor]``: ``standoff_mm``, ``field_mm``, ``depth_mm``, the sensor's working
+    distance and the half-widths of its field across and along the optical axis (the pose
+    planning of :func:`calstudy.papers.selfcal.experiments.suggest_poses` plans for them);
     optional ``[noise]``: standard deviations per axis ``sensor_mm`` (fitted sphere centre),
     ``repeatability_mm`` and ``tracker_mm``. Without ``[noise]`` the covariance of the parameters
-    is scaled by the residual chi-square, and the report says so.
+    comes from the residuals (the error of each view and the one shared by the views of a
+    sphere), and the report says so.
 ``spheres.csv``
     One row per sphere placement: ``sphere`` (an integer id), ``x_<u>, y_<u>, z_<u>``: the
     tracker's (or CMM's) reading of its centre in the part frame.
@@ -31,8 +37,11 @@ rows before and after against a requirement.
 from __future__ import annotations
 
 import csv
+import itertools
 import math
+import re
 import shutil
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -40,12 +49,19 @@ import numpy as np
 import pandas as pd
 
 from calstudy.core.config import check_ids, parse_number, require
-from calstudy.core.errors import CalibrationError
+from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform, matrix_to_euler_zyx
 from calstudy.core.schema import check_toml
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import load_robot
-from calstudy.papers.selfcal.identify import Identification, Measurements, identify
+from calstudy.models.urdf import robot_from_urdf
+from calstudy.papers.selfcal.design import BaseParameters, base_parameters
+from calstudy.papers.selfcal.identify import (
+    Identification,
+    Measurements,
+    identify,
+    scaled_jacobian,
+)
 from calstudy.papers.selfcal.model import (
     IS_LENGTH,
     N_PARAMS,
@@ -72,6 +88,18 @@ METRES_SUSPECT_MM = 10.0
 #: the robust scale is not taken below this (mm): the rounding of the files
 MIN_SIGMA_MM = 1e-4
 DEFAULT_REQUIREMENT_MM = 0.42
+#: below this many identified directions (beyond the parameters you fix) the poses are refused:
+#: a one-point sensor or one sphere costs 3 of the 30, a pose repeated or one joint moving far more
+MIN_IDENTIFIED = 24
+#: per-axis noise (mm) assumed for the rank at the start when none is declared: the smallest of a
+#: tracker-and-scanner cell (a tracker's 10-15 um); the rank at the fit uses the residual scale
+START_SIGMA_MM = 0.01
+#: largest share of the calibration rows the rejection rule may set aside
+MAX_OUTLIER_SHARE = 0.25
+IDENTIFIED, FIXED_BY_YOU, NOT_IDENTIFIABLE = "identified", "fixed by you", "not identifiable"
+#: the two bases of the covariance of :func:`identify_cell`
+DECLARED = "declared noise"
+RESIDUAL = "residual variances (per view and per sphere)"
 
 
 @dataclass
@@ -88,6 +116,9 @@ class MeasuredCell:
     spheres : (k, 3) tracker readings in the part frame, mm; ``sphere_ids`` their ids.
     pose_ids : dict of the ``pose`` ids of each set.
     part2base, sensor2flange : (4, 4) the nominal base placement and sensor mounting.
+    sensor_geometry : dict or None
+        The ``[sensor]`` keys ``standoff_mm``, ``field_mm``, ``depth_mm`` the file gives (for
+        the pose planning); None if it gives none.
     noise : dict or None
         Declared standard deviations per axis (``sensor_mm``, ``repeatability_mm``,
         ``tracker_mm``); None if the file declares none.
@@ -106,6 +137,7 @@ class MeasuredCell:
     source: str
     part2base: np.ndarray
     sensor2flange: np.ndarray
+    sensor_geometry: dict | None = None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -240,6 +272,13 @@ def _pose_from(table: dict, key: str, source) -> np.ndarray:
 
 def _robot_from(table: dict, folder: Path, source) -> Robot:
     name = str(require(table, "robot", source))
+    if name.endswith(".urdf"):
+        path = (folder / name).resolve()
+        if not path.is_file():
+            raise CalibrationError(f"{source}: robot file {path} does not exist")
+        return robot_from_urdf(path, flange=table.get("flange"))
+    if table.get("flange") is not None:
+        raise CalibrationError(f"{source}: flange names a URDF frame; the robot is not a URDF")
     if name.endswith(".toml"):
         path = (folder / name).resolve()
         if not path.is_file():
@@ -277,6 +316,76 @@ def _measurements(rows: pd.DataFrame, noise: dict | None, readings: np.ndarray) 
         sphere,
         cov=cov,
         tracker_cov=tracker,
+    )
+
+
+#: a 6-D pose reading stands for four points of the target frame: its origin and the points this
+#: far (mm) along its x, y and z axes
+POSE_ARM_MM = 100.0
+
+
+def measurements_from_poses(
+    Q, target2sensor, target2part, target, arm_mm: float = POSE_ARM_MM
+) -> Measurements:
+    """6-D pose readings (a camera on the flange seeing a target, a marker board or a tracker's
+    6-D probe, whose pose in the part frame is known) as point measurements of the model.
+
+    Each reading becomes four rows: the target's origin and the points ``arm_mm`` along its x,
+    y and z axes, in the sensor frame (``C``) and in the part frame (``P_ref``). Four points of
+    a rigid frame fix its position and orientation, so the identification sees the full pose:
+    one target identifies all 30 parameters where one sphere leaves the base rotation about it
+    free. Row ``4 i + k`` is point ``k`` of reading ``i``; its ``sphere`` is ``4 target + k``
+    (the part-frame reading of a target point is shared by every view of that target).
+
+    Parameters
+    ----------
+    Q : array_like, shape (m, 6)
+        Joint angles, rad.
+    target2sensor : array_like, shape (m, 4, 4)
+        The target's pose in the sensor frame at each robot pose (what the camera reads), mm.
+    target2part : array_like, shape (k, 4, 4)
+        The pose of each target in the part frame (the tracker's reading), mm.
+    target : array_like of int, shape (m,)
+        Which target each reading saw.
+    arm_mm : float
+        Distance of the axis points from the target's origin; about the target's size.
+
+    Raises
+    ------
+    CalibrationError
+        Shapes that disagree, a target index out of range, non-finite values or an
+        ``arm_mm`` that is not positive.
+    """
+    Q = np.asarray(Q, float)
+    t2s = np.asarray(target2sensor, float)
+    t2p = np.asarray(target2part, float)
+    target = np.asarray(target)
+    m = len(Q)
+    if Q.shape != (m, 6) or t2s.shape != (m, 4, 4) or target.shape != (m,):
+        raise CalibrationError(
+            f"pose readings: joint angles {Q.shape}, target poses {t2s.shape} and target "
+            f"indices {target.shape} must be (m, 6), (m, 4, 4) and (m,) for one m"
+        )
+    if t2p.ndim != 3 or t2p.shape[1:] != (4, 4):
+        raise CalibrationError(f"target poses in the part frame have shape {t2p.shape}")
+    if m and (target.min() < 0 or target.max() >= len(t2p) or np.any(target != target // 1)):
+        raise CalibrationError(
+            f"target indices must be integers in 0..{len(t2p) - 1}; found {target.min()} to "
+            f"{target.max()}"
+        )
+    if not (np.isfinite(Q).all() and np.isfinite(t2s).all() and np.isfinite(t2p).all()):
+        raise CalibrationError("pose readings hold non-finite values")
+    if not (math.isfinite(arm_mm) and arm_mm > 0):
+        raise CalibrationError(f"arm_mm = {arm_mm} must be a positive length")
+    target = target.astype(int)
+    local = np.vstack([np.zeros(3), arm_mm * np.eye(3)])  # (4, 3) points of the target frame
+    C = np.einsum("mij,kj->mki", t2s[:, :3, :3], local) + t2s[:, None, :3, 3]
+    P = np.einsum("mij,kj->mki", t2p[target, :3, :3], local) + t2p[target][:, None, :3, 3]
+    return Measurements(
+        np.repeat(Q, 4, axis=0),
+        C.reshape(4 * m, 3),
+        P.reshape(4 * m, 3),
+        (4 * target[:, None] + np.arange(4)).reshape(4 * m),
     )
 
 
@@ -319,7 +428,14 @@ def read_cell(folder) -> MeasuredCell:
         str(folder),
         part2base,
         sensor2flange,
+        _sensor_geometry(table),
     )
+
+
+def _sensor_geometry(table: dict) -> dict | None:
+    keys = ("standoff_mm", "field_mm", "depth_mm")
+    found = {k: float(table["sensor"][k]) for k in keys if table["sensor"].get(k) is not None}
+    return found or None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -371,7 +487,7 @@ def write_cell(
     if noise is None:
         text.append(
             "# no [noise] table (sensor_mm, repeatability_mm, tracker_mm): the covariance of the\n"
-            "# parameters is then scaled by the residual chi-square"
+            "# parameters then comes from the residuals"
         )
     else:
         text.append("[noise]  # standard deviations per axis, mm")
@@ -408,21 +524,34 @@ class CellFit:
     Attributes
     ----------
     fit : Identification
-        The final fit (outliers excluded); ``fit.params`` the 30 parameters.
-    covariance : (30, 30) mm and rad.
+        The final fit (outliers excluded); ``fit.params`` the 30 parameters, those not in
+        ``free`` at their start value.
+    covariance : (30, 30) mm and rad; zero in the rows and columns of the fixed parameters: the
+        covariance of the identified ones only (the subspace the poses fix).
     covariance_basis : str
-        ``"declared noise"`` (maximum likelihood, covariance from the declared standard
-        deviations) or ``"residual chi-square"`` (least squares, ``s^2 (J^T J)^-1`` with ``s^2``
-        the residual sum of squares over its degrees of freedom).
+        :data:`DECLARED` (maximum likelihood, covariance from the declared standard deviations)
+        or :data:`RESIDUAL` (least squares; the error of each view and the error shared by the
+        views of one sphere estimated from the residuals, :func:`shared_error_covariance`).
     sigma_mm : float
-        Per-axis residual scale used by the rejection rule.
+        Per-axis residual scale used by the rejection rule and the noise-aware rank.
     residuals : pandas.DataFrame
         One row per calibration measurement: ``pose``, ``sphere``, ``ex, ey, ez, error_mm`` at the
         final parameters, ``normalised`` (``|e|^2 / sigma^2``) and ``outlier``.
     condition_number : float
-        Of the scaled identification Jacobian of the kept measurements.
+        Of the scaled identification Jacobian of the kept measurements in the free parameters.
     rounds : int
         Fits run (1 without outliers).
+    free : (30,) bool
+        The parameters identified; the others are fixed at the start (by you or because the
+        poses do not identify them).
+    identifiability : pandas.DataFrame
+        Per parameter: ``name``, ``status`` (:data:`IDENTIFIED`, :data:`FIXED_BY_YOU` or
+        :data:`NOT_IDENTIFIABLE`) and ``combination``: for a parameter fixed as not identifiable,
+        the directions the poses do not fix in which it has a share (unit vectors in scaled
+        units, :attr:`~calstudy.papers.selfcal.design.BaseParameters.unidentified`).
+    notes : list of str
+        What the fit fixed and why, and any rank warning (also issued as a
+        :class:`~calstudy.core.errors.CalibrationWarning`).
     """
 
     fit: Identification
@@ -432,6 +561,9 @@ class CellFit:
     residuals: pd.DataFrame
     condition_number: float
     rounds: int
+    free: np.ndarray
+    identifiability: pd.DataFrame
+    notes: list[str]
 
     @property
     def params(self) -> np.ndarray:
@@ -440,6 +572,11 @@ class CellFit:
     @property
     def outliers(self) -> np.ndarray:
         return self.residuals["outlier"].to_numpy(bool)
+
+    @property
+    def n_identified(self) -> int:
+        """Parameters identified (the rank of the kept poses at the fit)."""
+        return int(self.free.sum())
 
 
 def subset(meas: Measurements, keep) -> Measurements:
@@ -461,11 +598,111 @@ def subset(meas: Measurements, keep) -> Measurements:
     )
 
 
+def _declared_sigma(noise: dict) -> float:
+    s2 = noise["sensor_mm"] ** 2 + noise["repeatability_mm"] ** 2 + noise["tracker_mm"] ** 2
+    return max(math.sqrt(s2), MIN_SIGMA_MM)
+
+
 def _scale(err2: np.ndarray, noise: dict | None) -> float:
     if noise is not None:
-        s2 = noise["sensor_mm"] ** 2 + noise["repeatability_mm"] ** 2 + noise["tracker_mm"] ** 2
-        return max(math.sqrt(s2), MIN_SIGMA_MM)
+        return _declared_sigma(noise)
     return max(math.sqrt(float(np.median(err2)) / CHI2_3_MEDIAN), MIN_SIGMA_MM)
+
+
+def fixed_mask(fixed) -> np.ndarray:
+    """Boolean mask (30,) of the parameters named in ``fixed`` (names of :data:`PARAM_NAMES`).
+
+    Raises
+    ------
+    CalibrationError
+        A name that is not one of the 30 parameters.
+    """
+    mask = np.zeros(N_PARAMS, bool)
+    for name in [] if fixed is None else list(fixed):
+        if name not in PARAM_NAMES:
+            raise CalibrationError(
+                f"fixed parameter {name!r} is not one of the model's: {', '.join(PARAM_NAMES)}"
+            )
+        mask[PARAM_NAMES.index(name)] = True
+    return mask
+
+
+def _identifiable(meas, params, candidates, sigma, model) -> tuple[np.ndarray, BaseParameters]:
+    """Parameters the poses identify (30,) among the ``candidates`` (30,) and the base
+    parameters of the candidate columns (noise-aware rank with ``sigma``)."""
+    _, jac = model.points_and_jacobian(params, meas.Q, meas.C)
+    cols = np.flatnonzero(candidates)
+    names = [PARAM_NAMES[i] for i in cols]
+    base = base_parameters(jac[:, cols], names, IS_LENGTH[cols], sigma_mm=sigma)
+    pivots = base.table["pivot"].to_numpy(int)
+    free = np.zeros(N_PARAMS, bool)
+    free[cols[pivots <= base.rank]] = True
+    return free, base
+
+
+def _identifiability_table(free, user_fixed, base: BaseParameters) -> pd.DataFrame:
+    status = np.where(user_fixed, FIXED_BY_YOU, np.where(free, IDENTIFIED, NOT_IDENTIFIABLE))
+    combination = [
+        "; ".join(c for c in base.unidentified if re.search(rf"\b{n}\b", c))
+        if st == NOT_IDENTIFIABLE
+        else ""
+        for n, st in zip(PARAM_NAMES, status, strict=True)
+    ]
+    return pd.DataFrame({"name": PARAM_NAMES, "status": status, "combination": combination})
+
+
+def _not_identified_note(table: pd.DataFrame, base: BaseParameters, where: str) -> str:
+    fixed = table.loc[table["status"] == NOT_IDENTIFIABLE, "name"]
+    return (
+        f"{where}: the poses identify {int((table['status'] == IDENTIFIED).sum())} parameters; "
+        f"{', '.join(fixed)} fixed at the nominal value as not identifiable; the directions the "
+        f"poses do not fix (scaled units, angles as mm at 1 m): {' | '.join(base.unidentified)}"
+    )
+
+
+#: link twists of the model's DH links 3 to 5 (axes 3-4, 4-5, 5-6) by index in PARAM_NAMES
+_DH_TWISTS = {(3, 4): PARAM_NAMES.index("alpha3"), (4, 5): PARAM_NAMES.index("alpha4")}
+#: sine of a nominal twist below which two axes count as parallel
+PARALLEL_SIN = 1e-6
+
+
+def parallel_axes_note(start) -> str:
+    """A sentence on nominally parallel axes beyond the pair 2-3 (which Hayati's ``beta2``
+    models), or "" if there are none: the DH link between them cannot separate the offsets
+    along the two axes, so one of them is fixed (:func:`identify_cell` does so)."""
+    pairs = [
+        f"{i} and {j}"
+        for (i, j), k in _DH_TWISTS.items()
+        if abs(math.sin(float(np.asarray(start)[k]))) < PARALLEL_SIN
+    ]
+    if not pairs:
+        return ""
+    return (
+        f"axes {' and '.join(pairs)} of the nominal robot are parallel: the model's DH link "
+        "there (Hayati's beta is only on link 2) fixes only the sum of the offsets d along the "
+        "parallel axes and not their tilt about y, so one offset is held at its nominal value"
+    )
+
+
+def _check_rank(n_user_free: int, free: np.ndarray, table: pd.DataFrame, where: str) -> None:
+    lost = n_user_free - int(free.sum())
+    if lost > N_PARAMS - MIN_IDENTIFIED:
+        raise CalibrationError(
+            f"{where}: the poses identify {int(free.sum())} of the {n_user_free} parameters "
+            f"({lost} directions lost, more than the {N_PARAMS - MIN_IDENTIFIED} that a sensor "
+            "seen as one point or one sphere costs): poses repeated, one joint moving or "
+            "spheres too few? Not identifiable: "
+            + ", ".join(table.loc[table["status"] == NOT_IDENTIFIABLE, "name"])
+        )
+
+
+def _outlier_round(norm: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The next kept set: the worst kept measurement set aside if beyond the threshold."""
+    new = keep.copy()
+    worst = int(np.argmax(np.where(keep, norm, -np.inf)))
+    if norm[worst] > CHI2_3_999:
+        new[worst] = False
+    return new
 
 
 def identify_cell(
@@ -473,51 +710,268 @@ def identify_cell(
     start,
     noise: dict | None = None,
     reject: bool = True,
-    max_rounds: int = 5,
+    max_rounds: int | None = None,
     pose_ids=None,
     model: GlobalModel | None = None,
+    fixed=None,
+    check_columns: bool = True,
 ) -> CellFit:
-    """Identify the 30 parameters from measured data, flag outliers and refit without them.
+    """Identify the parameters from measured data, flag outliers and refit without them.
 
-    Rule: after each fit, a measurement whose ``|e|^2 / sigma^2`` exceeds :data:`CHI2_3_999`
-    (chi-square, 3 degrees of freedom, 99.9 %) is an outlier, ``sigma`` the declared per-axis
-    noise or the robust scale of the kept residuals; the fit is repeated on the rest (warm start)
-    until the set stops changing or ``max_rounds`` fits ran. With ``noise`` the fit is maximum
-    likelihood and the covariance follows from the declared noise; without, least squares and
-    the covariance scaled by the residual chi-square.
+    Identifiable parameters: at the start (nominal parameters, all rows) and again at the fit
+    (kept rows, with the residual scale), the column-pivoted QR of the scaled Jacobian with a
+    noise-aware rank (:func:`calstudy.papers.selfcal.design.base_parameters`: a direction fixed
+    with a standard deviation above :data:`~calstudy.papers.selfcal.design.STD_LIMIT_MM` is not
+    identified; at the start without declared noise :data:`START_SIGMA_MM` is assumed) gives the
+    parameters
+    the poses identify; the others stay at their nominal value, named with the combinations
+    they enter, and a :class:`~calstudy.core.errors.CalibrationWarning` says so (two parallel
+    axes beyond the pair 2-3, a one-point sensor, one sphere). The covariance is that of the
+    identified parameters only.
+
+    Outliers: after each fit the kept measurement with the largest ``|e|^2 / sigma^2`` is set
+    aside if that exceeds :data:`CHI2_3_999` (chi-square, 3 degrees of freedom, 99.9 %),
+    ``sigma`` the declared per-axis noise or the robust scale of the kept residuals, and the fit
+    repeated (warm start), one measurement at a time, so that a few gross errors that spoil the
+    first fit do not push good measurements over the threshold; at the end a measurement set
+    aside whose residual is within the threshold at the final fit is taken back (one refit).
+    With ``noise`` the fit is maximum likelihood and the covariance follows from the declared
+    noise; without, least squares and the covariance from the residuals, with the tracker error
+    shared by the views of one sphere (:func:`shared_error_covariance`).
+
+    Parameters
+    ----------
+    meas : Measurements
+        The calibration rows.
+    start : array_like, shape (30,)
+        Nominal parameters (mm, rad): the LM start and the value of every fixed parameter.
+    noise : dict, optional
+        Declared standard deviations per axis (``sensor_mm``, ``repeatability_mm``,
+        ``tracker_mm``).
+    reject : bool
+        Apply the rejection rule.
+    max_rounds : int, optional
+        Fits allowed for the rejection; default ``len(meas) // 4 + 2``.
+    pose_ids : array_like, optional
+        Ids of the rows for the residual table (default 1..m).
+    fixed : sequence of str, optional
+        Parameters to hold at ``start`` (names of :data:`PARAM_NAMES`), e.g. lengths you know
+        from a measurement of the arm.
+    check_columns : bool
+        Refuse sensor-frame columns that fit much better swapped or negated
+        (:func:`check_sensor_columns`).
+
+    Raises
+    ------
+    CalibrationError
+        An unknown fixed parameter; columns that look swapped or negated; poses that identify
+        fewer than :data:`MIN_IDENTIFIED` directions beyond those you fixed (a pose repeated,
+        one joint moving); more than :data:`MAX_OUTLIER_SHARE` of the rows beyond the rejection
+        threshold (declared noise too small, or a model that does not fit); LM not converged.
     """
     model = default_model() if model is None else model
+    start = np.asarray(start, float)
+    user_fixed = fixed_mask(fixed)
+    n_user_free = int((~user_fixed).sum())
     weighted = noise is not None and meas.cov is not None
+    declared = _declared_sigma(noise) if noise is not None else None
+    if check_columns:
+        check_sensor_columns(meas, start, model)
+    notes: list[str] = []
+    start_sigma = START_SIGMA_MM if declared is None else declared
+    free, base = _identifiable(meas, start, ~user_fixed, start_sigma, model)
+    table = _identifiability_table(free, user_fixed, base)
+    _check_rank(n_user_free, free, table, "at the start")
+    if free.sum() < n_user_free:
+        notes.append(_not_identified_note(table, base, "at the start"))
+    if parallel_axes_note(start):
+        notes.append(parallel_axes_note(start))
+    rounds_allowed = len(meas) // 4 + 2 if max_rounds is None else int(max_rounds)
     keep = np.ones(len(meas), bool)
-    params = np.asarray(start, float)
+    params = start.copy()
     rounds = 0
     while True:
         rounds += 1
-        fit = identify(subset(meas, keep), params, weighted=weighted, model=model)
+        fit = identify(subset(meas, keep), params, weighted=weighted, free=free, model=model)
         params = fit.params
         e = model.points(params, meas.Q, meas.C) - meas.P_ref
         err2 = np.einsum("ij,ij->i", e, e)
         sigma = _scale(err2[keep], noise)
-        new = err2 / sigma**2 <= CHI2_3_999 if reject else keep
-        if np.array_equal(new, keep) or rounds >= max_rounds or 3 * new.sum() < N_PARAMS:
+        norm = err2 / sigma**2
+        if not reject:
+            break
+        new = _outlier_round(norm, keep)
+        if (~new).sum() > MAX_OUTLIER_SHARE * len(meas):
+            raise CalibrationError(
+                f"{int((norm > CHI2_3_999).sum())} of {len(meas)} calibration rows lie beyond "
+                f"the rejection threshold ({int((~keep).sum())} set aside already, median "
+                f"|e|^2 / sigma^2 {float(np.median(norm)):.3g} with sigma {sigma:.4g} mm): "
+                "the declared noise is too small, or the model does not fit these data "
+                "(columns, units, robot file)"
+            )
+        if np.array_equal(new, keep):
+            back = ~keep & (norm <= CHI2_3_999)
+            if not back.any():
+                break
+            new = keep | back
+        if rounds >= rounds_allowed:
+            notes.append(
+                f"outlier rule stopped after {rounds} fits (max_rounds) with "
+                f"{int((norm[keep] > CHI2_3_999).sum())} kept rows beyond the threshold"
+            )
             break
         keep = new
+    kept = subset(meas, keep)
+    at_fit, _ = _identifiable(kept, params, free, sigma, model)
+    if (free & ~at_fit).any():
+        lost = free & ~at_fit
+        free = at_fit
+        params[lost] = start[lost]
+        fit = identify(kept, params, weighted=weighted, free=free, model=model)
+        params = fit.params
+        rounds += 1
+        e = model.points(params, meas.Q, meas.C) - meas.P_ref
+        err2 = np.einsum("ij,ij->i", e, e)
+        sigma = _scale(err2[keep], noise)
+        _, base = _identifiable(kept, params, ~user_fixed, sigma, model)
+        table = _identifiability_table(free, user_fixed, base)
+        _check_rank(n_user_free, free, table, "at the fit")
+        notes.append(_not_identified_note(table, base, "at the fit (noise-aware rank)"))
+    if notes:
+        warnings.warn("; ".join(notes), CalibrationWarning, stacklevel=2)
     ids = np.arange(1, len(meas) + 1) if pose_ids is None else np.asarray(pose_ids)
-    table = pd.DataFrame({"pose": ids, "sphere": meas.sphere})
-    table[["ex_mm", "ey_mm", "ez_mm"]] = e
-    table["error_mm"] = np.sqrt(err2)
-    table["normalised"] = err2 / sigma**2
-    table["outlier"] = ~keep
-    _, jac = model.points_and_jacobian(params, meas.Q[keep], meas.C[keep])
-    s = np.linalg.svd(jac * np.where(IS_LENGTH, 1.0, 1e-3), compute_uv=False)
-    basis = "declared noise" if weighted else "residual chi-square"
-    return CellFit(fit, fit.estimate.covariance, basis, sigma, table, float(s[0] / s[-1]), rounds)
+    residuals = pd.DataFrame({"pose": ids, "sphere": meas.sphere})
+    residuals[["ex_mm", "ey_mm", "ez_mm"]] = e
+    residuals["error_mm"] = np.sqrt(err2)
+    residuals["normalised"] = err2 / sigma**2
+    residuals["outlier"] = ~keep
+    _, jac = model.points_and_jacobian(params, kept.Q, kept.C)
+    s = np.linalg.svd(scaled_jacobian(jac)[:, free], compute_uv=False)
+    cov = np.zeros((N_PARAMS, N_PARAMS))
+    if weighted:
+        cov[np.ix_(free, free)] = fit.estimate.covariance
+        basis = DECLARED
+    else:
+        r = (model.points(params, kept.Q, kept.C) - kept.P_ref).ravel()
+        cov[np.ix_(free, free)] = shared_error_covariance(jac[:, free], r, kept.sphere)
+        basis = RESIDUAL
+    return CellFit(
+        fit, cov, basis, sigma, residuals, float(s[0] / s[-1]), rounds, free, table, notes
+    )
+
+
+def shared_error_covariance(jac: np.ndarray, residuals: np.ndarray, sphere) -> np.ndarray:
+    """Covariance of least-squares parameters when each view has its own error and all views of
+    a sphere share the error of its one tracker reading, both variances estimated from the
+    residuals.
+
+    The residual covariance is modelled as ``s_e^2 I + s_t^2 S`` (``S`` joins the three axes of
+    two views of the same sphere); with ``M = I - J (J^T J)^-1 J^T`` the expected values of
+    ``r^T r`` and ``r^T S r`` are linear in the two variances (``tr(M V)`` and ``tr(M S M V)``),
+    which the observed values solve (method of moments; ``s_t^2`` clipped at 0). The
+    covariance is then the sandwich ``(J^T J)^-1 J^T V J (J^T J)^-1``: unlike ``s^2 (J^T J)^-1``
+    it does not treat the views of one sphere as independent.
+
+    Parameters
+    ----------
+    jac : (3 m, p) Jacobian of the residuals in the identified parameters (mm per mm or rad).
+    residuals : (3 m,) residuals at the solution, mm.
+    sphere : (m,) sphere of each view.
+
+    Returns
+    -------
+    (p, p) covariance, mm and rad.
+    """
+    jac = np.asarray(jac, float)
+    r = np.asarray(residuals, float)
+    sphere = np.asarray(sphere)
+    n, p = jac.shape
+    same = np.kron((sphere[:, None] == sphere[None, :]).astype(float), np.eye(3))
+    q, _ = np.linalg.qr(jac)
+    resid_maker = np.eye(n) - q @ q.T
+    ms = resid_maker @ same
+    msm = ms @ resid_maker
+    a = np.array([[np.trace(resid_maker), np.trace(ms)], [np.trace(msm), np.sum(msm * same)]])
+    b = np.array([r @ r, r @ same @ r])
+    var_e, var_t = np.linalg.solve(a, b)
+    if var_t <= 0 or var_e <= 0:
+        var_t, var_e = 0.0, float(r @ r) / (n - p)
+    v = var_e * np.eye(n) + var_t * same
+    info_inv = np.linalg.inv(jac.T @ jac)
+    return info_inv @ (jac.T @ v @ jac) @ info_inv
+
+
+def _shifted_rms(a: np.ndarray, b: np.ndarray) -> float:
+    """RMS distance of the points ``b`` (m, 3) to ``a`` after the best shift."""
+    d = a - b
+    return float(np.sqrt(np.mean(np.sum((d - d.mean(axis=0)) ** 2, axis=1))))
+
+
+def _column_variant(perm, signs) -> str:
+    axes = ("cx", "cy", "cz")
+    return ", ".join(
+        f"{'-' if sg < 0 else ''}{axes[p]} as {axes[i]}"
+        for i, (p, sg) in enumerate(zip(perm, signs, strict=True))
+        if p != i or sg < 0
+    )
+
+
+def check_sensor_columns(meas: Measurements, start, model: GlobalModel | None = None) -> None:
+    """Refuse sensor-frame columns that the nominal cell explains much better swapped or negated.
+
+    The centres the nominal model predicts in the sensor frame, ``inv(sensor2part(q)) P_ref``,
+    are compared with the measured ``cx, cy, cz`` and with each of their 47 other orders and
+    signs (RMS after the best shift: the nominal mounting is known to degrees, not to a quarter
+    turn). If another variant comes closer than the columns as written, both are identified
+    and their median residuals compared: the variant's below a third of the written one, the
+    columns are refused with the likely cause.
+
+    Raises
+    ------
+    CalibrationError
+        Naming the variant (e.g. ``cy as cx, cx as cy``) and both median residuals (mm).
+    """
+    model = default_model() if model is None else model
+    poses = model.sensor2part(start, meas.Q)
+    predicted = np.einsum("mji,mj->mi", poses[:, :3, :3], meas.P_ref - poses[:, :3, 3])
+    best = None
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            if perm == (0, 1, 2) and signs == (1.0, 1.0, 1.0):
+                continue
+            rms = _shifted_rms(predicted, meas.C[:, perm] * signs)
+            if best is None or rms < best[0]:
+                best = (rms, perm, signs)
+    written = _shifted_rms(predicted, meas.C)
+    if best is None or best[0] >= written:
+        return
+    _, perm, signs = best
+    fits = {}
+    for key, C in (("written", meas.C), ("variant", meas.C[:, perm] * np.array(signs))):
+        try:
+            p = identify(replace(meas, C=C, cov=None), start, model=model).params
+        except CalibrationError:
+            fits[key] = math.inf
+            continue
+        err = np.linalg.norm(model.points(p, meas.Q, C) - meas.P_ref, axis=1)
+        fits[key] = float(np.median(err))
+    if fits["variant"] < fits["written"] / 3.0:
+        raise CalibrationError(
+            f"the sensor-frame columns cx, cy, cz look swapped or negated: read with "
+            f"{_column_variant(perm, signs)} the identification leaves a median residual of "
+            f"{fits['variant']:.4g} mm, as written {fits['written']:.4g} mm; check the order of "
+            "the columns and the direction of the sensor's axes (a left-handed sensor frame?), "
+            "or the nominal sensor mounting in cell.toml (a quarter or half turn off?)"
+        )
 
 
 def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
-    """Per parameter: nominal, identified, change and standard deviation (mm or deg)."""
+    """Per parameter: nominal, identified, change and standard deviation (mm or deg), with the
+    ``status`` of :attr:`CellFit.identifiability` and the ``combination`` a parameter fixed as not
+    identifiable enters; the standard deviation of a fixed parameter is NaN (not zero)."""
     p = cell_fit.params
     std = np.sqrt(np.clip(np.diag(cell_fit.covariance), 0.0, None))
+    std = np.where(cell_fit.free, std, np.nan)
     conv = np.where(IS_LENGTH, 1.0, 180.0 / math.pi)
     return pd.DataFrame(
         {
@@ -527,6 +981,8 @@ def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
             "identified": p * conv,
             "change": angle_wrap(p - np.asarray(start)) * conv,
             "std": std * conv,
+            "status": cell_fit.identifiability["status"].to_numpy(),
+            "combination": cell_fit.identifiability["combination"].to_numpy(),
         }
     )
 

@@ -39,6 +39,16 @@ class Pose(Schema):
     zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
 
 
+class SensorPose(Pose):
+    """The ``[sensor]`` table of a cell's cell.toml: the mounting and, optionally, the sensor's
+    working distance and the half-widths of its field across and along the optical axis (mm),
+    which the pose planning uses (the paper's scanner when absent)."""
+
+    standoff_mm: PositiveFinite | None = None
+    field_mm: PositiveFinite | None = None
+    depth_mm: PositiveFinite | None = None
+
+
 class Repeatability(Documented):
     """The ``[repeatability]`` table of data/selfcal/scenario.toml."""
 
@@ -173,8 +183,9 @@ class CellFile(Documented):
     """``cell.toml`` of a measurement folder (:mod:`calstudy.papers.selfcal.measured`)."""
 
     robot: RobotName
+    flange: RobotName | None = None
     base: Pose
-    sensor: Pose
+    sensor: SensorPose
     noise: Noise | None = None
 
 
