@@ -1,0 +1,104 @@
+"""Scenarios that cannot exist are refused before any simulation, in well under a second, with a
+CalibrationError naming the input and the number."""
+
+from __future__ import annotations
+
+import shutil
+import time
+
+import pytest
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import data_path
+from calstudy.papers.binocular.scenario import load_scenario as load_binocular
+from calstudy.papers.dualarm.scenario import load_scenario as load_dualarm
+from calstudy.papers.hybrid.scenario import load_production, load_station
+from calstudy.papers.selfcal.scenario import load_scenario as load_selfcal
+
+
+def _folder(tmp_path, paper, name, old, new):
+    for f in data_path(paper).glob("*.toml"):
+        shutil.copy(f, tmp_path / f.name)
+    path = tmp_path / name
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+CASES = [
+    (
+        "selfcal scanner inside the sphere",
+        "selfcal", "scenario.toml", "standoff_mm = 300.0", "standoff_mm = 10.0",
+        lambda folder, path: load_selfcal(path),
+        r"scanner\.standoff_mm = 10\.0: .*within the sphere's radius",
+    ),
+    (
+        "dualarm stand 5 m below the base",
+        "dualarm", "scenario.toml", "stand_height_mm = 100.0", "stand_height_mm = -5000.0",
+        lambda folder, path: load_dualarm(path),
+        r"global_test\.stand_height_mm = -5000\.0: sphere A .* lies \d+ mm from the base of arm",
+    ),
+    (
+        "dualarm baseline 5000 mm at 500 mm",
+        "dualarm", "scenario.toml", "baseline_mm = 200.0", "baseline_mm = 5000.0",
+        lambda folder, path: load_dualarm(path),
+        r"stereo\.baseline_mm = 5000\.0: .*converge at 84\.3 deg",
+    ),
+    (
+        "dualarm point noise 1e6 mm",
+        "dualarm", "scenario.toml", "point_sigma_mm = 0.03", "point_sigma_mm = 1e6",
+        lambda folder, path: load_dualarm(path),
+        r"sensor\.point_sigma_mm = 1000000\.0: must be >= 0 and <= 1\.0",
+    ),
+    (
+        "hybrid stationary sensor above the panel",
+        "hybrid", "station.toml", "[1400.0, -250.0, -250.0]", "[1400.0, -250.0, 250.0]",
+        lambda folder, path: load_station(path),
+        r"stationary\.positions_mm #1 z = 250\.0: the sensor sits at or above the panel",
+    ),
+    (
+        "hybrid sensor looking down",
+        "hybrid", "station.toml", "[5.0, 0.0],", "[175.0, 0.0],",
+        lambda folder, path: load_station(path),
+        r"stationary\.tilts_deg #2 = \[175\.0, 0\.0\]: the sensor looks sideways or down",
+    ),
+    (
+        "hybrid 1e9 compensation products",
+        "hybrid", "production.toml", "n_compensation_max = 20", "n_compensation_max = 1000000000",
+        lambda folder, path: load_production(path),
+        r"protocol\.n_compensation_max = 1000000000: must be >= 3 and <= 1000",
+    ),
+    (
+        "binocular station 8.5 m from the calibrator",
+        "binocular", "station.toml", "observation_distance_mm = 850.0",
+        "observation_distance_mm = 8500.0",
+        lambda folder, path: load_binocular(folder),
+        r"poses\.observation_distance_mm = 8500\.0: every view of the calibrator .* beyond its "
+        r"reach",
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    "paper, name, old, new, load, message", [c[1:] for c in CASES], ids=[c[0] for c in CASES]
+)
+def test_impossible_scenario_refused_fast(tmp_path, paper, name, old, new, load, message):
+    path = _folder(tmp_path, paper, name, old, new)
+    start = time.perf_counter()
+    with pytest.raises(CalibrationError, match=message):
+        load(tmp_path, path)
+    assert time.perf_counter() - start < 1.0
+
+
+@pytest.mark.parametrize(
+    "paper, load",
+    [
+        ("selfcal", lambda: load_selfcal()),
+        ("dualarm", lambda: load_dualarm()),
+        ("hybrid", lambda: (load_station(), load_production())),
+        ("binocular", lambda: load_binocular()),
+    ],
+)
+def test_the_papers_scenarios_are_plausible(paper, load):
+    load()
