@@ -261,8 +261,13 @@ class SensorFile(Ledgered):
     calibration_uncertainty: CalibrationUncertainty
     detection: Detection
 
-    @model_validator(mode="after")
-    def _focus_beyond_image_distance(self) -> SensorFile:
+    def plausibility(self) -> None:
+        """The focus lies beyond the lens-to-sensor distance; both principal points lie in
+        the image."""
+        self._focus_beyond_image_distance()
+        self._centres_in_image()
+
+    def _focus_beyond_image_distance(self) -> None:
         image_distance = self.left.fx * self.image.pixel_pitch_mm
         if self.optics.focus_distance_mm <= image_distance:
             raise ValueError(
@@ -270,17 +275,14 @@ class SensorFile(Ledgered):
                 f"lens-to-sensor distance {image_distance:.4g} mm (left.fx x "
                 "image.pixel_pitch_mm): a measuring camera images at a magnification below 1"
             )
-        return self
 
-    @model_validator(mode="after")
-    def _centres_in_image(self) -> SensorFile:
+    def _centres_in_image(self) -> None:
         for side in ("left", "right"):
             cam = getattr(self, side)
             try:
                 check_principal_point(cam.cx, cam.cy, self.image.width, self.image.height)
             except ValueError as exc:
                 raise ValueError(f"{side}: {exc}") from None
-        return self
 
 
 # ----------------------------------------------------------------------------------------------
