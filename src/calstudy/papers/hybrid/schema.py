@@ -111,11 +111,17 @@ class Sensor(Inputs):
     standoff_mm: PositiveFinite
     #: the stripe must fall on the sphere: |y| = fraction * R with 0 <= fraction < 1
     stripe_offset_fraction: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
+    #: the flexible sensor's stripe (calstudy.models.sensors.LineLaserSensor)
+    sigma_point_mm: _noise("sensor_mm")
+    #: a circle fit needs at least 3 points
+    n_points: Annotated[int, Field(ge=3, le=MAX_FEATURES * 100)]
+    arc_half_angle_deg: Annotated[float, Field(gt=0, lt=90, allow_inf_nan=False)]
 
 
 class SphereTable(Inputs):
     """The ``[sphere]`` table of data/hybrid/station.toml."""
     centre_mm: Vec3
+    radius_mm: PositiveFinite
 
 
 class Moves(Inputs):
@@ -223,8 +229,15 @@ class StationFile(Ledgered):
     workpiece: Workpiece
 
     def plausibility(self) -> None:
-        """The stationary sensors sit below the panel and look up at it (section 4.1: they are
-        on the fixture's baseboard under the underbody); the datums lie on the panel."""
+        """The flexible sensor stands outside the sphere; the stationary sensors sit below the
+        panel and look up at it (section 4.1: they are on the fixture's baseboard under the
+        underbody); the datums lie on the panel."""
+        if self.sensor.standoff_mm <= self.sphere.radius_mm:
+            raise ValueError(
+                f"sensor.standoff_mm = {self.sensor.standoff_mm}: not beyond the sphere's radius "
+                f"sphere.radius_mm = {self.sphere.radius_mm}; the sensor would sit inside the "
+                "sphere it measures"
+            )
         panel_z = self.workpiece.nominal_origin_mm[2]
         for k, (pos, tilt) in enumerate(
             zip(self.stationary.positions_mm, self.stationary.tilts_deg, strict=True)
