@@ -274,9 +274,10 @@ _PARSED: dict[tuple[str, int, int], dict] = {}
 
 
 def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
-    """The TOML table of ``path`` (the ``what``, for messages), unchanged, after validating it
-    against ``model``: for loaders that go on reading the dict (the numbers stay the bytes of
-    the file)."""
+    """The TOML table of ``path`` (the ``what``, for messages) after validating it against
+    ``model``: for loaders that go on reading the dict (the numbers stay the bytes of the file).
+    The ``provenance`` entries of the assumption ledger (:mod:`calstudy.core.ledger`) are
+    dropped from it: they describe the inputs and are none themselves."""
     table = read_toml(path, what)  # a copy of the parsed file, kept by its file_key
     key = (*file_key(Path(path)), model)
     if key not in _VALIDATED:
@@ -284,7 +285,18 @@ def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
         if len(_VALIDATED) >= 64:
             _VALIDATED.clear()
         _VALIDATED.add(key)
+    return without_provenance(table)
+
+
+def without_provenance(table: Any) -> Any:
+    """``table`` with the ``provenance`` entry of every (nested) table removed."""
+    if isinstance(table, dict):
+        return {k: without_provenance(v) for k, v in table.items() if k != PROVENANCE}
     return table
+
+
+#: the key of a table's ledger entries (:mod:`calstudy.core.ledger`)
+PROVENANCE = "provenance"
 
 
 #: (resolved path, modification time, size, model) of the files that passed :func:`check_toml`:
@@ -467,4 +479,5 @@ __all__ = [
     "rotation_problem",
     "validate",
     "validate_rows",
+    "without_provenance",
 ]
