@@ -9,6 +9,7 @@ byte-deterministic.
 from __future__ import annotations
 
 import argparse
+import html
 import sys
 from collections import Counter
 from collections.abc import Sequence
@@ -42,7 +43,8 @@ TITLES = {
     "dualarm": "Dual-arm hand-eye scanning",
 }
 
-HEADER = "| input | value | provenance | range | source |"
+#: the columns of a ledger table and their shares of the page's width (%)
+COLUMNS = (("input", 23), ("value", 11), ("provenance", 13), ("range", 14), ("source", 39))
 
 
 def ledger_tables() -> dict[str, list[dict[str, str]]]:
@@ -66,7 +68,25 @@ def ledger_tables() -> dict[str, list[dict[str, str]]]:
 
 
 def _cell(text: str) -> str:
-    return " ".join(str(text).split()).replace("|", "\\|")
+    return html.escape(" ".join(str(text).split()))
+
+
+def _table(paper: str, rows: list[dict[str, str]]) -> list[str]:
+    """The HTML table of one paper's ledger (class ``ledger``: fixed column widths, long
+    names and values wrap within the column; book/_static/calstudy.css)."""
+    several = len(SCENARIO_FILES[paper]) > 1
+    out = ['<table class="ledger">', "<colgroup>"]
+    out += [f'<col style="width: {width}%">' for _, width in COLUMNS]
+    out += ["</colgroup>", "<thead><tr>"]
+    out += [f"<th>{name}</th>" for name, _ in COLUMNS]
+    out += ["</tr></thead>", "<tbody>"]
+    for r in rows:
+        name = f"{r['file']}: {r['input']}" if several else r["input"]
+        cells = (f"<code>{_cell(name)}</code>", _cell(r["value"]), r["kind"], _cell(r["range"]),
+                 _cell(r["source"]))
+        out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    out += ["</tbody>", "</table>"]
+    return out
 
 
 def render_ledger_page() -> str:
@@ -95,16 +115,9 @@ def render_ledger_page() -> str:
             + ", ".join(f"`data/{paper}/{name}`" for name, _ in SCENARIO_FILES[paper])
             + ".",
             "",
-            HEADER,
-            "| --- | --- | --- | --- | --- |",
+            *_table(paper, rows),
+            "",
         ]
-        for r in rows:
-            name = f"{r['file']}: {r['input']}" if len(SCENARIO_FILES[paper]) > 1 else r["input"]
-            lines.append(
-                f"| `{_cell(name)}` | {_cell(r['value'])} | {r['kind']} | {_cell(r['range'])} "
-                f"| {_cell(r['source'])} |"
-            )
-        lines.append("")
     return "\n".join(lines)
 
 
