@@ -3,6 +3,7 @@ CalibrationError naming the input and the number."""
 
 from __future__ import annotations
 
+import re
 import shutil
 import time
 
@@ -88,6 +89,43 @@ def test_impossible_scenario_refused_fast(tmp_path, paper, name, old, new, load,
     start = time.perf_counter()
     with pytest.raises(CalibrationError, match=message):
         load(tmp_path, path)
+    assert time.perf_counter() - start < 1.0
+
+
+def _user(path, *keys):
+    """Mark ``keys`` of the file ``path`` as the user's own (no ledger range applies)."""
+    text = path.read_text()
+    for key in keys:
+        mine = f'provenance.{key} = {{ kind = "user" }}'
+        text = re.sub(rf"provenance\.{key} = {{.*}}", mine, text)
+    path.write_text(text)
+
+
+def test_selfcal_envelope_out_of_reach(tmp_path):
+    """A user's sphere envelope 3.1-3.9 m in front of the M-710iC/50 (reach about 2 m)."""
+    path = _folder(
+        tmp_path, "selfcal", "scenario.toml", "[1100.0, -900.0, 0.0]", "[3100.0, -900.0, 0.0]"
+    )
+    path.write_text(path.read_text().replace("[1900.0, 900.0, 1200.0]", "[3900.0, 900.0, 1200.0]"))
+    _user(path, "envelope_min_mm", "envelope_max_mm")
+    start = time.perf_counter()
+    with pytest.raises(
+        CalibrationError,
+        match=r"spheres\.envelope_min_mm = \[3100\.0, -900\.0, 0\.0\], envelope_max_mm = "
+        r"\[3900\.0, 900\.0, 1200\.0\]: .* at least \d+ mm beyond its reach",
+    ):
+        load_selfcal(path)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_hybrid_sensor_inside_the_sphere(tmp_path):
+    path = _folder(tmp_path, "hybrid", "station.toml", "standoff_mm = 250.0", "standoff_mm = 5.0")
+    _user(path, "standoff_mm")
+    start = time.perf_counter()
+    with pytest.raises(
+        CalibrationError, match=r"sensor\.standoff_mm = 5\.0: not beyond the sphere's radius"
+    ):
+        load_station(path)
     assert time.perf_counter() - start < 1.0
 
 
