@@ -208,7 +208,20 @@ def _off(model: type[BaseModel], name: str) -> bool:
 
 
 def tables(model: BaseModel, prefix: str = "") -> Iterator[tuple[str, Inputs]]:
-    """``(dotted prefix, table)`` of every :class:`Inputs` table in ``model``, itself first."""
+    """Every :class:`Inputs` table of a validated file, the file itself first.
+
+    Parameters
+    ----------
+    model : pydantic.BaseModel
+        A validated scenario file (or table).
+    prefix : str
+        Dotted name of ``model`` in its file, ``""`` for the file.
+
+    Returns
+    -------
+    iterator of (str, Inputs)
+        The dotted prefix of each table's keys (``"sensor."``) and the table.
+    """
     if isinstance(model, Inputs):
         yield prefix, model
     for name in type(model).model_fields:
@@ -256,7 +269,22 @@ def _outside_part(value: Any, part) -> str:
 
 
 def ledger_problems(model: BaseModel, study: bool) -> list[str]:
-    """Every breach of the ledger rules in the validated file ``model`` (module docstring)."""
+    """Every breach of the ledger rules in a validated scenario file (module docstring).
+
+    Parameters
+    ----------
+    model : pydantic.BaseModel
+        The validated file.
+    study : bool
+        True for a file of the study's own ``data/``, where ``user`` is refused.
+
+    Returns
+    -------
+    list of str
+        One message per breach, naming the dotted input and its value: an input without
+        provenance, a provenance entry for no input, ``user`` in a study file, a value outside
+        its range. Empty if the ledger is complete.
+    """
     problems: list[str] = []
     for prefix, table in tables(model):
         names = table.input_names()
@@ -325,8 +353,20 @@ class Ledgered(Documented):
 
 
 def ledger_rows(model: BaseModel) -> list[dict[str, str]]:
-    """One row per input of the validated file ``model``: ``input`` (dotted name), ``value``,
-    ``kind``, ``range`` and ``source`` (the place, derivation, target or reason)."""
+    """The ledger of a validated scenario file, for the book.
+
+    Parameters
+    ----------
+    model : pydantic.BaseModel
+        The validated file (its ledger complete: :func:`ledger_problems` empty).
+
+    Returns
+    -------
+    list of dict
+        One row per input, in the order of the schema: ``input`` (dotted name), ``value`` (a
+        number, a short list, or its size), ``kind``, ``range`` (in words, ``""`` if none) and
+        ``source`` (the place, derivation, target or reason).
+    """
     rows = []
     for prefix, table in tables(model):
         prov = table.provenance or {}
