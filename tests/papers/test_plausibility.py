@@ -129,6 +129,22 @@ def test_hybrid_sensor_inside_the_sphere(tmp_path):
     assert time.perf_counter() - start < 1.0
 
 
+def test_dualarm_camera_inside_the_sphere(tmp_path):
+    path = _folder(
+        tmp_path, "dualarm", "scenario.toml", "working_distance_mm = 500.0",
+        "working_distance_mm = 20.0",
+    )
+    _user(path, "working_distance_mm")
+    start = time.perf_counter()
+    with pytest.raises(
+        CalibrationError,
+        match=r"sensor\.working_distance_mm = 20\.0: not beyond the radius of the spheres it "
+        r"scans \(25\.4035 mm",
+    ):
+        load_dualarm(path)
+    assert time.perf_counter() - start < 1.0
+
+
 @pytest.mark.parametrize(
     "paper, load",
     [

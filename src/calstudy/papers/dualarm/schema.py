@@ -292,10 +292,18 @@ class ScenarioFile(Ledgered, Inputs):
     icp: Icp
 
     def plausibility(self) -> None:
-        """The stereo head converges at an angle within :data:`CONVERGENCE_DEG`; every sphere
+        """The camera stands outside the spheres it scans; the stereo head converges at an angle
+        within :data:`CONVERGENCE_DEG`; every sphere
         placement and marker group lies within reach of the arm that scans it: no farther from
         its base than :data:`ARM_ENVELOPE_MM` plus the camera's offset from the flange plus the
         working distance."""
+        radius = 0.5 * max(self.spheres.diameter_a_mm, self.spheres.diameter_b_mm)
+        if self.sensor.working_distance_mm <= radius:
+            raise ValueError(
+                f"sensor.working_distance_mm = {self.sensor.working_distance_mm}: not beyond the "
+                f"radius of the spheres it scans ({radius:g} mm, spheres.diameter_a_mm / 2); the "
+                "camera would sit inside the sphere"
+            )
         st = self.stereo
         angle = math.degrees(math.atan2(st.baseline_mm, st.convergence_distance_mm))
         lo, hi = CONVERGENCE_DEG
