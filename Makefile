@@ -29,7 +29,7 @@ LIBRARY := $(sort $(shell find src/calstudy -name '*.py' -not -path '*/__pycache
 DATA := $(sort $(shell find data -type f -not -name '.*' -not -path '*/__pycache__/*' 2>/dev/null))
 RESULTS := $(sort $(shell find results -mindepth 2 -type f -not -path '*/.*' 2>/dev/null))
 BOOK_SOURCES := book/_config.yml book/_toc.yml book/references.bib \
-	$(filter-out book/claims.md,$(wildcard book/*.md)) book/claims.md \
+	$(filter-out book/claims.md book/ledger.md,$(wildcard book/*.md)) book/claims.md book/ledger.md \
 	$(wildcard book/_ext/*.py) $(wildcard book/_static/*)
 BOOK_STAMP := book/_build/html/.built
 
@@ -129,6 +129,9 @@ results/claims.csv: $(EXECUTED) src/calstudy/io/results.py | $(STAMP)
 book/claims.md: results/claims.csv data/claims.csv src/calstudy/io/book.py \
 		src/calstudy/io/claims_cells.py | $(STAMP)
 	$(BIN)/python -m calstudy.io.book claims $@
+
+book/ledger.md: $(DATA) src/calstudy/io/ledger.py src/calstudy/core/ledger.py | $(STAMP)
+	$(BIN)/python -m calstudy.io.ledger $@
 
 # Result files found at start-up; a notebook may stop writing one during this run.
 $(RESULTS): ;

@@ -24,11 +24,12 @@ from support import CI_PARAMS, NOTEBOOK_DIR, REPRODUCIBLE_ENV
 
 from calstudy.core.paths import REPO_ROOT, RESULTS_DIR
 from calstudy.io.book import render_claims_page
+from calstudy.io.ledger import render_ledger_page
 
 BOOK_DIR = REPO_ROOT / "book"
 BIN = Path(sys.executable).parent
 # Generated files of book/ that the copy makes afresh (see the Makefile's clean target).
-GENERATED = ("_build", "notebooks", "claims.md", "claims-verdicts.png")
+GENERATED = ("_build", "notebooks", "claims.md", "claims-verdicts.png", "ledger.md")
 
 
 def _env() -> dict[str, str]:
@@ -141,6 +142,7 @@ def build_ci_book(dest: Path, runs: dict[str, CiRun]) -> Path:
     for run in runs.values():
         shutil.copyfile(run.executed, book / "notebooks" / run.executed.name)
     render_claims_page(book / "claims.md", results=RESULTS_DIR / "claims.csv")
+    (book / "ledger.md").write_text(render_ledger_page())
     done = subprocess.run(
         [
             str(BIN / "jupyter-book"), "build", str(book), "--all",

@@ -51,6 +51,7 @@ from pydantic import (
 )
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import DATA_DIR
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -219,13 +220,22 @@ def format_errors(
     return f"{source}: " + "; ".join(parts)
 
 
-def validate(model: type[M], data: Any, source: str | Path, prefix: str = "") -> M:
+def validate(
+    model: type[M], data: Any, source: str | Path, prefix: str = "", study: bool = False
+) -> M:
     """``model`` validated from ``data``; a :class:`CalibrationError` naming ``source``, each bad
-    key (with ``prefix`` in front, e.g. ``"station."``), its value and the allowed range."""
+    key (with ``prefix`` in front, e.g. ``"station."``), its value and the allowed range.
+    ``study`` marks a file of the study's own ``data/`` (its validators see it in the context:
+    :mod:`calstudy.core.ledger` refuses inputs marked ``user`` there)."""
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context={"study": study})
     except ValidationError as exc:
         raise CalibrationError(format_errors(exc, source, prefix, model)) from None
+
+
+def is_study_file(path: str | Path) -> bool:
+    """True if ``path`` is a file of the study's own ``data/`` folder (not a user's copy)."""
+    return Path(path).resolve().is_relative_to(DATA_DIR)
 
 
 def file_key(path: Path) -> tuple:
@@ -264,17 +274,29 @@ _PARSED: dict[tuple[str, int, int], dict] = {}
 
 
 def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
-    """The TOML table of ``path`` (the ``what``, for messages), unchanged, after validating it
-    against ``model``: for loaders that go on reading the dict (the numbers stay the bytes of
-    the file)."""
+    """The TOML table of ``path`` (the ``what``, for messages) after validating it against
+    ``model``: for loaders that go on reading the dict (the numbers stay the bytes of the file).
+    The ``provenance`` entries of the assumption ledger (:mod:`calstudy.core.ledger`) are
+    dropped from it: they describe the inputs and are none themselves."""
     table = read_toml(path, what)  # a copy of the parsed file, kept by its file_key
     key = (*file_key(Path(path)), model)
     if key not in _VALIDATED:
-        validate(model, table, path)
+        validate(model, table, path, study=is_study_file(path))
         if len(_VALIDATED) >= 64:
             _VALIDATED.clear()
         _VALIDATED.add(key)
+    return without_provenance(table)
+
+
+def without_provenance(table: Any) -> Any:
+    """``table`` with the ``provenance`` entry of every (nested) table removed."""
+    if isinstance(table, dict):
+        return {k: without_provenance(v) for k, v in table.items() if k != PROVENANCE}
     return table
+
+
+#: the key of a table's ledger entries (:mod:`calstudy.core.ledger`)
+PROVENANCE = "provenance"
 
 
 #: (resolved path, modification time, size, model) of the files that passed :func:`check_toml`:
@@ -308,7 +330,7 @@ def check_principal_point(cx: float, cy: float, width: int, height: int) -> None
 def load_toml(path: str | Path, model: type[M], what: str) -> M:
     """Read the TOML file ``path`` (the ``what``, for messages) and validate it against
     ``model``."""
-    return validate(model, read_toml(path, what), path)
+    return validate(model, read_toml(path, what), path, study=is_study_file(path))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -447,6 +469,7 @@ __all__ = [
     "check_toml",
     "file_key",
     "format_errors",
+    "is_study_file",
     "load_toml",
     "number_problem",
     "parse_number",
@@ -456,4 +479,5 @@ __all__ = [
     "rotation_problem",
     "validate",
     "validate_rows",
+    "without_provenance",
 ]

@@ -37,7 +37,8 @@ def test_defocus_shift_is_zero_in_focus_and_flips_sign_across_the_focus(scenario
 
 
 def test_optics_trial_oracle_removes_the_defocus_error(scenario):
-    setup = ex.Setup(ex.with_optics(scenario, f_number=5.6), (), ())
+    # at f/2.8 the defocus error dominates each trial (at f/5.6 it is below the trial's noise)
+    setup = ex.Setup(ex.with_optics(scenario, f_number=2.8), (), ())
     rows = pd.DataFrame([ex.optics_trial(setup, np.random.default_rng(i)) for i in range(3)])
     assert (rows["t2_oracle"] < rows["t2_without"]).all()
     again = ex.optics_trial(setup, np.random.default_rng(0))

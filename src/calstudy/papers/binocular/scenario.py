@@ -24,6 +24,7 @@ from calstudy.core.schema import check_toml
 from calstudy.estimators.binocular import solve_calibrator_layout
 from calstudy.models import optics
 from calstudy.models.kinematics import Robot
+from calstudy.models.reach import reach_bound
 from calstudy.models.robots import load_robot
 from calstudy.models.stereo import StereoRig
 from calstudy.papers.binocular.schema import SCHEMAS
@@ -186,7 +187,7 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
         )
     h = np.array(require(station_t, "handeye.matrix", files["station"]), dtype=float)
     h[:3, :3] = geo.project_to_so3(h[:3, :3])
-    return Scenario(
+    scenario = Scenario(
         sensor=StereoRig.from_table(sensor_t, str(files["sensor"])),
         layout=layout,
         layout_residual=residual,
@@ -195,6 +196,64 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
         calibrator2base=_calibrator2base(station_t, files["station"]),
         config=tables,
     )
+    check_reach(scenario, files["station"])
+    return scenario
+
+
+def check_reach(scenario: Scenario, source: str | Path = "station.toml") -> None:
+    """Refuse a station whose robot cannot reach any of the views of a target.
+
+    The views of a target (the calibrator, each field region) put the sensor at
+    ``observation_distance_mm +- distance_spread_mm`` from it, within ``cone_deg`` of its
+    normal, turned by any roll: every sensor origin then lies within ``|mid| + spread +
+    2 d sin(cone / 2)`` of the central one (``mid`` the sensor frame's offset from the baseline
+    midpoint the views aim from) and the robot's wrist point within ``|sensor2flange^-1 c|`` of
+    the sensor origin (:class:`~calstudy.models.reach.ReachBound`). When even the nearest such
+    wrist point lies beyond the arm's reach, no view of that target is reachable: the check
+    costs microseconds and runs before any simulation.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The loaded station.
+    source : str or Path
+        The station file, for the message.
+
+    Raises
+    ------
+    CalibrationError
+        Naming ``poses.observation_distance_mm`` and its value, the target and by how much the
+        nearest view misses the reach.
+    """
+    cfg = scenario.config["station"]
+    poses = cfg["poses"]
+    d, spread = float(poses["observation_distance_mm"]), float(poses["distance_spread_mm"])
+    bound = reach_bound(scenario.robot)
+    aim1, aim2 = scenario.sensor.aim_point(1.0), scenario.sensor.aim_point(2.0)
+    mid = 2.0 * aim1 - aim2
+    wrist = geo.invert(scenario.sensor2flange) @ np.append(bound.wrist, 1.0)
+    slack = float(np.linalg.norm(mid)) + spread + 2.0 * d * math.sin(
+        math.radians(poses["cone_deg"]) / 2.0
+    )
+    slack += float(np.linalg.norm(wrist[:3]))
+    targets = [("the calibrator", scenario.calibrator2base)]
+    field_cfg = cfg["field"]
+    for name, centre in zip(field_cfg["regions"], field_cfg["centres_mm"], strict=True):
+        normal = np.array(field_cfg["faces_point_mm"], dtype=float) - np.array(centre, float)
+        targets.append((f"field region {name!r}", plate_frame(np.array(centre, float), normal)))
+    for what, target2base in targets:
+        central = target2base[:3, 3] + d * target2base[:3, 2]
+        rel = central - bound.centre
+        h = float(rel @ bound.axis)
+        rho = math.sqrt(max(float(rel @ rel) - h * h, 0.0))
+        beyond = math.hypot(rho - bound.radius, h) - bound.reach - slack
+        if beyond > bound.margin_mm():
+            raise CalibrationError(
+                f"{source}: poses.observation_distance_mm = {poses['observation_distance_mm']}: "
+                f"every view of {what} at that distance puts the robot's wrist at least "
+                f"{beyond:.0f} mm beyond its reach ({bound.reach:.0f} mm from the shoulder "
+                "circle): the robot cannot hold the sensor there"
+            )
 
 
 def paper_table(name: str) -> dict:
@@ -213,6 +272,7 @@ def published(name: str, key: str):
 
 __all__ = [
     "Scenario",
+    "check_reach",
     "load_scenario",
     "paper_table",
     "plate_frame",

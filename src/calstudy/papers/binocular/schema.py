@@ -13,6 +13,11 @@ centre per field region. A message names the file, the key, the value and the al
 ``calibrator.toml: standard.distance_mm: P2P7 = 58.853, P3P7 = 55.181, P5P7 = 200.0 admit no
 layout: ...``
 (:func:`calstudy.estimators.binocular.layout_problem`).
+
+Every input carries its provenance beside it (:mod:`calstudy.core.ledger`); noise levels lie
+below the physical bounds of :data:`NOISE_BOUNDS` and counts below their size bounds (checked
+before anything is allocated). Whether the robot reaches the views the station asks for needs
+all three files and the robot's table: :func:`calstudy.papers.binocular.scenario.check_reach`.
 """
 
 from __future__ import annotations
@@ -22,13 +27,13 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
+from calstudy.core.ledger import OFF, Inputs, Ledgered
 from calstudy.core.schema import (
     Degrees,
     Documented,
     Finite,
     NonNegativeFinite,
     PositiveFinite,
-    PositiveInt,
     Schema,
     Vec3,
     check_principal_point,
@@ -53,6 +58,34 @@ Pair = Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
 Name = Annotated[str, Field(min_length=1)]
 #: lengths of a station in mm that all lie below this look like metres
 METRES_SUSPECT_MM = 10.0
+#: most pixels along an image side (the largest industrial sensors have about 14,000)
+MAX_PIXELS = 20000
+#: most poses of a protocol and regions of a field (the paper uses 6, 10 and 3)
+MAX_POSES, MAX_REGIONS = 1000, 100
+
+#: physical upper bounds of the noise levels (the unit is the key's), each with its reason:
+#: beyond them the instrument is not of the class the paper uses; zero is allowed (an oracle)
+NOISE_BOUNDS = {
+    # read noise of a machine-vision camera: 50 DN is a fifth of an 8-bit full scale
+    "read_noise_dn": 50.0,
+    # errors a stereo calibration that still measures to 0.1 mm can leave (Table 1's digits
+    # imply far less): 50 px of focal length or principal point, 0.01 in k1, 1 mrad, 1 mm
+    "calibration_px": 50.0,
+    "k1": 0.01,
+    "extrinsic_rad": 1e-3,
+    "extrinsic_mm": 1.0,
+    # CMM and laser tracker: 100 um (+ 100 um/m) is ten times the coarsest of either class
+    "reference_um": 100.0,
+    # a retro-reflective dot centred worse than 0.1 mm in its sphere is not an SBR
+    "dot_centring_um": 100.0,
+    # ISO 9283 repeatabilities of industrial arms are 0.02-0.2 mm; 1 mm is five times the worst
+    "repeatability_mm": 1.0,
+}
+
+
+def _noise(bound: str):
+    """A noise level: >= 0, <= ``NOISE_BOUNDS[bound]``, 0 accepted outside its ledger range."""
+    return Annotated[float, Field(ge=0, le=NOISE_BOUNDS[bound], allow_inf_nan=False), OFF]
 
 
 def _metres(values, what: str) -> None:
@@ -88,16 +121,16 @@ def _rotation(matrix: list, what: str) -> None:
 # sensor.toml
 
 
-class Image(Documented):
+class Image(Inputs):
     """The ``[image]`` table of data/binocular/sensor.toml."""
 
-    width: PositiveInt
-    height: PositiveInt
+    width: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
+    height: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
     #: mm per pixel: 1-50 um (a value in um, 4.6, is refused)
     pixel_pitch_mm: Annotated[float, Field(gt=0, le=0.05, allow_inf_nan=False)]
 
 
-class Camera(Documented):
+class Camera(Inputs):
     """The ``[left]`` and ``[right]`` tables of data/binocular/sensor.toml (px)."""
 
     fx: PositiveFinite
@@ -121,7 +154,7 @@ class Camera(Documented):
         return dist
 
 
-class Extrinsic(Documented):
+class Extrinsic(Inputs):
     """The ``[extrinsic]`` table of data/binocular/sensor.toml: left2right, mm."""
 
     rotation: Matrix3
@@ -142,8 +175,10 @@ class Extrinsic(Documented):
         return t
 
 
-class Optics(Documented):
+class Optics(Inputs):
     """The ``[optics]`` table of data/binocular/sensor.toml (Eq. 4)."""
+
+    NOT_INPUTS = frozenset({"calibrate_f_number_to"})
 
     f_number: Annotated[float, Field(ge=0.5, le=128, allow_inf_nan=False)]
     focus_distance_mm: PositiveFinite
@@ -155,10 +190,10 @@ class Optics(Documented):
     rim_distance_mm: Annotated[float, Field(ge=-1000, le=1000, allow_inf_nan=False)]
 
 
-class Exposure(Documented):
+class Exposure(Inputs):
     """The ``[exposure]`` table of data/binocular/sensor.toml (Eq. 3)."""
 
-    times_ms: Annotated[list[PositiveFinite], Field(min_length=1)]
+    times_ms: Annotated[list[PositiveFinite], Field(min_length=1, max_length=10)]
     bits: Annotated[int, Field(ge=1, le=16)]
     dot_peak_at_100ms: PositiveFinite
     #: the background's share of full scale at 100 ms
@@ -177,30 +212,30 @@ class Exposure(Documented):
         return self
 
 
-class Noise(Documented):
+class Noise(Inputs):
     """The ``[noise]`` table of data/binocular/sensor.toml."""
 
-    read_noise_dn: NonNegativeFinite
+    read_noise_dn: _noise("read_noise_dn")
     electrons_per_dn: PositiveFinite
 
 
-class CalibrationUncertainty(Documented):
+class CalibrationUncertainty(Inputs):
     """The ``[calibration_uncertainty]`` table of data/binocular/sensor.toml."""
 
-    focal_px: NonNegativeFinite
-    principal_point_px: NonNegativeFinite
-    k1: NonNegativeFinite
-    extrinsic_rotation_rad: Annotated[float, Field(ge=0, le=0.1, allow_inf_nan=False)]
-    extrinsic_translation_mm: NonNegativeFinite
+    focal_px: _noise("calibration_px")
+    principal_point_px: _noise("calibration_px")
+    k1: _noise("k1")
+    extrinsic_rotation_rad: _noise("extrinsic_rad")
+    extrinsic_translation_mm: _noise("extrinsic_mm")
 
 
-class Detection(Documented):
+class Detection(Inputs):
     """The ``[detection]`` table of data/binocular/sensor.toml."""
 
     canny_low: Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)]
     canny_high: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
     #: an ellipse needs at least 5 points
-    min_edge_points: Annotated[int, Field(ge=5)]
+    min_edge_points: Annotated[int, Field(ge=5, le=100_000)]
     ray_tolerance_mm: PositiveFinite
 
     @model_validator(mode="after")
@@ -212,7 +247,7 @@ class Detection(Documented):
         return self
 
 
-class SensorFile(Documented):
+class SensorFile(Ledgered):
     """``data/binocular/sensor.toml``."""
 
     source: Notes = Notes()
@@ -226,8 +261,13 @@ class SensorFile(Documented):
     calibration_uncertainty: CalibrationUncertainty
     detection: Detection
 
-    @model_validator(mode="after")
-    def _focus_beyond_image_distance(self) -> SensorFile:
+    def plausibility(self) -> None:
+        """The focus lies beyond the lens-to-sensor distance; both principal points lie in
+        the image."""
+        self._focus_beyond_image_distance()
+        self._centres_in_image()
+
+    def _focus_beyond_image_distance(self) -> None:
         image_distance = self.left.fx * self.image.pixel_pitch_mm
         if self.optics.focus_distance_mm <= image_distance:
             raise ValueError(
@@ -235,24 +275,21 @@ class SensorFile(Documented):
                 f"lens-to-sensor distance {image_distance:.4g} mm (left.fx x "
                 "image.pixel_pitch_mm): a measuring camera images at a magnification below 1"
             )
-        return self
 
-    @model_validator(mode="after")
-    def _centres_in_image(self) -> SensorFile:
+    def _centres_in_image(self) -> None:
         for side in ("left", "right"):
             cam = getattr(self, side)
             try:
                 check_principal_point(cam.cx, cam.cy, self.image.width, self.image.height)
             except ValueError as exc:
                 raise ValueError(f"{side}: {exc}") from None
-        return self
 
 
 # ----------------------------------------------------------------------------------------------
 # calibrator.toml
 
 
-class Standard(Documented):
+class Standard(Inputs):
     """The ``[standard]`` table of data/binocular/calibrator.toml."""
 
     names: Annotated[list[Name], Field(min_length=7, max_length=7)]
@@ -275,17 +312,17 @@ class Standard(Documented):
         return distance_mm
 
 
-class Cmm(Documented):
+class Cmm(Inputs):
     """The ``[cmm]`` table of data/binocular/calibrator.toml: sigma = a + b L."""
 
-    sigma_um: NonNegativeFinite
-    sigma_um_per_m: NonNegativeFinite
+    sigma_um: _noise("reference_um")
+    sigma_um_per_m: _noise("reference_um")
 
 
-class Sbr(Documented):
+class Sbr(Inputs):
     """The ``[sbr]`` table of data/binocular/calibrator.toml."""
 
-    dot_centring_um: NonNegativeFinite
+    dot_centring_um: _noise("dot_centring_um")
     dot_diameter_mm: PositiveFinite
 
 
@@ -300,7 +337,7 @@ class CalibratorPublished(Documented):
     table3_rmse: Pair
 
 
-class CalibratorFile(Documented):
+class CalibratorFile(Ledgered):
     """``data/binocular/calibrator.toml``."""
 
     source: Notes = Notes()
@@ -314,7 +351,7 @@ class CalibratorFile(Documented):
 # station.toml
 
 
-class HandEye(Documented):
+class HandEye(Inputs):
     """The ``[handeye]`` table of data/binocular/station.toml: sensor2flange, mm."""
 
     matrix: Matrix44
@@ -330,7 +367,7 @@ class HandEye(Documented):
         return matrix
 
 
-class CalibratorPlace(Documented):
+class CalibratorPlace(Inputs):
     """The ``[calibrator]`` table of data/binocular/station.toml."""
 
     p7_distance_mm: PositiveFinite
@@ -347,14 +384,14 @@ class CalibratorPlace(Documented):
         return self
 
 
-class Poses(Documented):
+class Poses(Inputs):
     """The ``[poses]`` table of data/binocular/station.toml."""
 
     #: at least 10 mm (a value in metres is refused)
     observation_distance_mm: Annotated[float, Field(ge=METRES_SUSPECT_MM, allow_inf_nan=False)]
     #: AX = XB needs at least 3 poses (2 motions about different axes)
-    n_calibration: Annotated[int, Field(ge=3)]
-    n_validation: PositiveInt
+    n_calibration: Annotated[int, Field(ge=3, le=MAX_POSES)]
+    n_validation: Annotated[int, Field(ge=1, le=MAX_POSES)]
     cone_deg: Annotated[float, Field(ge=0, lt=90, allow_inf_nan=False)]
     roll_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
     distance_spread_mm: NonNegativeFinite
@@ -369,32 +406,32 @@ class Poses(Documented):
         return self
 
 
-class RobotTable(Documented):
+class RobotTable(Inputs):
     """The ``[robot]`` table of data/binocular/station.toml."""
 
     model: Name
-    repeatability_mm: NonNegativeFinite
+    repeatability_mm: _noise("repeatability_mm")
 
 
-class Tracker(Documented):
+class Tracker(Inputs):
     """The ``[laser_tracker]`` table of data/binocular/station.toml: sigma = a + b L."""
 
-    sigma_um: NonNegativeFinite
-    sigma_um_per_m: NonNegativeFinite
+    sigma_um: _noise("reference_um")
+    sigma_um_per_m: _noise("reference_um")
 
 
 Five = Annotated[list[PositiveFinite], Field(min_length=5, max_length=5)]
 
 
-class Field_(Documented):
+class Field_(Inputs):
     """The ``[field]`` table of data/binocular/station.toml (Table 5)."""
 
-    regions: Annotated[list[Name], Field(min_length=1)]
+    regions: Annotated[list[Name], Field(min_length=1, max_length=MAX_REGIONS)]
     names: list[Annotated[list[Name], Field(min_length=5, max_length=5)]]
     standard_mm: list[Five]
     centres_mm: list[Vec3]
     faces_point_mm: Vec3
-    n_poses: PositiveInt
+    n_poses: Annotated[int, Field(ge=1, le=MAX_POSES)]
 
     @field_validator("regions")
     @classmethod
@@ -439,7 +476,7 @@ class StationPublished(Documented):
         return self
 
 
-class StationFile(Documented):
+class StationFile(Ledgered):
     """``data/binocular/station.toml``."""
 
     source: Notes = Notes()

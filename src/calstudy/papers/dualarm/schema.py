@@ -5,22 +5,29 @@ Checked on load (:func:`calstudy.core.schema.check_toml`): every key read must b
 type and range (lengths mm, angles degrees where the key says ``_deg``, rotation vectors rad),
 unknown keys are refused, and the cross-field rules below hold (one position per marker name,
 every marker in a declared group, a principal point inside the image, an outlier range that is
-a range). A message names the file, the key, the value and the allowed range.
+a range), and the station can exist (:meth:`ScenarioFile.plausibility`: stereo cameras that
+converge at a workable angle, spheres and markers within the arms' reach, noise levels below the
+physical bounds of :data:`NOISE_BOUNDS`, counts below their size bounds, checked before anything
+is allocated). Every input carries its provenance beside it (:mod:`calstudy.core.ledger`). A
+message names the file, the key, the value and the allowed range.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
+import numpy as np
 from pydantic import ConfigDict, Field, field_validator, model_validator
+from scipy.spatial.transform import Rotation
 
+from calstudy.core.ledger import OFF, Inputs, Ledgered
 from calstudy.core.schema import (
     Documented,
     Finite,
     Fraction,
     NonNegativeFinite,
     PositiveFinite,
-    PositiveInt,
     Row,
     Schema,
     Vec3,
@@ -29,6 +36,43 @@ from calstudy.core.schema import (
 
 #: an angle from a direction (a tilt, an incidence, a viewing angle), degrees
 Tilt = Annotated[float, Field(ge=0, le=90, allow_inf_nan=False)]
+#: most pixels along an image side (the largest industrial sensors have about 14,000)
+MAX_PIXELS = 20000
+#: most points of a scan (ICP pairs them by a KD tree), poses, views, iterations, markers
+MAX_POINTS, MAX_POSES, MAX_ITERATIONS, MAX_MARKERS = 100_000, 100, 10_000, 1000
+#: the convergence angle of a stereo head (between the two optical axes at the convergence
+#: point, deg): below 2 deg depth is hardly triangulated (its error grows as 1 / angle), beyond
+#: 60 deg the two images of a surface differ too much to match and their common field vanishes
+CONVERGENCE_DEG = (2.0, 60.0)
+#: the farthest (mm) the flange of an arm of the 1.4-1.6 m class that [layout] assumes comes from
+#: its base origin: e.g. the KUKA KR 16-2 of data/robots, shoulder circle 675 mm up and 260 mm
+#: out, 1351 mm from it to the wrist point and 158 mm on to the flange, about 2.4 m at most
+ARM_ENVELOPE_MM = 2500.0
+
+#: physical upper bounds of the noise levels (the unit is the key's), each with its reason:
+#: beyond them the instrument is not of the class the paper uses; zero is allowed (an oracle)
+NOISE_BOUNDS = {
+    # a structured-light point scattering by 1 mm is 35 times the paper's 0.029 mm accuracy and
+    # a tenth of sphere B's radius: no sphere fit the paper reports would be possible
+    "point_mm": 1.0,
+    # sub-pixel centre detection: beyond 2 px a centre is no longer sub-pixel
+    "px": 2.0,
+    # a marker triangulated worse than 1 mm cannot give the 0.1 mm calibration of Table 3
+    "marker_mm": 1.0,
+    # ISO 9283 repeatabilities of industrial arms are 0.02-0.2 mm; 1 mm is five times the worst
+    "repeat_mm": 1.0,
+    "repeat_deg": 0.1,
+    # a drift step of 1 mm (0.1 deg) per move is beyond the absolute accuracy of such arms
+    "drift_mm": 1.0,
+    "drift_deg": 0.1,
+}
+
+
+def _noise(bound: str):
+    """A noise level: >= 0, <= ``NOISE_BOUNDS[bound]``, 0 accepted outside its ledger range."""
+    return Annotated[float, Field(ge=0, le=NOISE_BOUNDS[bound], allow_inf_nan=False), OFF]
+
+
 #: a rotation vector (rad), at most half a turn beyond pi
 RotVec = Annotated[
     list[Annotated[float, Field(ge=-7, le=7, allow_inf_nan=False)]],
@@ -36,11 +80,11 @@ RotVec = Annotated[
 ]
 
 
-class Camera(Documented):
+class Camera(Inputs):
     """The ``[camera]`` table of data/dualarm/scenario.toml."""
 
-    width: PositiveInt
-    height: PositiveInt
+    width: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
+    height: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
     fx_px: PositiveFinite
     fy_px: PositiveFinite
     cx_px: Finite
@@ -52,40 +96,42 @@ class Camera(Documented):
         return self
 
 
-class Stereo(Documented):
+class Stereo(Inputs):
     """The ``[stereo]`` table of data/dualarm/scenario.toml."""
 
     baseline_mm: PositiveFinite
     convergence_distance_mm: PositiveFinite
 
 
-class Sensor(Documented):
+class Sensor(Inputs):
     """The ``[sensor]`` table of data/dualarm/scenario.toml."""
 
-    point_sigma_mm: NonNegativeFinite
+    point_sigma_mm: _noise("point_mm")
     #: a sphere fit needs at least 4 points
-    points_per_scan: Annotated[int, Field(ge=4)]
+    points_per_scan: Annotated[int, Field(ge=4, le=MAX_POINTS)]
     max_incidence_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
     working_distance_mm: PositiveFinite
 
 
-class Detection(Documented):
+class Detection(Inputs):
     """The ``[detection]`` table of data/dualarm/scenario.toml."""
 
-    sigma_px: NonNegativeFinite
+    sigma_px: _noise("px")
     #: radius of a coded marker's centre circle (its perspective bias grows with radius^2)
     marker_radius_mm: Annotated[float, Field(ge=0, le=50, allow_inf_nan=False)]
-    marker_sigma_mm: NonNegativeFinite
+    marker_sigma_mm: _noise("marker_mm")
     #: the probability that a visible marker is lost in an image
     loss_rate: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
     max_view_angle_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
 
 
-class Markers(Documented):
+class Markers(Inputs):
     """The ``[markers]`` table of data/dualarm/scenario.toml."""
 
-    names: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=3)]
-    xyz_mm: Annotated[list[Vec3], Field(min_length=3)]
+    names: Annotated[
+        list[Annotated[str, Field(min_length=1)]], Field(min_length=3, max_length=MAX_MARKERS)
+    ]
+    xyz_mm: Annotated[list[Vec3], Field(min_length=3, max_length=MAX_MARKERS)]
     groups: Annotated[list[str], Field(min_length=2, max_length=2)]
 
     @model_validator(mode="after")
@@ -103,7 +149,7 @@ class Markers(Documented):
         return self
 
 
-class Calibration(Documented):
+class Calibration(Inputs):
     """The ``[calibration]`` table of data/dualarm/scenario.toml."""
 
     cam2flange_1_rotvec: RotVec
@@ -114,37 +160,37 @@ class Calibration(Documented):
     base2_to_base1_mm: Vec3
 
 
-class Layout(Documented):
+class Layout(Inputs):
     """The ``[layout]`` table of data/dualarm/scenario.toml."""
 
     world2base1_rotvec: RotVec
     world2base1_mm: Vec3
 
 
-class Robot(Documented):
+class Robot(Inputs):
     """The ``[robot]`` table of data/dualarm/scenario.toml."""
 
-    repeat_sigma_mm: NonNegativeFinite
-    repeat_sigma_deg: NonNegativeFinite
-    drift_step_sigma_mm: NonNegativeFinite
-    drift_step_sigma_deg: NonNegativeFinite
+    repeat_sigma_mm: _noise("repeat_mm")
+    repeat_sigma_deg: _noise("repeat_deg")
+    drift_step_sigma_mm: _noise("drift_mm")
+    drift_step_sigma_deg: _noise("drift_deg")
 
 
-class Spheres(Documented):
+class Spheres(Inputs):
     """The ``[spheres]`` table of data/dualarm/scenario.toml."""
 
     diameter_a_mm: PositiveFinite
     diameter_b_mm: PositiveFinite
 
 
-class HandEye(Documented):
+class HandEye(Inputs):
     """The ``[handeye]`` table of data/dualarm/scenario.toml."""
 
-    grid_rows: Annotated[int, Field(ge=2)]
-    grid_cols: Annotated[int, Field(ge=2)]
+    grid_rows: Annotated[int, Field(ge=2, le=100)]
+    grid_cols: Annotated[int, Field(ge=2, le=100)]
     pitch_mm: PositiveFinite
     #: Tsai-Lenz needs at least 3 poses (2 motions about different axes)
-    n_poses: Annotated[int, Field(ge=3)]
+    n_poses: Annotated[int, Field(ge=3, le=MAX_POSES)]
     tilt_deg: Tilt
     #: turn of the image about the optical axis between views, within +-roll_deg
     roll_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
@@ -161,26 +207,26 @@ class HandEye(Documented):
         return self
 
 
-class Survey(Documented):
+class Survey(Inputs):
     """The ``[survey]`` table of data/dualarm/scenario.toml."""
 
-    views_per_group: PositiveInt
-    bridge_views: PositiveInt
+    views_per_group: Annotated[int, Field(ge=1, le=MAX_POSES)]
+    bridge_views: Annotated[int, Field(ge=1, le=MAX_POSES)]
     bridge_distance_mm: PositiveFinite
     bridge_tilt_deg: Tilt
     bridge_roll_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
     tilt_deg: Tilt
     #: PnP needs at least 3 shared markers
-    min_shared_markers: Annotated[int, Field(ge=3)]
+    min_shared_markers: Annotated[int, Field(ge=3, le=MAX_MARKERS)]
 
 
-class GlobalTest(Documented):
+class GlobalTest(Inputs):
     """The ``[global_test]`` table of data/dualarm/scenario.toml."""
 
-    n_groups: PositiveInt
-    n_poses: PositiveInt
-    calibration_poses: PositiveInt
-    placement_offsets_mm: Annotated[list[Finite], Field(min_length=1)]
+    n_groups: Annotated[int, Field(ge=1, le=MAX_POSES)]
+    n_poses: Annotated[int, Field(ge=1, le=MAX_POSES)]
+    calibration_poses: Annotated[int, Field(ge=1, le=MAX_POSES)]
+    placement_offsets_mm: Annotated[list[Finite], Field(min_length=1, max_length=MAX_POSES)]
     stand_height_mm: Finite
 
     @model_validator(mode="after")
@@ -193,7 +239,7 @@ class GlobalTest(Documented):
         return self
 
 
-class CircularPlate(Documented):
+class CircularPlate(Inputs):
     """The ``[circular_plate]`` table of data/dualarm/scenario.toml."""
 
     tilt_deg: Tilt
@@ -212,20 +258,22 @@ class CircularPlate(Documented):
         return self
 
 
-class Icp(Documented):
+class Icp(Inputs):
     """The ``[icp]`` table of data/dualarm/scenario.toml."""
 
     z_weight: PositiveFinite
     z_threshold_mm: PositiveFinite
-    max_iterations: PositiveInt
+    max_iterations: Annotated[int, Field(ge=1, le=MAX_ITERATIONS)]
     max_pair_distance_mm: PositiveFinite
-    n_views: Annotated[int, Field(ge=2)]
+    n_views: Annotated[int, Field(ge=2, le=MAX_POSES)]
     tilt_deg: Tilt
     sphere_offset_mm: Finite
 
 
-class ScenarioFile(Documented):
+class ScenarioFile(Ledgered, Inputs):
     """``data/dualarm/scenario.toml``."""
+
+    NOT_INPUTS = frozenset({"name"})
 
     name: str = ""
     camera: Camera
@@ -242,6 +290,80 @@ class ScenarioFile(Documented):
     global_test: GlobalTest
     circular_plate: CircularPlate
     icp: Icp
+
+    def plausibility(self) -> None:
+        """The camera stands outside the spheres it scans; the stereo head converges at an angle
+        within :data:`CONVERGENCE_DEG`; every sphere
+        placement and marker group lies within reach of the arm that scans it: no farther from
+        its base than :data:`ARM_ENVELOPE_MM` plus the camera's offset from the flange plus the
+        working distance."""
+        radius = 0.5 * max(self.spheres.diameter_a_mm, self.spheres.diameter_b_mm)
+        if self.sensor.working_distance_mm <= radius:
+            raise ValueError(
+                f"sensor.working_distance_mm = {self.sensor.working_distance_mm}: not beyond the "
+                f"radius of the spheres it scans ({radius:g} mm, spheres.diameter_a_mm / 2); the "
+                "camera would sit inside the sphere"
+            )
+        st = self.stereo
+        angle = math.degrees(math.atan2(st.baseline_mm, st.convergence_distance_mm))
+        lo, hi = CONVERGENCE_DEG
+        if not lo <= angle <= hi:
+            raise ValueError(
+                f"stereo.baseline_mm = {st.baseline_mm}: with convergence_distance_mm = "
+                f"{st.convergence_distance_mm} the cameras converge at {angle:.3g} deg, outside "
+                f"the {lo:g}-{hi:g} deg a stereo head can work with (baseline / convergence "
+                f"distance between {math.tan(math.radians(lo)):.3g} and "
+                f"{math.tan(math.radians(hi)):.3g})"
+            )
+        cal = self.calibration
+        world2base = [_transform(self.layout.world2base1_rotvec, self.layout.world2base1_mm)]
+        base2_to_base1 = _transform(cal.base2_to_base1_rotvec, cal.base2_to_base1_mm)
+        world2base.append(np.linalg.inv(base2_to_base1) @ world2base[0])
+        markers = np.array(self.markers.xyz_mm, dtype=float)
+        groups = np.array([n.split("-")[0] for n in self.markers.names])
+        centres = [markers[groups == g].mean(axis=0) for g in self.markers.groups]
+        middle = 0.5 * (centres[0] + centres[1])
+        radius_a = 0.5 * self.spheres.diameter_a_mm
+        lift = self.global_test.stand_height_mm + radius_a
+        places = [
+            (
+                "global_test.stand_height_mm",
+                self.global_test.stand_height_mm,
+                f"sphere A at placement_offsets_mm #{k + 1}",
+                np.array([middle[0], middle[1] + off, lift]),
+            )
+            for k, off in enumerate(self.global_test.placement_offsets_mm)
+        ]
+        for arm, centre in enumerate(centres):
+            places.append(
+                (
+                    "icp.sphere_offset_mm",
+                    self.icp.sphere_offset_mm,
+                    f"the ICP sphere beside marker group {self.markers.groups[arm]}",
+                    np.array([centre[0] + self.icp.sphere_offset_mm, centre[1], lift]),
+                )
+            )
+            places.append(
+                (
+                    "markers.xyz_mm",
+                    [round(float(v), 3) for v in centre],
+                    f"the centre of marker group {self.markers.groups[arm]}",
+                    centre,
+                )
+            )
+        offsets = (cal.cam2flange_1_mm, cal.cam2flange_2_mm)
+        for key, value, what, point in places:
+            for arm in range(2):
+                reach = ARM_ENVELOPE_MM + float(np.linalg.norm(offsets[arm]))
+                reach += self.sensor.working_distance_mm
+                far = float(np.linalg.norm((world2base[arm] @ np.append(point, 1.0))[:3]))
+                if far > reach:
+                    raise ValueError(
+                        f"{key} = {value}: {what} lies {far:.0f} mm from the base of arm "
+                        f"{arm + 1}; its camera reaches at most {reach:.0f} mm (an arm envelope "
+                        f"of {ARM_ENVELOPE_MM:g} mm, the camera's offset from the flange and the "
+                        "working distance): the arm cannot scan it"
+                    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -324,6 +446,14 @@ class PublishedFile(Documented):
         if self.table2.overall is None:
             raise ValueError("table2.overall: missing (required)")
         return self
+
+
+def _transform(rotvec, xyz) -> np.ndarray:
+    """The 4 x 4 transform of a rotation vector (rad) and a translation (mm)."""
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    out[:3, 3] = xyz
+    return out
 
 
 __all__ = ["PublishedFile", "ScenarioFile"]

@@ -6,30 +6,74 @@ simulation reads must be there, with its type and range (lengths in mm, angles i
 the key says ``_deg``), unknown keys are refused (a misspelt key is not silently a default), and
 the cross-field rules below hold. A message names the file, the key, the value and the allowed
 range, e.g. ``station.toml: handeye.matrix: its rotation is not orthonormal (...)``.
+
+Every input carries its provenance beside it (:mod:`calstudy.core.ledger`), and the station must
+be one that can exist (:meth:`StationFile.plausibility`, :meth:`ProductionFile.plausibility`):
+the stationary sensors below the panel they look up at, the datums and features on the panel,
+noise levels below the physical bounds of :data:`NOISE_BOUNDS`, counts below :data:`MAX_PRODUCTS`
+and the other size bounds (checked before anything is allocated).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
+from calstudy.core.ledger import OFF, Inputs, Ledgered
 from calstudy.core.schema import (
     Degrees,
     Documented,
     Finite,
     NonNegativeFinite,
     PositiveFinite,
-    PositiveInt,
     Schema,
     Vec3,
     check_principal_point,
     rotation_problem,
 )
 
+#: most products of a protocol phase: the paper's protocol uses 10-30; each product is a panel
+#: of 58 features simulated in memory, so a count is bounded before anything is allocated
+MAX_PRODUCTS = 1000
 #: at least three products: a mean, a standard deviation and a correlation need them
-Products = Annotated[int, Field(ge=3)]
+Products = Annotated[int, Field(ge=3, le=MAX_PRODUCTS)]
+#: most pixels along a camera image side (the largest industrial sensors have about 14,000)
+MAX_PIXELS = 20000
+#: most moves of a calibration, sensors on a fixture, flexible features
+MAX_MOVES, MAX_SENSORS, MAX_FEATURES = 100, 100, 1000
+
+#: physical upper bounds of the noise levels (the unit is the key's), each with its reason:
+#: beyond them the instrument is not of the class the station describes. Zero is allowed (an
+#: oracle switches the error source off).
+NOISE_BOUNDS = {
+    # ISO 9283 repeatabilities of industrial arms are 0.02-0.2 mm; 1 mm is five times the worst
+    "repeatability_mm": 1.0,
+    # a line-laser sensor (feature or datum point, sigma per axis): 1 mm is ten times the
+    # coarsest in-line sheet-metal sensors (about 0.1 mm)
+    "sensor_mm": 1.0,
+    # sub-pixel centre detection: beyond 2 px a hole centre is no longer sub-pixel
+    "pixel": 2.0,
+    # a CMM (probing or target pre-calibration): 0.1 mm is ten times a shop-floor CMM's error
+    "cmm_mm": 0.1,
+    "cmm_deg": 0.1,
+    # the +-2 mm dimensional tolerance of car-body parts (section 4.3): panels, their clamping
+    # and the station's drift beyond it would not be the process the paper describes
+    "tolerance_mm": 2.0,
+    "placement_deg": 1.0,
+    # ISO 2768-1 class c (coarse) allows +-2 mm / +-1 deg on a sensor bracket of 1 m or less
+    "mounting_mm": 2.0,
+    "mounting_deg": 1.0,
+}
+
+
+def _noise(bound: str):
+    """A noise level: >= 0, <= ``NOISE_BOUNDS[bound]``, 0 accepted outside its ledger range."""
+    return Annotated[
+        float, Field(ge=0, le=NOISE_BOUNDS[bound], allow_inf_nan=False), OFF
+    ]
 Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
 
 
@@ -40,7 +84,7 @@ class Source(Documented):
     station: str = ""
 
 
-class HandEye(Documented):
+class HandEye(Inputs):
     """The ``[handeye]`` table of data/hybrid/station.toml."""
     #: sensor2flange, a rigid 4 x 4 transform (mm); printed to 6 decimals in the paper
     matrix: Annotated[list[Row4], Field(min_length=4, max_length=4)]
@@ -57,27 +101,33 @@ class HandEye(Documented):
         return matrix
 
 
-class Robot(Documented):
+class Robot(Inputs):
     """The ``[robot]`` table of data/hybrid/station.toml."""
-    repeatability_mm: NonNegativeFinite
+    repeatability_mm: _noise("repeatability_mm")
 
 
-class Sensor(Documented):
+class Sensor(Inputs):
     """The ``[sensor]`` table of data/hybrid/station.toml."""
     standoff_mm: PositiveFinite
     #: the stripe must fall on the sphere: |y| = fraction * R with 0 <= fraction < 1
     stripe_offset_fraction: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
+    #: the flexible sensor's stripe (calstudy.models.sensors.LineLaserSensor)
+    sigma_point_mm: _noise("sensor_mm")
+    #: a circle fit needs at least 3 points
+    n_points: Annotated[int, Field(ge=3, le=MAX_FEATURES * 100)]
+    arc_half_angle_deg: Annotated[float, Field(gt=0, lt=90, allow_inf_nan=False)]
 
 
-class SphereTable(Documented):
+class SphereTable(Inputs):
     """The ``[sphere]`` table of data/hybrid/station.toml."""
     centre_mm: Vec3
+    radius_mm: PositiveFinite
 
 
-class Moves(Documented):
+class Moves(Inputs):
     """The ``[calibration_moves]`` table of data/hybrid/station.toml."""
-    n_translations: Annotated[int, Field(ge=3)]
-    n_rotations: Annotated[int, Field(ge=2)]
+    n_translations: Annotated[int, Field(ge=3, le=MAX_MOVES)]
+    n_rotations: Annotated[int, Field(ge=2, le=MAX_MOVES)]
     translation_range_mm: PositiveFinite
     across_plane_range_mm: NonNegativeFinite
     rotation_range_deg: Annotated[float, Field(gt=0, le=180, allow_inf_nan=False)]
@@ -96,15 +146,15 @@ class Moves(Documented):
         return self
 
 
-class Cameras(Documented):
+class Cameras(Inputs):
     """The ``[cameras]`` table of data/hybrid/station.toml."""
     fx: PositiveFinite
     fy: PositiveFinite
     cx: Finite
     cy: Finite
-    width: PositiveInt
-    height: PositiveInt
-    pixel_sigma: NonNegativeFinite
+    width: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
+    height: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
+    pixel_sigma: _noise("pixel")
     #: the values of the hole-centre noise swept by notebook 01
     pixel_sigmas: Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
@@ -114,19 +164,22 @@ class Cameras(Documented):
         return self
 
 
-class Target(Documented):
+class Target(Inputs):
     """The ``[target]`` table of data/hybrid/station.toml."""
-    cmm_sigma_mm: NonNegativeFinite
-    cmm_sigma_deg: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)]
+    cmm_sigma_mm: _noise("cmm_mm")
+    cmm_sigma_deg: _noise("cmm_deg")
 
 
-class Stationary(Documented):
+class Stationary(Inputs):
     """The ``[stationary]`` table of data/hybrid/station.toml."""
-    positions_mm: Annotated[list[Vec3], Field(min_length=3)]
-    tilts_deg: list[Annotated[list[Degrees], Field(min_length=2, max_length=2)]]
+    positions_mm: Annotated[list[Vec3], Field(min_length=3, max_length=MAX_SENSORS)]
+    tilts_deg: Annotated[
+        list[Annotated[list[Degrees], Field(min_length=2, max_length=2)]],
+        Field(max_length=MAX_SENSORS),
+    ]
     #: mounting tolerance of a sensor on the fixture (3 sigma per axis), mm and deg
-    mounting_tolerance_mm: NonNegativeFinite
-    mounting_tolerance_deg: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)]
+    mounting_tolerance_mm: _noise("mounting_mm")
+    mounting_tolerance_deg: _noise("mounting_deg")
 
     @model_validator(mode="after")
     def _same_count(self) -> Stationary:
@@ -138,7 +191,7 @@ class Stationary(Documented):
         return self
 
 
-class Workpiece(Documented):
+class Workpiece(Inputs):
     """The ``[workpiece]`` table of data/hybrid/station.toml."""
     size_mm: Annotated[list[PositiveFinite], Field(min_length=2, max_length=2)]
     nominal_origin_mm: Vec3
@@ -146,9 +199,9 @@ class Workpiece(Documented):
     datum_A_slot_mm: Vec3
     datum_B_hole_mm: Vec3
     datum_C_plane_mm: Vec3
-    placement_sigma_mm: NonNegativeFinite
-    placement_sigma_deg: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)]
-    datum_sigma_mm: NonNegativeFinite
+    placement_sigma_mm: _noise("tolerance_mm")
+    placement_sigma_deg: _noise("placement_deg")
+    datum_sigma_mm: _noise("sensor_mm")
     free_direction_mm: NonNegativeFinite
 
     @model_validator(mode="after")
@@ -161,7 +214,7 @@ class Workpiece(Documented):
         return self
 
 
-class StationFile(Documented):
+class StationFile(Ledgered):
     """``data/hybrid/station.toml``."""
 
     source: Source = Source()
@@ -175,12 +228,47 @@ class StationFile(Documented):
     stationary: Stationary
     workpiece: Workpiece
 
+    def plausibility(self) -> None:
+        """The flexible sensor stands outside the sphere; the stationary sensors sit below the
+        panel and look up at it (section 4.1: they are on the fixture's baseboard under the
+        underbody); the datums lie on the panel."""
+        if self.sensor.standoff_mm <= self.sphere.radius_mm:
+            raise ValueError(
+                f"sensor.standoff_mm = {self.sensor.standoff_mm}: not beyond the sphere's radius "
+                f"sphere.radius_mm = {self.sphere.radius_mm}; the sensor would sit inside the "
+                "sphere it measures"
+            )
+        panel_z = self.workpiece.nominal_origin_mm[2]
+        for k, (pos, tilt) in enumerate(
+            zip(self.stationary.positions_mm, self.stationary.tilts_deg, strict=True)
+        ):
+            if pos[2] >= panel_z:
+                raise ValueError(
+                    f"stationary.positions_mm #{k + 1} z = {pos[2]}: the sensor sits at or above "
+                    f"the panel's plane (workpiece.nominal_origin_mm z = {panel_z}); it must be "
+                    "below the panel to look up at its underside"
+                )
+            up = math.cos(math.radians(tilt[0])) * math.cos(math.radians(tilt[1]))
+            if up <= 0:
+                raise ValueError(
+                    f"stationary.tilts_deg #{k + 1} = {tilt}: the sensor looks sideways or down "
+                    "(its axis has no upward component); it must look up at the panel"
+                )
+        size = self.workpiece.size_mm
+        for name in ("datum_A_slot_mm", "datum_B_hole_mm", "datum_C_plane_mm"):
+            x, y, _ = getattr(self.workpiece, name)
+            if not (0 <= x <= size[0] and 0 <= y <= size[1]):
+                raise ValueError(
+                    f"workpiece.{name} = {[x, y, _]}: not on the {size[0]:g} x {size[1]:g} mm "
+                    "panel (workpiece.size_mm; the frame has its origin at a corner)"
+                )
+
 
 # ---------------------------------------------------------------------------------------------
 # production.toml
 
 
-class Protocol(Documented):
+class Protocol(Inputs):
     """The ``[protocol]`` table of data/hybrid/production.toml."""
     n_before: Products
     n_compensation: Products
@@ -197,25 +285,30 @@ class Protocol(Documented):
         return self
 
 
-class Variation(Documented):
+class Variation(Inputs):
     """The ``[variation]`` table of data/hybrid/production.toml."""
-    part_sigma_mm: NonNegativeFinite
+    part_sigma_mm: _noise("tolerance_mm")
 
 
-class FeatureNoise(Documented):
+class FeatureNoise(Inputs):
     """The ``[sensors]`` table of data/hybrid/production.toml."""
-    feature_sigma_mm: NonNegativeFinite
+    feature_sigma_mm: _noise("sensor_mm")
 
 
-class Sigma(Documented):
+class CmmNoise(Inputs):
     """The ``[cmm]`` table of data/hybrid/production.toml."""
-    sigma_mm: NonNegativeFinite
+    sigma_mm: _noise("cmm_mm")
+
+
+class Drift(Inputs):
+    """The ``[drift]`` table of data/hybrid/production.toml."""
+    sigma_mm: _noise("tolerance_mm")
 
 
 Sweep = Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
 
-class SweepTable(Documented):
+class SweepTable(Inputs):
     """The ``[sweep]`` table of data/hybrid/production.toml."""
     part_sigma_mm: Sweep
     feature_sigma_mm: Sweep
@@ -223,12 +316,12 @@ class SweepTable(Documented):
     drift_sigma_mm: Sweep
 
 
-class StationaryFeatures(Documented):
+class StationaryFeatures(Inputs):
     """The ``[stationary_features]`` table of data/hybrid/production.toml."""
-    ids: Annotated[list[str], Field(min_length=3)]
-    kinds: Annotated[list[str], Field(min_length=3)]
+    ids: Annotated[list[str], Field(min_length=3, max_length=MAX_SENSORS)]
+    kinds: Annotated[list[str], Field(min_length=3, max_length=MAX_SENSORS)]
     #: the points of sensors 4.. (sensors 1-3 measure the datums of station.toml)
-    others_xyz_mm: list[Vec3]
+    others_xyz_mm: Annotated[list[Vec3], Field(max_length=MAX_SENSORS)]
 
     @model_validator(mode="after")
     def _counts(self) -> StationaryFeatures:
@@ -256,20 +349,20 @@ class Feature(Schema):
         return self
 
 
-class Flexible(Documented):
+class Flexible(Inputs):
     """The ``[flexible]`` table of data/hybrid/production.toml."""
-    features: Annotated[list[Feature], Field(min_length=1)]
+    features: Annotated[list[Feature], Field(min_length=1, max_length=MAX_FEATURES)]
 
 
-class ProductionFile(Documented):
+class ProductionFile(Ledgered):
     """``data/hybrid/production.toml``."""
 
     source: Source = Source()
     protocol: Protocol
     variation: Variation
     sensors: FeatureNoise
-    cmm: Sigma
-    drift: Sigma
+    cmm: CmmNoise
+    drift: Drift
     sweep: SweepTable
     stationary_features: StationaryFeatures
     flexible: Flexible

@@ -333,12 +333,16 @@ def make_station(
     hand = np.array(cfg["handeye"]["matrix"], dtype=float)
     sensor2flange = geo.make_transform(geo.project_to_so3(hand[:3, :3]), hand[:3, 3])
     cam = cfg["cameras"]
-    laser = (
-        LineLaserSensor()
-        if sigma_point_mm is None
-        else LineLaserSensor(sigma_point_mm=sigma_point_mm)
+    stripe = cfg["sensor"]
+    laser = LineLaserSensor(
+        sigma_point_mm=stripe["sigma_point_mm"] if sigma_point_mm is None else sigma_point_mm,
+        n_points=stripe["n_points"],
+        arc_half_angle_deg=stripe["arc_half_angle_deg"],
     )
-    sphere = Sphere(centre=np.array(cfg["sphere"]["centre_mm"], dtype=float))
+    sphere = Sphere(
+        radius_mm=cfg["sphere"]["radius_mm"],
+        centre=np.array(cfg["sphere"]["centre_mm"], dtype=float),
+    )
     target, made, back2front_cmm = _make_target(cfg["target"], target_rng)
     statcam2base_design = _stationary_sensors(cfg["stationary"])
     statcam2base_true = _mount_stationary(statcam2base_design, cfg["stationary"], mount_rng)

@@ -14,9 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from calstudy.core.config import require, scenario_file
+from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
 from calstudy.core.schema import check_toml
 from calstudy.models.kinematics import Robot
+from calstudy.models.reach import reach_bound
 from calstudy.models.robots import load_robot
 from calstudy.papers.selfcal.schema import ScenarioFile
 
@@ -101,7 +103,7 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
     def get(key: str):
         return require(t, key, path)
 
-    return Scenario(
+    scenario = Scenario(
         robot=load_robot(get("robot")),
         repeatability_mm=float(get("repeatability.sigma_mm")),
         base_rough=_pose(get("base.rough_xyz_mm"), get("base.rough_zyx_deg")),
@@ -141,3 +143,44 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
         compliance_sweep=tuple(float(v) for v in get("compliance.sweep_scales")),
         crb_multiple=float(get("protocol.crb_multiple")),
     )
+    check_reach(scenario, path)
+    return scenario
+
+
+def check_reach(scenario: Scenario, source: str | Path = "scenario.toml") -> None:
+    """Refuse a sphere envelope that the robot reaches from none of its points.
+
+    A view puts the scanner within ``sqrt((standoff + depth)^2 + 2 field^2)`` of the sphere's
+    centre, and the robot's wrist point within ``|sensor_design^-1 c|`` of the scanner
+    (:class:`~calstudy.models.reach.ReachBound`; the views are planned with the design mount).
+    Every point of the envelope lies at least ``|clip(C) - C| - r`` from the shoulder circle
+    (centre ``C``, radius ``r``); when that exceeds the reach plus both offsets, no placement
+    of a sphere in the envelope can be measured. Microseconds, before any simulation.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The loaded cell.
+    source : str or Path
+        The scenario file, for the message.
+
+    Raises
+    ------
+    CalibrationError
+        Naming ``spheres.envelope_min_mm`` and ``envelope_max_mm``, their values and by how
+        much the envelope's nearest point misses the reach.
+    """
+    bound = reach_bound(scenario.robot)
+    lo, hi = scenario.envelope
+    nearest = np.clip(bound.centre, lo, hi)
+    wrist = np.linalg.inv(scenario.sensor_design) @ np.append(bound.wrist, 1.0)
+    view = math.hypot(scenario.standoff_mm + scenario.depth_mm, math.sqrt(2) * scenario.field_mm)
+    slack = view + float(np.linalg.norm(wrist[:3]))
+    beyond = float(np.linalg.norm(nearest - bound.centre)) - bound.radius - bound.reach - slack
+    if beyond > bound.margin_mm():
+        raise CalibrationError(
+            f"{source}: spheres.envelope_min_mm = {lo.tolist()}, envelope_max_mm = "
+            f"{hi.tolist()}: from the envelope's nearest point the robot's wrist stays at least "
+            f"{beyond:.0f} mm beyond its reach, for every view at the scanner's standoff: no "
+            "sphere placed there can be measured"
+        )
