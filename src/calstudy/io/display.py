@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.claims import claim_register
+from calstudy.core.labels import label, plain
 from calstudy.io.claims_cells import published_figure, typeset
 
 #: What a missing value is shown as.
@@ -32,36 +33,18 @@ MISSING = "—"
 
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
-#: Column-name suffixes read as units: ``rot_err_deg`` is shown as ``rot err (deg)``.
-UNIT_SUFFIXES = {
-    "mm": "mm",
-    "um": "µm",
-    "deg": "deg",
-    "rad": "rad",
-    "px": "px",
-    "pct": "%",
-    "percent": "%",
-    "s": "s",
-    "ms": "ms",
-}
-
-
 def header(name: object, unit: str | None = None) -> str:
-    """Column header with its unit: ``("err_mm", None)`` -> ``"err (mm)"``,
-    ``("err", "mm")`` -> ``"err (mm)"``; underscores become spaces."""
-    text = str(name)
-    if unit is None:
-        stem, _, suffix = text.rpartition("_")
-        if stem and suffix.lower() in UNIT_SUFFIXES:
-            text, unit = stem, UNIT_SUFFIXES[suffix.lower()]
-    text = text.replace("_", " ").strip()
-    return f"{text} ({unit})" if unit else text
+    """Column header in words with its unit (:func:`calstudy.core.labels.label`):
+    ``("err_mm", None)`` -> ``"err (mm)"``, ``("err", "mm")`` -> ``"err (mm)"``,
+    ``"within_0p3_pct"`` -> ``"within 0.3 mm (%)"``."""
+    return label(name, unit)
 
 
 def format_value(value: object, digits: int = 4) -> str:
     """One cell as text: floats to ``digits`` significant digits (no ``1e-16`` noise shown as
     more than it is; powers of ten as ``1.2×10⁻⁵``), integers as integers, booleans as yes/no,
-    missing as an em dash, text with ± µm ≤ ≥ → for ``+-``, ``um``, ``<=``, ``>=``, ``->``."""
+    missing as an em dash, text with ± µm ≤ ≥ → for ``+-``, ``um``, ``<=``, ``>=``, ``->`` and
+    claim ids and bare identifiers in words (:func:`calstudy.core.labels.plain`)."""
     if value is None or value is pd.NA or value is pd.NaT:
         return MISSING
     if isinstance(value, bool | np.bool_):
@@ -84,7 +67,9 @@ def format_value(value: object, digits: int = 4) -> str:
             return f"{mantissa}×10{str(int(exponent)).translate(_SUPERSCRIPT)}"
         return text
     text = str(value)
-    return MISSING if text.strip() in ("", "nan", "NaN", "None", "<NA>") else typeset(text)
+    if text.strip() in ("", "nan", "NaN", "None", "<NA>"):
+        return MISSING
+    return plain(typeset(text))
 
 
 def format_table(
@@ -104,7 +89,7 @@ def format_table(
         The table (its index is kept only if it is named or not a plain range).
     units : mapping, optional
         Unit of a column, shown in its header; columns named ``*_mm``, ``*_deg``, ... get their
-        unit from the suffix (:data:`UNIT_SUFFIXES`).
+        unit from the suffix (:data:`calstudy.core.labels.UNIT_SUFFIXES`).
     digits : int or mapping, default 4
         Significant digits of floats, for all columns or per column.
     max_columns : int, default 8
@@ -192,17 +177,23 @@ def _table_html(table: pd.DataFrame, caption: str | None) -> str:
     rows = "".join(
         "<tr>" + "".join(_td(v) for v in row) + "</tr>" for row in table.itertuples(index=False)
     )
-    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+    cap = f"<caption>{html.escape(plain(typeset(caption)))}</caption>" if caption else ""
     return (
         f'<table class="calstudy-table">{cap}<thead><tr>{head}</tr></thead>'
         f"<tbody>{rows}</tbody></table>"
     )
 
 
+#: Rows of a table shown open; a longer one is folded into a dropdown headed by its caption.
+LONG_TABLE_ROWS = 12
+
+
 def table_html(
     df: pd.DataFrame, *, caption: str | None = None, **options
 ) -> str:
-    """HTML of :func:`show_table` (the options are those of :func:`format_table`)."""
+    """HTML of :func:`show_table` (the options are those of :func:`format_table`); a table of
+    more than :data:`LONG_TABLE_ROWS` rows is folded into a ``<details>`` dropdown whose
+    summary is its caption and row count."""
     tables, notes = format_table(df, **options)
     parts = [_table_html(t, caption if i == 0 else None) for i, t in enumerate(tables)]
     if notes:
@@ -211,6 +202,11 @@ def table_html(
             + "<br>".join(html.escape(n) for n in notes)
             + "</small></p>"
         )
+    rows = max(len(t) for t in tables)
+    if rows > LONG_TABLE_ROWS:
+        title = html.escape(plain(typeset(caption)).rstrip(".")) if caption else "Table"
+        parts = [f'<details class="calstudy-long"><summary>{title} ({rows} rows)</summary>',
+                 *parts, "</details>"]
     return "\n".join(parts)
 
 
