@@ -2,7 +2,7 @@
 
 The book is built into a temporary folder from the notebooks executed at their CI values
 (:mod:`booksite`; the session's ``ci_runs``, shared with ``test_notebooks.py``); then every
-page is loaded in Chromium at a 1,400 px window (:mod:`browser`) and checked:
+page is loaded in Chromium at 1366 x 900 (:data:`DESKTOP`; :mod:`browser`) and checked:
 
 - no console error, no request leaving the machine, no absolute path of the build machine;
 - all math typeset by the shipped MathJax (no raw ``$``, ``\\(`` or ``\\[`` left in the text),
@@ -16,10 +16,19 @@ page is loaded in Chromium at a 1,400 px window (:mod:`browser`) and checked:
 - every link inside the book reaches its page and anchor; the claims page has a badge in its
   verdict's colour per claim and links every computed claim to a section of its notebook;
   one search box (no second header bar), no script twice in a page's head, page titles
-  without the book's name twice.
+  without the book's name twice;
+- results first: the claims table's header and first 8 claims in the first screen; every
+  paper chapter opens with a verdict box and a figure with a numbered caption that its text
+  refers to; glued values in the body's weight; no raw identifier (``0p3``, ``_mm:``,
+  ``t2 ``, a claim id) outside code; figure text at least 10 px as shown (the PNG's smallest
+  font size, recorded by ``io.results.write_figure``, at its dpi and shown width);
+- light pages: a favicon; at most 1.5 MB of files loaded besides the page's own images and
+  MathJax, and at most 1.3 MB of MathJax on a page with formulas.
 
-Screenshots of the claims page and a notebook page go to ``book/_build/screenshots/``
-(git-ignored) for a reviewer.
+Every page is loaded again at a phone's 390 x 844 (:data:`PHONE`): no page scrolls sideways,
+no word breaks inside a table cell (at either size), the claims are cards and the first shows
+whole. Screenshots of the claims page and the hybrid chapter at both sizes go to
+``book/_build/screenshots/`` (git-ignored) for a reviewer.
 
 Without Chromium the tests fail and say how to install it.
 """

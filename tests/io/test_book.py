@@ -358,3 +358,15 @@ def test_book_packages_are_pinned():
             pins[name.strip().lower()] = version.strip()
     for package in ("jupyter-book", "sphinx-book-theme", "pydata-sphinx-theme"):
         assert pins.get(package), f"{package} is not pinned with == in environment.txt"
+
+
+def test_book_extension_drops_the_icon_script():
+    """Pages lose the 1.45 MB icon script (calstudy.css draws the icons), and keep the rest."""
+    ext = _extension()
+    page = (
+        '<head>\n  <script defer src="_static/scripts/fontawesome.js?digest=1"></script>\n'
+        '<script src="_static/x.js"></script>\n</head><body>fontawesome.js</body>'
+    )
+    light = ext.lighten(page)
+    assert "scripts/fontawesome.js" not in light and '<script src="_static/x.js">' in light
+    assert light.endswith("<body>fontawesome.js</body>")  # only the head's script line goes

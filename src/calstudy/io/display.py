@@ -93,9 +93,10 @@ def format_table(
     digits : int or mapping, default 4
         Significant digits of floats, for all columns or per column.
     max_columns : int, default 8
-        Widest table shown. A wider one with fewer than ``max_columns`` rows is transposed
-        (its rows become columns, headed by the first key column, beside a column of the
-        former headers); otherwise it is split into tables of at most ``max_columns``
+        Widest table shown. A wider one with a key column and fewer than ``max_columns`` rows
+        is transposed (its rows become columns, headed by the key's values, beside a column of
+        the former headers headed by the key's name); otherwise it is split into tables of at
+        most ``max_columns``
         columns, each repeating the key columns. In the book the tables also stay within the
         column at any width (``book/_static/calstudy.css``: long header words break).
     keys : sequence of str, optional
@@ -149,12 +150,11 @@ def format_table(
     key_headers = [header(k, units.get(k)) for k in keys]
     if text.shape[1] <= max_columns:
         return [text], notes
-    if len(text) + 1 <= max_columns:  # the rows become columns, beside one of labels
-        label = key_headers[0] if key_headers else None
-        body = text.set_index(label) if label else text
-        flipped = body.T
+    if key_headers and len(text) + 1 <= max_columns:  # rows become columns, headed by the key
+        label = key_headers[0]
+        flipped = text.set_index(label).T
         flipped.columns = [str(c) for c in flipped.columns]
-        flipped.insert(0, "", flipped.index)
+        flipped.insert(0, label, flipped.index)
         return [flipped.reset_index(drop=True)], notes
     rest = [c for c in text.columns if c not in key_headers]
     width = max(1, max_columns - len(key_headers))
