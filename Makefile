@@ -178,4 +178,5 @@ bench: $(STAMP) ## time the speed budgets (prints; writes nothing)
 
 clean: ## remove the built book and executed notebooks (results/ and .venv stay)
 	rm -rf book/_build book/notebooks book/claims.md book/claims-verdicts.png \
-		book/claims-register.csv book/claims-results.csv
+		book/claims-register.csv book/claims-results.csv book/claims-headline.md book/ledger.md \
+		book/verdicts-*.md book/key-*.png

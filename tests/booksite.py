@@ -23,13 +23,17 @@ import yaml
 from support import CI_PARAMS, NOTEBOOK_DIR, REPRODUCIBLE_ENV
 
 from calstudy.core.paths import REPO_ROOT, RESULTS_DIR
-from calstudy.io.book import render_claims_page
+from calstudy.io.book import PAPERS, render_claims_page
 from calstudy.io.ledger import render_ledger_page
 
 BOOK_DIR = REPO_ROOT / "book"
 BIN = Path(sys.executable).parent
 # Generated files of book/ that the copy makes afresh (see the Makefile's clean target).
-GENERATED = ("_build", "notebooks", "claims.md", "claims-verdicts.png", "ledger.md")
+GENERATED = (
+    "_build", "notebooks", "claims.md", "claims-verdicts.png", "claims-headline.md", "ledger.md",
+    *(f"{kind}-{paper}.{ext}" for paper in PAPERS for kind, ext in
+      (("verdicts", "md"), ("key", "png"))),
+)
 
 
 def _env() -> dict[str, str]:
@@ -141,7 +145,10 @@ def build_ci_book(dest: Path, runs: dict[str, CiRun]) -> Path:
     (book / "notebooks").mkdir()
     for run in runs.values():
         shutil.copyfile(run.executed, book / "notebooks" / run.executed.name)
-    render_claims_page(book / "claims.md", results=RESULTS_DIR / "claims.csv")
+    # the claims and verdicts of the committed results; the chapters' key figures of these runs
+    results = {run.results.parent for run in runs.values()}
+    render_claims_page(book / "claims.md", results=RESULTS_DIR / "claims.csv",
+                       figures=results.pop() if len(results) == 1 else None)
     (book / "ledger.md").write_text(render_ledger_page())
     done = subprocess.run(
         [

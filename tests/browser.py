@@ -33,11 +33,13 @@ def find_chromium() -> str | None:
 
 @dataclass
 class PageReport:
-    """What one page load showed: console errors and requests that left the machine."""
+    """What one page load showed: console errors, requests that left the machine, and every
+    URL requested (``data:`` URLs aside)."""
 
     url: str
     errors: list[str] = field(default_factory=list)
     remote_requests: list[str] = field(default_factory=list)
+    requests: list[str] = field(default_factory=list)
 
 
 class Chromium:
@@ -200,6 +202,8 @@ class Chromium:
                 report.errors.append(f"log: {entry['text']} {entry.get('url', '')}".strip())
             elif e["method"] == "Network.requestWillBeSent":
                 req = p["request"]["url"]
+                if not req.startswith("data:"):
+                    report.requests.append(req)
                 if not req.startswith(LOCAL_SCHEMES):
                     report.remote_requests.append(req)
         return report

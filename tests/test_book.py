@@ -2,7 +2,7 @@
 
 The book is built into a temporary folder from the notebooks executed at their CI values
 (:mod:`booksite`; the session's ``ci_runs``, shared with ``test_notebooks.py``); then every
-page is loaded in Chromium at a 1,400 px window (:mod:`browser`) and checked:
+page is loaded in Chromium at 1366 x 900 (:data:`DESKTOP`; :mod:`browser`) and checked:
 
 - no console error, no request leaving the machine, no absolute path of the build machine;
 - all math typeset by the shipped MathJax (no raw ``$``, ``\\(`` or ``\\[`` left in the text),
@@ -16,16 +16,26 @@ page is loaded in Chromium at a 1,400 px window (:mod:`browser`) and checked:
 - every link inside the book reaches its page and anchor; the claims page has a badge in its
   verdict's colour per claim and links every computed claim to a section of its notebook;
   one search box (no second header bar), no script twice in a page's head, page titles
-  without the book's name twice.
+  without the book's name twice;
+- results first: the claims table's header and first 8 claims in the first screen; every
+  paper chapter opens with a verdict box and a figure with a numbered caption that its text
+  refers to; glued values in the body's weight; no raw identifier (``0p3``, ``_mm:``,
+  ``t2 ``, a claim id) outside code; figure text at least 10 px as shown (the PNG's smallest
+  font size, recorded by ``io.results.write_figure``, at its dpi and shown width);
+- light pages: a favicon; at most 1.5 MB of files loaded besides the page's own images and
+  MathJax, and at most 1.3 MB of MathJax on a page with formulas.
 
-Screenshots of the claims page and a notebook page go to ``book/_build/screenshots/``
-(git-ignored) for a reviewer.
+Every page is loaded again at a phone's 390 x 844 (:data:`PHONE`): no page scrolls sideways,
+no word breaks inside a table cell (at either size), the claims are cards and the first shows
+whole. Screenshots of the claims page and the hybrid chapter at both sizes go to
+``book/_build/screenshots/`` (git-ignored) for a reviewer.
 
 Without Chromium the tests fail and say how to install it.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from urllib.parse import unquote, urlparse
 
@@ -36,8 +46,8 @@ from browser import INSTALL_HINT, Chromium, find_chromium
 
 from calstudy.claims import claim_register
 from calstudy.core.paths import REPO_ROOT, RESULTS_DIR
-from calstudy.io.book import VERDICT_COLOURS
-from calstudy.io.results import read_claims
+from calstudy.io.book import PAPERS, VERDICT_COLOURS
+from calstudy.io.results import FONT_KEY, read_claims
 
 pytestmark = pytest.mark.book
 
@@ -62,13 +72,28 @@ def _toc_pages() -> list[str]:
 #: (code listings scroll by the theme's design and are not counted; tables, outputs, figures
 #: and equations are).
 FIT_COLUMN = tuple(_toc_pages())
-#: Pages photographed for the reviewer, and the file names of their screenshots.
+#: Window sizes a reader opens the book at (CSS px): a laptop and a phone.
+DESKTOP = (1366, 900)
+PHONE = (390, 844)
+#: Pages photographed for the reviewer at both sizes, and the stem of their screenshots.
 SCREENSHOTS = {
-    "claims.html": "claims.png",
-    "notebooks/04_binocular_correction.html": "notebook-04.png",
+    "claims.html": "claims",
+    "hybrid.html": "chapter-hybrid",
 }
 SCREENSHOT_DIR = REPO_ROOT / "book" / "_build" / "screenshots"
-WIDTH = 1400
+#: The paper chapters: each opens with a verdict box and a numbered figure.
+CHAPTERS = tuple(f"{paper}.html" for paper in PAPERS)
+#: Claims rows of the table visible without scrolling at DESKTOP.
+FIRST_SCREEN_CLAIMS = 8
+#: Smallest figure text on the page at 100 % (CSS px).
+MIN_FIGURE_TEXT_PX = 10.0
+#: Assets a page loads besides its own images and MathJax (bytes): HTML, CSS, scripts, fonts.
+MAX_PAGE_ASSETS = 1_500_000
+#: What MathJax adds on a page with formulas (its one bundle, ``tex-chtml.js``, 1.16 MB, and
+#: the fonts it loads).
+MAX_MATHJAX = 1_300_000
+#: Text a reader must not meet outside code: raw column patterns and claim ids.
+RAW_PATTERNS = (r"\d+p\d", r"_mm:", r"\bt\d ", r"\b(?:hybrid|selfcal|binocular|dualarm)\.[a-z_]+\b")
 
 # Runs in the page after MathJax and the images settled; returns what the checks read.
 _INSPECT = r"""
@@ -181,6 +206,71 @@ _INSPECT = r"""
 """
 
 
+# Runs after _INSPECT: what a reader meets at the window's size (first screen, sideways
+# scrolling, broken words, weights, figures, the chapter's opening, the assets loaded).
+_READER = r"""
+(() => {
+  const art = document.querySelector('article.bd-article') || document.querySelector('main')
+    || document.body;
+  const rect = e => { const r = e.getBoundingClientRect();
+    return {top: r.top + window.scrollY, bottom: r.bottom + window.scrollY, width: r.width}; };
+  const table = art.querySelector('table.claims');
+  const claims = table ? {
+    header: table.tHead ? rect(table.tHead) : null,
+    header_shown: table.tHead ? getComputedStyle(table.tHead).display !== 'none' : false,
+    rows: [...table.querySelectorAll('tr.claim')].map(rect),
+    display: (table.querySelector('tr.claim') ? getComputedStyle(
+      table.querySelector('tr.claim')).display : ''),
+  } : null;
+  // a word split over two lines inside a table cell (a break at a hyphen or slash is a break
+  // between words)
+  const broken = [];
+  for (const cell of art.querySelectorAll('td, th')) {
+    if (broken.length > 20) break;
+    if (cell.getBoundingClientRect().width === 0 || cell.closest('pre, .cell_input')) continue;
+    const walker = document.createTreeWalker(cell, NodeFilter.SHOW_TEXT);
+    while (walker.nextNode()) {
+      const node = walker.currentNode;
+      for (const m of node.nodeValue.matchAll(/[^\s\-‐–—\/]{2,}/g)) {
+        const range = document.createRange();
+        range.setStart(node, m.index);
+        range.setEnd(node, m.index + m[0].length);
+        const tops = new Set([...range.getClientRects()].filter(r => r.width > 0)
+          .map(r => Math.round(r.top)));
+        if (tops.size > 1) { broken.push(`${m[0]} in "${cell.textContent.trim().slice(0, 50)}"`); }
+      }
+    }
+  }
+  const bold = [...art.querySelectorAll('.pasted-text, .pasted-inline')].filter(e =>
+    +getComputedStyle(e).fontWeight >= 600 && +getComputedStyle(e.parentElement).fontWeight < 600
+  ).map(e => e.textContent.trim().slice(0, 60));
+  const shown = art.cloneNode(true);
+  shown.querySelectorAll('.cell_input, pre, code, .highlight, script, style, mjx-container, '
+    + 'mjx-assistive-mml').forEach(e => e.remove());
+  const walker = document.createTreeWalker(shown, NodeFilter.SHOW_TEXT);
+  const parts = [];
+  while (walker.nextNode()) { parts.push(walker.currentNode.nodeValue); }
+  const images = [...art.querySelectorAll('img')].filter(i => i.getBoundingClientRect().width > 0)
+    .map(i => ({src: i.currentSrc || i.src, shown: i.getBoundingClientRect().width,
+                natural: i.naturalWidth, alt: (i.getAttribute('alt') || '').slice(0, 50)}));
+  const boxes = [...art.querySelectorAll('.verdict-box')].map(b =>
+    b.querySelectorAll('.verdict').length);
+  const numbered = [...art.querySelectorAll('figure')].map(f =>
+    (f.querySelector('.caption-number') || {textContent: ''}).textContent.trim())
+    .filter(n => /^Fig\.?\s*\d+/.test(n));
+  const numrefs = [...art.querySelectorAll('a.reference span.std-numref, a.reference.internal')]
+    .map(a => a.textContent.trim()).filter(s => /^Fig\.?\s*\d+/.test(s));
+  return {
+    scroll_width: document.documentElement.scrollWidth, inner_width: window.innerWidth,
+    inner_height: window.innerHeight, claims: claims, broken: broken, bold: bold,
+    glued: art.querySelectorAll('.pasted-text, .pasted-inline').length,
+    text: parts.join(' '), images: images, boxes: boxes, numbered: numbered, numrefs: numrefs,
+    icons: [...document.querySelectorAll('link[rel~="icon"]')].map(l => l.href),
+  };
+})()
+"""
+
+
 @pytest.fixture(scope="session")
 def chromium_binary() -> str:
     path = find_chromium()
@@ -202,13 +292,31 @@ def seen(chromium_binary, build) -> dict[str, dict]:
     """Every page opened once: ``{relative path: report and inspection}``."""
     html, _ = build
     out = {}
-    with Chromium(chromium_binary, width=WIDTH) as browser:
+    with Chromium(chromium_binary, width=DESKTOP[0], height=DESKTOP[1]) as browser:
         for page in pages(html):
             rel = page.relative_to(html).as_posix()
             report = browser.open(page.as_uri())
-            out[rel] = {"report": report, **browser.evaluate(_INSPECT)}
+            out[rel] = {"report": report, **browser.evaluate(_INSPECT),
+                        "reader": browser.evaluate(_READER)}
             if rel in SCREENSHOTS:
-                out[rel]["screenshot"] = browser.screenshot(SCREENSHOT_DIR / SCREENSHOTS[rel])
+                out[rel]["screenshot"] = browser.screenshot(
+                    SCREENSHOT_DIR / f"{SCREENSHOTS[rel]}-{DESKTOP[0]}.png")
+    return out
+
+
+@pytest.fixture(scope="session")
+def phone(chromium_binary, build) -> dict[str, dict]:
+    """Every page opened once at the phone's size: ``{relative path: what _READER read}``."""
+    html, _ = build
+    out = {}
+    with Chromium(chromium_binary, width=PHONE[0], height=PHONE[1]) as browser:
+        for page in pages(html):
+            rel = page.relative_to(html).as_posix()
+            browser.open(page.as_uri())
+            out[rel] = {"reader": browser.evaluate(_READER)}
+            if rel in SCREENSHOTS:
+                out[rel]["screenshot"] = browser.screenshot(
+                    SCREENSHOT_DIR / f"{SCREENSHOTS[rel]}-{PHONE[0]}.png")
     return out
 
 
@@ -379,8 +487,167 @@ def test_page_titles(seen):
     assert not bad, bad
 
 
-def test_screenshots_written(seen):
-    for page, name in SCREENSHOTS.items():
-        assert page in seen, f"{page} was not built"
-        shot = seen[page]["screenshot"]
-        assert shot == SCREENSHOT_DIR / name and shot.stat().st_size > 10_000
+def test_screenshots_written(seen, phone):
+    for size, views in ((DESKTOP, seen), (PHONE, phone)):
+        for page, stem in SCREENSHOTS.items():
+            assert page in views, f"{page} was not built"
+            shot = views[page]["screenshot"]
+            assert shot == SCREENSHOT_DIR / f"{stem}-{size[0]}.png"
+            assert shot.stat().st_size > 10_000
+
+
+def test_claims_table_in_the_first_screen(seen, phone):
+    """At 1366 x 900 the claims table's header and its first 8 claims show without scrolling;
+    on a phone the claims are cards (one block each) and the first one shows whole."""
+    desk = seen["claims.html"]["reader"]
+    claims = desk["claims"]
+    assert claims is not None, "the claims page has no table.claims"
+    height = desk["inner_height"]
+    assert claims["header_shown"] and claims["header"]["bottom"] <= height, claims["header"]
+    assert len(claims["rows"]) >= FIRST_SCREEN_CLAIMS
+    last = claims["rows"][FIRST_SCREEN_CLAIMS - 1]
+    assert last["bottom"] <= height, (
+        f"claim {FIRST_SCREEN_CLAIMS} ends {last['bottom']:.0f} px down in a {height} px window")
+    mobile = phone["claims.html"]["reader"]["claims"]
+    assert mobile["display"] == "block", f"claims shown as {mobile['display']}, not cards"
+    first = mobile["rows"][0]
+    assert first["bottom"] <= PHONE[1], f"the first claim card ends {first['bottom']:.0f} px down"
+
+
+def test_no_page_scrolls_sideways(seen, phone):
+    def problems(_, info):
+        r = info["reader"]
+        return ([f"{r['scroll_width']} px wide in a {r['inner_width']} px window"]
+                if r["scroll_width"] > r["inner_width"] else [])
+
+    for views in (seen, phone):
+        assert not any(problems(p, i) for p, i in views.items()), _failures(views, problems)
+
+
+def test_no_word_broken_inside_a_table_cell(seen, phone):
+    for size, views in ((DESKTOP, seen), (PHONE, phone)):
+        assert not any(i["reader"]["broken"] for i in views.values()), _failures(
+            views, lambda _, i, w=size[0]: [f"at {w} px, word broken: {s}"
+                                            for s in i["reader"]["broken"]]
+        )
+
+
+def test_glued_values_in_the_body_weight(seen):
+    glued = sum(i["reader"]["glued"] for i in seen.values())
+    assert glued, "no page holds a glued value: the check reads nothing"
+    assert not any(i["reader"]["bold"] for i in seen.values()), _failures(
+        seen, lambda _, i: [f"bold glued value: {s!r}" for s in i["reader"]["bold"]]
+    )
+
+
+def test_no_raw_identifiers_in_page_text(seen):
+    """Outside code, no raw column pattern (``0p3``, ``_mm:``, ``t2 ``) and no claim id: the
+    label map (calstudy.core.labels) writes them as words."""
+    def problems(_, info):
+        text = info["reader"]["text"]
+        return [f"raw identifier: {text[max(0, m.start() - 30):m.end() + 20]!r}"
+                for pattern in RAW_PATTERNS for m in re.finditer(pattern, text)][:5]
+
+    assert not any(problems(p, i) for p, i in seen.items()), _failures(seen, problems)
+
+
+def _png(src: str, html: Path):
+    """The PNG an image shows: from its data URI or its file."""
+    import base64
+    import io
+
+    from PIL import Image
+
+    if src.startswith("data:"):
+        return Image.open(io.BytesIO(base64.b64decode(src.split(",", 1)[1])))
+    return Image.open(Path(unquote(urlparse(src).path)))
+
+
+def test_figure_text_at_least_10_px(seen, build):
+    """Every figure's smallest text, as the page shows it at 1366 px: its size in points
+    (written into the PNG by io.results.write_figure) at the PNG's dpi, scaled by the shown
+    over the natural width."""
+    html, _ = build
+
+    def problems(_, info):
+        found = []
+        for img in info["reader"]["images"]:
+            png = _png(img["src"], html)
+            if png.format != "PNG":
+                continue
+            pt = png.info.get(FONT_KEY)
+            if pt is None:
+                found.append(f"no font size recorded in the figure {img['alt']!r}")
+                continue
+            dpi = png.info.get("dpi", (72, 72))[0]
+            px = float(pt) / 72 * dpi * img["shown"] / img["natural"]
+            if px < MIN_FIGURE_TEXT_PX:
+                found.append(f"text {px:.1f} px in the figure {img['alt']!r}")
+        return found
+
+    assert not any(problems(p, i) for p, i in seen.items()), _failures(seen, problems)
+
+
+def test_every_chapter_opens_with_verdicts_and_a_numbered_figure(seen):
+    for page in CHAPTERS:
+        r = seen[page]["reader"]
+        assert r["boxes"] and min(r["boxes"]) > 0, f"{page}: no verdict box with badges"
+        assert r["numbered"], f"{page}: no figure with a numbered caption"
+        assert r["numrefs"], f"{page}: the text refers to no figure by its number"
+
+
+def test_favicon(seen, build):
+    html, _ = build
+    assert (html / "favicon.ico").is_file(), "no favicon.ico at the site's root"
+
+    def problems(_, info):
+        icons = info["reader"]["icons"]
+        if not icons:
+            return ["no icon link"]
+        return [f"icon missing: {i}" for i in icons
+                if not Path(unquote(urlparse(i).path)).is_file()]
+
+    assert not any(problems(p, i) for p, i in seen.items()), _failures(seen, problems)
+
+
+_IMAGE = (".png", ".jpg", ".jpeg", ".gif", ".svg", ".webp", ".ico")
+_DATA_IMAGE = re.compile(r"data:image/[a-z+]+;base64,[A-Za-z0-9+/=]+")
+
+
+def page_assets(info) -> dict[str, int]:
+    """Bytes of each file a page requested besides images: the page (without the images it
+    holds as data URIs), CSS, scripts, fonts, MathJax's files."""
+    sizes = {}
+    for url in info["report"].requests:
+        if not url.startswith("file:"):
+            continue
+        path = Path(unquote(urlparse(url).path))
+        if path.suffix.lower() in _IMAGE or not path.is_file():
+            continue
+        size = path.stat().st_size
+        if path.suffix == ".html":
+            text = path.read_text(encoding="utf-8")
+            size -= sum(len(m.group(0).encode()) for m in _DATA_IMAGE.finditer(text))
+        sizes[path.as_posix()] = size
+    return sizes
+
+
+def test_page_assets_under_budget(seen):
+    """Each page loads at most 1.5 MB besides its own images, and MathJax at most 1.3 MB more
+    on a page with formulas."""
+    assert all(page_assets(i) for i in seen.values()), "a page loaded no file: nothing measured"
+
+    def problems(_, info):
+        sizes = page_assets(info)
+        mathjax = sum(v for k, v in sizes.items() if "/_static/mathjax/" in k)
+        total = sum(sizes.values()) - mathjax
+        found = []
+        if total > MAX_PAGE_ASSETS:
+            top = sorted(sizes.items(), key=lambda kv: -kv[1])[:3]
+            found.append(f"{total / 1e6:.2f} MB of assets besides MathJax; largest "
+                         + ", ".join(f"{Path(k).name} {v / 1e6:.2f} MB" for k, v in top))
+        if mathjax > MAX_MATHJAX:
+            found.append(f"MathJax loads {mathjax / 1e6:.2f} MB")
+        return found
+
+    assert not any(problems(p, i) for p, i in seen.items()), _failures(seen, problems)

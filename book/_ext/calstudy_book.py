@@ -11,6 +11,11 @@ twice in every page's head (the themes add them again while pages are written); 
 ``const THEBE_JS_URL`` is a console error ("Identifier 'THEBE_JS_URL' has already been
 declared"). When the build finishes, every page keeps only the first copy of each identical
 script line of its head. ``_static/calstudy.css`` styles the claims page (badges, table).
+
+Pages stay light: the theme's icon script (``fontawesome.js``, 1.45 MB, for a dozen icons) is
+dropped from every page and ``calstudy.css`` draws those icons as characters; the favicon is
+also copied to the site's root (``/favicon.ico``, which browsers ask for over HTTP). The
+notebooks offered for download (``_sources/``) lose their progress lines as the pages do.
 """
 
 from __future__ import annotations
@@ -84,18 +89,37 @@ def dedupe_head(text: str) -> str:
     return "".join(kept) + text[head_end:]
 
 
-def _dedupe_pages(app, exception) -> None:
+#: A script line of the head that no page needs (the icons are characters in calstudy.css).
+_ICON_SCRIPT = re.compile(r"^[ \t]*<script[^>]*scripts/fontawesome\.js[^>]*></script>[ \t]*\n?",
+                          re.MULTILINE)
+
+
+def lighten(text: str) -> str:
+    """``text`` of a page with repeated head scripts and the icon script removed."""
+    return _ICON_SCRIPT.sub("", dedupe_head(text))
+
+
+def _finish_pages(app, exception) -> None:
     if exception is not None or app.builder.format != "html":
         return
-    for page in Path(app.outdir).rglob("*.html"):
+    out = Path(app.outdir)
+    for page in out.rglob("*.html"):
         text = page.read_text(encoding="utf-8")
-        fixed = dedupe_head(text)
+        fixed = lighten(text)
         if fixed != text:
             page.write_text(fixed, encoding="utf-8")
+    for notebook in (out / "_sources").rglob("*.ipynb"):
+        text = notebook.read_text(encoding="utf-8")
+        fixed = strip_notebook_progress(text)
+        if fixed is not text:
+            notebook.write_text(fixed, encoding="utf-8")
+    favicon = out / "_static" / "favicon.ico"
+    if favicon.is_file():
+        (out / "favicon.ico").write_bytes(favicon.read_bytes())
 
 
 def setup(app):
     app.connect("source-read", _source_read)
-    app.connect("build-finished", _dedupe_pages)
+    app.connect("build-finished", _finish_pages)
     app.add_css_file("calstudy.css")
     return {"parallel_read_safe": True, "parallel_write_safe": True}

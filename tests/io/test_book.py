@@ -9,10 +9,14 @@ import pytest
 
 from calstudy.claims import CLAIM_COLUMNS, ClaimRow, claim_register
 from calstudy.io.book import (
+    COLUMNS,
     FIGURE_NAME,
+    HEADLINE_NAME,
     REGISTER_COPY,
     RESULTS_COPY,
+    claim_target,
     main,
+    percent,
     published_value,
     read_results,
     render_claims_page,
@@ -63,14 +67,15 @@ def results(tmp_path):
 
 
 def rows_of(text: str) -> dict[str, str]:
+    """Each claim's table row with the hidden row of its details, by claim id."""
     return {
-        line.split("<code>")[1].split("</code>")[0]: line
+        line.split('<summary title="')[1].split('"')[0]: line
         for line in text.splitlines()
-        if line.startswith("<tr><td><details>")
+        if line.startswith('<tr class="claim" id="claim-')
     }
 
 
-def test_page_has_counts_figure_table_and_dropdowns(tmp_path, results):
+def test_page_has_counts_table_figure_and_rules(tmp_path, results):
     book = tmp_path / "book"
     (book).mkdir()
     (book / "_toc.yml").write_text(
@@ -86,29 +91,96 @@ def test_page_has_counts_figure_table_and_dropdowns(tmp_path, results):
     for name in (FIGURE_NAME, REGISTER_COPY, RESULTS_COPY):
         assert (book / name).is_file(), name
     assert (book / FIGURE_NAME).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert f"```{{figure}} {FIGURE_NAME}\n:alt: Published against reproduced" in text
+    assert f"```{{figure}} {FIGURE_NAME}\n:name: fig-claims-forest\n:alt: Forest plot" in text
     assert f"{{download}}`data/claims.csv <{REGISTER_COPY}>`" in text
+    # the counts, then the one table right under them, then the figure, the rules folded
+    counts, table = text.index("verdict-counts"), text.index('<table class="claims">')
+    assert counts < table < text.index("{figure}") < text.index(":class: dropdown")
+    assert text.count('<table class="claims">') == 1
+    head = text[table:text.index("</thead>")]
+    assert [c.header for c in COLUMNS] == [
+        h.rsplit(">", 1)[1] for h in head.split("</th>")[:-1]
+    ]
     rows = rows_of(text)
     assert set(rows) == set(claim_register()["id"])
     coc = rows["binocular.coc"]
     # published in the unit of the reproduced figure, computed from the register's 0.049 -> 0.041
-    assert "<td>0.837 ratio<br>" in coc and "0.041 / 0.049 mm" in coc
-    assert "0.84 ratio" in coc and "[0.8, 0.88]" in coc and "N = 200" in coc
-    assert "71 %" in coc
-    assert "null control: not reproduced; oracle control: reproduced" in coc  # in the dropdown
-    assert '<a href="notebooks/04_binocular.html"' in coc  # listed in the toc: linked
+    assert ">0.837</span>" in coc and "0.041 / 0.049 mm" in coc
+    assert ">0.84</span>" in coc and "[0.8, 0.88]" in coc and "N = 200" in coc
+    assert ">71 %</td>" in coc
+    assert "null ✓" in coc and "oracle ✓" in coc  # the controls as badges
+    assert "null control: not reproduced; oracle control: reproduced" in coc  # the details
+    assert 'href="notebooks/04_binocular.html' in coc  # listed in the toc: linked
     assert "<p><em>Note:</em> a note</p>" in coc  # the note one click away
-    assert "verdict-reproduced" in coc
-    # an empty published cell says why: a bound of the study, not a figure of the paper
+    assert "verdict-reproduced" in coc and "circle-of-confusion rectification" in coc
+    # a bound the claim is judged against, not a figure of the paper
     handeye = rows["hybrid.handeye"]
-    assert "none in the paper" in handeye and "bound ≤ 3 × CRB RMS" in handeye
+    assert ">≤ 3</span>" in handeye and "bound ≤ 3 × CRB RMS" in handeye
     assert "Controls:" not in handeye  # no controls, no replication rate
-    assert 'title="no per-trial effect: not testable or no trials">—</span>' in handeye
-    assert '<a href="' not in handeye  # 01_hybrid is not in the toc
-    assert "<td>2–4 mm</td>" in rows["hybrid.systematic"]  # same unit: the paper's own figure
+    assert 'title="no control for this claim">—' in handeye
+    assert 'title="no per-trial effect">—</span>' in handeye
+    assert '<a ' not in handeye.split('claim-more')[0]  # 01_hybrid is not in the toc
+    assert ">2–4</span>" in rows["hybrid.systematic"]  # same unit: the paper's own figure
     assert "verdict-pending" in rows["selfcal.residual"]
     assert "±0.3 mm" in rows["hybrid.deviation"] and "+-" not in text
     assert "nan" not in text.lower().replace("nanc", "")
+
+
+def test_fragments_for_the_intro_and_the_chapters(tmp_path, results):
+    """The intro's headline counts the verdicts; each paper chapter's opening has one badge
+    and one sentence per claim of its paper and its key figure with a numbered caption."""
+    book = tmp_path / "book"
+    figures = tmp_path / "figures" / "04_binocular_correction"
+    figures.mkdir(parents=True)
+    (figures / "rmse_summary.png").write_bytes(b"\x89PNG\r\n\x1a\nnot really")
+    render_claims_page(book / "claims.md", results=results, figures=figures.parent)
+    n = len(claim_register())
+    headline_text = (book / HEADLINE_NAME).read_text()
+    assert headline_text.startswith(
+        f"Of the {n} claims of the four papers, checked over Monte Carlo trials on synthetic "
+        f"data: 1 reproduced, 2 direction only, 1 not reproduced and {n - 4} pending.")
+    assert f"```{{figure}} {FIGURE_NAME}\n:name: fig-intro-forest" in headline_text
+    box = (book / "verdicts-binocular.md").read_text()
+    n_binocular = int((claim_register()["paper"] == "binocular").sum())
+    assert box.count("<li>") == box.count('class="verdict verdict-') == n_binocular
+    assert ("Circle-of-confusion rectification: published 0.837 ratio, reproduced 0.84 ratio "
+            "(95 % interval 0.8 to 0.88, median of 200 trials), a significant effect within "
+            "the accepted band; 71 % of single reruns go the paper&#x27;s way.") in box
+    assert "```{figure} key-binocular.png\n:name: fig-binocular-key" in box
+    assert (book / "key-binocular.png").read_bytes() == (figures / "rmse_summary.png").read_bytes()
+    hybrid = (book / "verdicts-hybrid.md").read_text()
+    assert ("Hand-eye calibration: the bound is at most 3 RMS ratio; reproduced 3.5 RMS ratio"
+            in hybrid)
+    assert "{figure}" not in hybrid  # its notebook's figure is not there
+
+
+def test_claim_target_and_percent():
+    """Targets of the committed claims: the published figure with the factor-1.5 band (10
+    points for a percentage), a bound with its side (one computed by the notebook, read from
+    the note), no effect for a ratio without a published figure."""
+    from calstudy.core.paths import RESULTS_DIR
+
+    reg = claim_register().set_index("id", drop=False)
+    res = read_results(RESULTS_DIR / "claims.csv").set_index("id", drop=False)
+
+    def target(claim_id):
+        return claim_target(reg.loc[claim_id].to_dict(), res.loc[claim_id])
+
+    coc = target("binocular.coc")
+    assert coc.kind == "published" and coc.value == pytest.approx(0.041 / 0.049)
+    assert coc.band == pytest.approx((1 / 1.5, 1.5))
+    dev = target("hybrid.deviation")
+    assert dev.value == pytest.approx(96.55)
+    assert dev.band == pytest.approx((86.55 / 96.55, 106.55 / 96.55))
+    assert target("hybrid.systematic").value == pytest.approx(3.0)  # middle of 2-4 mm
+    handeye = target("hybrid.handeye")
+    assert (handeye.kind, handeye.value, handeye.band) == ("bound", 3.0, (0.0, 1.0))
+    corr = target("hybrid.correlation")  # 1.36/sqrt(n): the value the notebook computed
+    assert corr.kind == "bound" and corr.value == pytest.approx(0.105)
+    one = target("selfcal.one_step")
+    assert (one.kind, one.value, one.band) == ("no effect", 1.0, (0.0, 1.0))
+    assert percent(0.445) == format(0.445, ".0%").replace("%", " %") == "44 %"
+    assert percent(float("nan")) == "" and percent(None) == ""
 
 
 def test_page_is_deterministic_and_all_pending_without_results(tmp_path):
@@ -118,7 +190,7 @@ def test_page_is_deterministic_and_all_pending_without_results(tmp_path):
     text = first.decode()
     n = len(claim_register())
     assert f'verdict-pending">pending</span> {n}' in text
-    assert text.count('class="verdict verdict-pending"') == n + 1
+    assert text.count('class="verdict verdict-pending"') == n + 1  # a badge per claim, 1 count
     assert not (tmp_path / FIGURE_NAME).exists()
     render_claims_page(out, results=tmp_path / "none.csv")
     assert out.read_bytes() == first
@@ -286,3 +358,15 @@ def test_book_packages_are_pinned():
             pins[name.strip().lower()] = version.strip()
     for package in ("jupyter-book", "sphinx-book-theme", "pydata-sphinx-theme"):
         assert pins.get(package), f"{package} is not pinned with == in environment.txt"
+
+
+def test_book_extension_drops_the_icon_script():
+    """Pages lose the 1.45 MB icon script (calstudy.css draws the icons), and keep the rest."""
+    ext = _extension()
+    page = (
+        '<head>\n  <script defer src="_static/scripts/fontawesome.js?digest=1"></script>\n'
+        '<script src="_static/x.js"></script>\n</head><body>fontawesome.js</body>'
+    )
+    light = ext.lighten(page)
+    assert "scripts/fontawesome.js" not in light and '<script src="_static/x.js">' in light
+    assert light.endswith("<body>fontawesome.js</body>")  # only the head's script line goes

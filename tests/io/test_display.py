@@ -66,7 +66,10 @@ def test_wide_short_table_is_transposed():
     df = pd.DataFrame({"method": ["x", "y"], **{f"c{i}_mm": [i, i + 0.5] for i in range(12)}})
     (t,), _ = format_table(df)
     assert t.shape == (12, 3)
-    assert list(t.columns) == ["", "x", "y"] and t.iloc[0, 0] == "c0 (mm)"
+    assert list(t.columns) == ["method", "x", "y"] and t.iloc[0, 0] == "c0 (mm)"
+    # without a key column the rows have no names to head columns with: split, not transposed
+    tables, _ = format_table(df.drop(columns="method"))
+    assert [list(t.columns)[:1] for t in tables] == [["c0 (mm)"], ["c8 (mm)"]]
 
 
 def test_a_table_with_as_many_rows_as_columns_allowed_is_split_not_transposed():
@@ -76,7 +79,7 @@ def test_a_table_with_as_many_rows_as_columns_allowed_is_split_not_transposed():
     assert all(t.shape[1] <= 8 for t in tables) and tables[0].columns[0] == "k"
     seven = df.iloc[:7]
     (t,), _ = format_table(seven, max_columns=8)
-    assert t.shape == (9, 8) and list(t.columns)[:2] == ["", "a"]  # 7 rows: transposed
+    assert t.shape == (9, 8) and list(t.columns)[:2] == ["k", "a"]  # 7 rows: transposed
 
 
 def test_table_html_right_aligns_numbers():

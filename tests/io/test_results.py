@@ -378,3 +378,27 @@ def test_aggregate_claims_empty(tmp_path):
     assert (tmp_path / "claims.csv").read_text() == ",".join(CLAIM_COLUMNS) + "\n"
 
 
+
+
+def test_write_figure_raises_small_text_and_records_the_smallest_size(tmp_path):
+    """Text below MIN_FONT_PT is raised to it; the PNG says the smallest size, which the
+    book's check turns into pixels on the page."""
+    from matplotlib.figure import Figure
+    from PIL import Image
+
+    from calstudy.io.results import FONT_KEY, MIN_FONT_PT
+
+    fig = Figure(figsize=(4, 3))
+    ax = fig.add_subplot()
+    ax.set_xlabel("tiny", fontsize=5)
+    ax.set_title("large", fontsize=14)
+    ax.tick_params(labelsize=12)
+    title = ax.title
+    png = Image.open(write_figure(fig, tmp_path / "f.png"))
+    assert float(png.info[FONT_KEY]) == MIN_FONT_PT
+    assert ax.xaxis.label.get_fontsize() == MIN_FONT_PT and title.get_fontsize() == 14
+    big = Figure(figsize=(4, 3))
+    big.add_subplot().set_title("large", fontsize=14)
+    for t in big.axes[0].get_xticklabels() + big.axes[0].get_yticklabels():
+        t.set_fontsize(11)
+    assert float(Image.open(write_figure(big, tmp_path / "g.png")).info[FONT_KEY]) == 11

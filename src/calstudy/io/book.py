@@ -20,6 +20,7 @@ import shutil
 import sys
 from collections import Counter
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,7 @@ import pandas as pd
 import yaml
 
 from calstudy.claims import CLAIM_COLUMNS, VERDICTS
+from calstudy.core.labels import claim_label
 from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
 from calstudy.io.claims_cells import (
     Published,
@@ -40,15 +42,23 @@ from calstudy.io.claims_cells import (
 from calstudy.io.results import read_claims
 
 __all__ = [
+    "COLUMNS",
     "FIGURE_NAME",
+    "HEADLINE_NAME",
     "REGISTER_COPY",
     "RESULTS_COPY",
+    "chapter_fragment",
+    "claim_sentence",
+    "claim_target",
     "claims_figure",
+    "headline",
     "main",
     "published_value",
     "read_results",
     "render_claims_page",
+    "percent",
     "typeset",
+    "verdict_box",
 ]
 
 #: Paper short name -> (title, bibtex key in book/references.bib), in book order.
@@ -176,34 +186,6 @@ def _published(claim: pd.Series, row: pd.Series | None) -> Published:
     return published_figure(claim, unit)
 
 
-def _published_html(pub: Published) -> str:
-    main = html.escape(pub.text)
-    if pub.value is None:
-        main = f'<span class="why">{main}</span>'
-    extra = f'<br><span class="why">{html.escape(pub.detail)}</span>' if pub.detail else ""
-    return main + extra
-
-
-def _reproduced_html(row: pd.Series) -> str:
-    value, lo, hi = _number(row["reproduced"]), _number(row["ci_low"]), _number(row["ci_high"])
-    if not value:
-        if row["verdict"] == "not testable":
-            return '<span class="why">no figure: not testable (see the note)</span>'
-        return '<span class="why">not computed</span>'
-    unit = html.escape(typeset(row["unit"]))
-    interval = f" [{lo}, {hi}]" if lo and hi else ""
-    n = int(row["n"])
-    trials = f'<br><span class="why">N = {n}</span>' if n > 0 else ""
-    return f"{value} {unit}<span class=\"ci\">{interval}</span>{trials}"
-
-
-def _rate_html(row: pd.Series) -> str:
-    rate = row["replication_rate"]
-    if rate is None or not math.isfinite(float(rate)):
-        return '<span class="why" title="no per-trial effect: not testable or no trials">—</span>'
-    return f"{100 * float(rate):.0f} %"
-
-
 def _controls_text(row: pd.Series) -> str:
     parts = [
         f"{name} control: {typeset(row[col])}"
@@ -248,154 +230,463 @@ def _section_link(claim_id: str, stem: str, book_dir: Path, toc: set[str]) -> st
     if len(short) > 28:
         short = short[:28].rsplit(" ", 1)[0].rstrip(",;:(") + " …"
     return (f'<a class="section-link" href="{page}#{anchor}" title="{html.escape(heading)}">'
-            f"{number} § {html.escape(short)}</a>")
+            f'{number} §<span class="nb-heading"> {html.escape(short)}</span></a>')
 
 
-def _table(group: pd.DataFrame, computed: dict, toc: set[str], book_dir: Path) -> list[str]:
-    lines = [
-        '<table class="claims">',
-        '<colgroup><col class="c-claim"><col class="c-pub"><col class="c-rep">'
-        '<col class="c-rate"><col class="c-verdict"><col class="c-nb"></colgroup>',
-        "<thead><tr><th>claim (click for the statement)</th><th>published</th>"
-        "<th>reproduced [95 % CI]</th><th>repl. rate</th><th>verdict</th>"
-        "<th>judged in</th></tr></thead>",
-        "<tbody>",
-    ]
-    for _, claim in group.iterrows():
-        row = computed.get(claim["id"])
-        short = html.escape(_short(claim["statement"]))
-        summary = f"<code>{html.escape(claim['id'])}</code> {short}"
-        # the summary toggles the full-width row below it (book/_static/calstudy.css)
-        claim_cell = f"<details><summary>{summary}</summary></details>"
-        published = _published_html(_published(claim, row))
-        if row is None:
-            cells = [claim_cell, published, '<span class="why">not computed yet</span>', "—",
-                     _badge(PENDING), "—"]
-        else:
-            stem = typeset(row["notebook"])
-            cells = [claim_cell, published, _reproduced_html(row), _rate_html(row),
-                     _badge(typeset(row["verdict"])),
-                     _section_link(claim["id"], stem, book_dir, toc)]
-        classes = ["", "", "num", "num", "", ""]
-        tds = "".join(f'<td class="{c}">{v}</td>' if c else f"<td>{v}</td>"
-                      for c, v in zip(classes, cells, strict=True))
-        more = f'<tr class="claim-more"><td colspan="{len(cells)}">{_details(claim, row)}</td></tr>'
-        lines.append(f"<tr>{tds}</tr>{more}")
+@dataclass(frozen=True)
+class Target:
+    """What a claim's reproduced figure is set against, in the reproduced figure's unit.
+
+    Attributes
+    ----------
+    value : float or None
+        The published figure (the middle of a published range), the bound, or 1 for a ratio
+        judged against no effect; None when there is nothing to set it against.
+    kind : str
+        ``"published"``, ``"bound"`` or ``"no effect"`` ("" without a value).
+    band : tuple of float
+        The accepted region of reproduced / target: the factor-1.5 band (10 percentage points
+        for a percentage) around a published figure, the side of the bound or of no effect
+        that the paper claims.
+    """
+
+    value: float | None
+    kind: str = ""
+    band: tuple[float, float] = (0.0, 0.0)
+
+
+#: Widest band factor of the rule: a median within a factor 1.5 of the published figure.
+FACTOR = 1.5
+#: ... or within 10 percentage points of a published percentage.
+PERCENT_POINTS = 10.0
+_NOTE_BOUND = re.compile(r"\bbound\s*(?:<=|≤|>=|≥)\s*([0-9.]+)")
+
+
+def claim_target(claim, row: pd.Series | None) -> Target:
+    """The target of ``claim`` (a register row) for the reproduced ``row`` (results/claims.csv);
+    a bound the register states as a formula (``1.36/sqrt(n)``) is the value the notebook
+    computed and wrote into the row's note ("bound <= 0.105")."""
+    unit = typeset(row["unit"]) if row is not None else typeset(claim["unit"])
+    higher = typeset(claim.get("direction", "")) == "higher"
+    side = (1.0, math.inf) if higher else (0.0, 1.0)
+    pub = published_figure(claim, unit).value
+    if typeset(claim.get("kind", "")) == "bound":
+        bound = bound_value(claim)
+        if bound is None and pub is not None:
+            bound = float(np.mean(pub))
+        if bound is None and row is not None and (m := _NOTE_BOUND.search(typeset(row["note"]))):
+            bound = float(m.group(1))
+        return Target(bound, "bound", side) if bound is not None else Target(None)
+    if pub is not None:
+        value = float(np.mean(pub))
+        if unit == "%":
+            return Target(value, "published", ((value - PERCENT_POINTS) / value,
+                                               (value + PERCENT_POINTS) / value))
+        return Target(value, "published", (1 / FACTOR, FACTOR))
+    if is_ratio(unit):
+        return Target(1.0, "no effect", side)
+    return Target(None)
+
+
+def percent(rate: object) -> str:
+    """A share as the book writes it everywhere: whole percent (``0.445`` -> ``"45 %"``,
+    Python's ``.0%`` rounding), "" for a missing value."""
+    try:
+        x = float(rate)
+    except (TypeError, ValueError):
+        return ""
+    return f"{x:.0%}".replace("%", " %") if math.isfinite(x) else ""
+
+
+def _control_badges(row: pd.Series | None) -> str:
+    """Small badges of the null and oracle controls: passed (the null not reproduced, the oracle
+    significant), failed, or absent."""
+    if row is None:
+        return ""
+    out = []
+    for name, col, wanted in (("null", "null_control", ("not reproduced",)),
+                              ("oracle", "oracle_control", ("reproduced", "direction only"))):
+        got = typeset(row[col])
+        if not got:
+            continue
+        ok = got in wanted
+        mark, cls = ("✓", "pass") if ok else ("✗", "fail")
+        out.append(f'<span class="control control-{cls}" title="{name} control: '
+                   f'{html.escape(got)}">{name} {mark}</span>')
+    return " ".join(out) or '<span class="why" title="no control for this claim">—</span>'
+
+
+def _target_html(claim, row: pd.Series | None) -> str:
+    target = claim_target(claim, row)
+    pub = _published(claim, row)
+    tip = html.escape(" ".join(p for p in (pub.text, pub.detail) if p), quote=True)
+    if target.kind == "bound":
+        sign = "≥" if target.band[1] == math.inf else "≤"
+        return f'<span title="bound: {tip}">{sign} {_number(target.value)}</span>'
+    if target.kind == "published":
+        shown = pub.text.removesuffix(typeset(row["unit"]) if row is not None else "").strip()
+        return f'<span title="{tip}">{html.escape(shown)}</span>'
+    if target.kind == "no effect":
+        return f'<span class="why" title="{tip}">none; vs 1</span>'
+    return f'<span class="why" title="{tip}">none</span>'
+
+
+def _reproduced_cell(row: pd.Series | None) -> str:
+    if row is None:
+        return '<span class="why">not computed yet</span>'
+    value, lo, hi = _number(row["reproduced"]), _number(row["ci_low"]), _number(row["ci_high"])
+    if not value:
+        return '<span class="why">no figure</span>'
+    interval = f' <span class="ci">[{lo}, {hi}]</span>' if lo and hi else ""
+    n = int(row["n"])
+    return f'<span title="median of N = {n} trials">{value}</span>{interval}'
+
+
+def _unit_cell(claim, row: pd.Series | None) -> str:
+    return html.escape(UNIT_LABELS.get(u := typeset(row["unit"] if row is not None
+                                                    else claim["unit"]), u))
+
+
+#: Units as the claims table writes them (short words).
+UNIT_LABELS = {"x CRB RMS": "× CRB", "× CRB RMS": "× CRB", "Kolmogorov distance": "K-S distance",
+               "model error / CRB": "× CRB", "field error ratio": "ratio",
+               "frame error ratio": "ratio", "iterations": "iterations"}
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of the claims table: header, CSS class and the cell of a claim.
+
+    ``cell(claim, row, context)`` gets the register row, the results row (None while pending)
+    and a dict with ``toc`` and ``book_dir``; it returns HTML.
+    """
+
+    key: str
+    header: str
+    cell: object
+    css: str = ""
+
+
+def _claim_cell(claim, row, context) -> str:
+    words = html.escape(claim_label(claim["id"]))
+    return (f'<details><summary title="{html.escape(claim["id"])}">{words}</summary>'
+            "</details>")
+
+
+def _verdict_cell(claim, row, context) -> str:
+    return _badge(PENDING if row is None else typeset(row["verdict"]))
+
+
+def _notebook_cell(claim, row, context) -> str:
+    if row is None:
+        return "—"
+    return _section_link(claim["id"], typeset(row["notebook"]), context["book_dir"],
+                         context["toc"])
+
+
+#: The columns of the claims table, in order; a column is added by adding an entry.
+COLUMNS = [
+    Column("claim", "claim", _claim_cell, "claim"),
+    Column("published", "published", lambda c, r, x: _target_html(c, r), "num"),
+    Column("reproduced", "reproduced [95 % CI]", lambda c, r, x: _reproduced_cell(r), "num"),
+    Column("unit", "unit", lambda c, r, x: _unit_cell(c, r), "unit"),
+    Column("rate", "replic.", lambda c, r, x: (
+        percent(r["replication_rate"]) if r is not None and percent(r["replication_rate"])
+        else '<span class="why" title="no per-trial effect">—</span>'), "num"),
+    Column("controls", "controls", lambda c, r, x: _control_badges(r), "controls"),
+    Column("verdict", "verdict", _verdict_cell, "verdict-cell"),
+    Column("notebook", "where", _notebook_cell, "nb"),
+]
+
+
+def _table(reg: pd.DataFrame, computed: dict, toc: set[str], book_dir: Path) -> list[str]:
+    """The one table of every claim, grouped by paper; a claim's statement, controls and note
+    open below its row (its summary toggles them)."""
+    context = {"toc": toc, "book_dir": book_dir}
+    head = "".join(f'<th class="{c.css}">{html.escape(c.header)}</th>' for c in COLUMNS)
+    lines = ['<table class="claims">', f"<thead><tr>{head}</tr></thead>", "<tbody>"]
+    papers = list(PAPERS) + sorted(set(reg["paper"]) - set(PAPERS))
+    for paper in papers:
+        group = reg[reg["paper"] == paper]
+        if group.empty:
+            continue
+        title = PAPERS.get(paper, (paper, ""))[0]
+        lines.append(f'<tr class="paper-row"><th colspan="{len(COLUMNS)}">'
+                     f"{html.escape(PAPER_NAMES.get(paper, paper))}"
+                     f' <span class="why">{html.escape(title)}</span></th></tr>')
+        for _, claim in group.iterrows():
+            row = computed.get(claim["id"])
+            tds = "".join(
+                f'<td class="{c.css}" data-label="{html.escape(c.header)}">'
+                f"{c.cell(claim, row, context)}</td>"
+                for c in COLUMNS
+            )
+            more = (f'<tr class="claim-more"><td colspan="{len(COLUMNS)}">'
+                    f"{_details(claim, row)}</td></tr>")
+            lines.append(f'<tr class="claim" id="claim-{claim["id"].replace(".", "-")}">'
+                         f"{tds}</tr>{more}")
     lines += ["</tbody>", "</table>"]
     return lines
 
 
-def _kind(unit: str) -> str:
-    return "ratio" if is_ratio(unit) else typeset(unit) or "value"
+#: Paper short name -> the subject of its chapter (the book's part titles).
+PAPER_NAMES = {
+    "hybrid": "Hybrid visual inspection station",
+    "selfcal": "Robotic visual inspection, self-calibration",
+    "binocular": "Eye-in-hand binocular sensor",
+    "dualarm": "Dual-arm hand-eye scanning",
+}
+
+#: Marker of each verdict in the figures (shape as well as colour).
+VERDICT_MARKERS = {"reproduced": "o", "direction only": "D", "not reproduced": "X",
+                   "not testable": "s", PENDING: "."}
 
 
 def claims_figure(
-    res: pd.DataFrame, path: str | Path, register: pd.DataFrame | None = None
+    res: pd.DataFrame, path: str | Path, register: pd.DataFrame | None = None,
+    papers: Sequence[str] | None = None,
 ) -> tuple[Path, str]:
-    """Draw published against reproduced, one panel per unit (ratios on a log axis around 1).
+    """Draw every claim on one normalised axis: reproduced / target, grouped by paper.
 
-    Each claim is a row: the reproduced median with its 95 % interval, coloured by verdict,
-    and the published figure in the same unit (a black diamond, a bar for a published range),
-    computed from the register's figures (:func:`~calstudy.io.claims_cells.published_figure`).
+    The target is the published figure, the bound, or no effect (1) for a ratio judged against
+    it (:func:`claim_target`). Each row shades the region the rule accepts (the factor-1.5
+    band around a published figure, the claimed side of a bound or of no effect), draws the
+    target at 1 (a black tick for a bound, an open diamond for a published figure, a dashed
+    line for no effect) and the reproduced median with its 95 % interval, in its verdict's
+    colour and marker shape. A claim without a reproduced figure (not testable) is a grey row
+    saying so. Text is 10 pt at a 7.8 in width.
+
+    Parameters
+    ----------
+    res : pandas.DataFrame
+        ``results/claims.csv`` (:func:`read_results`).
+    path : str or pathlib.Path
+        The PNG to write.
+    register : pandas.DataFrame, optional
+        The claims register; default ``data/claims.csv``.
+    papers : sequence of str, optional
+        Only these papers (default all).
 
     Returns
     -------
     tuple of (pathlib.Path, str)
         The PNG written and a one-sentence description of it (the image's alt text).
     """
-    # a bare Figure, not pyplot: no backend is chosen or switched for the caller
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
-    from matplotlib.ticker import FuncFormatter, NullFormatter
+    from matplotlib.patches import Patch
+    from matplotlib.ticker import FixedLocator, NullFormatter
+    from matplotlib.transforms import blended_transform_factory
 
     from calstudy.io.results import write_figure
 
     if register is None:
         register = pd.read_csv(DATA_DIR / "claims.csv", dtype=str, keep_default_na=False)
-    claims = {c["id"]: c for _, c in register.iterrows()}
-    res = res[np.isfinite(res["reproduced"].astype(float))].copy()
-    res["kind"] = res["unit"].map(_kind)
-    order = [k for k in ("ratio", "mm", "%") if k in set(res["kind"])]
-    order += sorted(set(res["kind"]) - set(order))
-    sizes = [int((res["kind"] == k).sum()) for k in order]
-    bounds = False
-    fig = Figure(figsize=(7.8, 0.9 + 0.3 * sum(sizes) + 0.55 * len(order)))
-    axes = fig.subplots(
-        len(order), 1, gridspec_kw={"height_ratios": [s + 1.2 for s in sizes]}, squeeze=False
-    )
-    for ax, kind in zip(axes[:, 0], order, strict=True):
-        group = res[res["kind"] == kind].sort_values("id", ascending=False)
-        y = np.arange(len(group))
-        values = []
-        for yi, (_, row) in zip(y, group.iterrows(), strict=True):
-            colour = VERDICT_COLOURS.get(row["verdict"], "#000000")
-            med, lo, hi = (float(row[c]) for c in ("reproduced", "ci_low", "ci_high"))
-            if math.isfinite(lo) and math.isfinite(hi):
-                ax.plot([lo, hi], [yi, yi], color=colour, lw=2.2, solid_capstyle="butt")
-                values += [lo, hi]
-            ax.plot(med, yi, "o", color=colour, ms=6)
-            values.append(med)
-            claim = claims.get(row["id"])
-            pub = None if claim is None else published_figure(claim, row["unit"]).value
-            bound = None if claim is None or pub is not None else bound_value(claim)
-            if bound is not None:
-                ax.plot(bound, yi, "|", color="black", ms=13, mew=1.6)
-                values.append(bound)
-                bounds = True
-            if pub is not None:
-                if pub[1] > pub[0]:
-                    ax.plot(pub, [yi, yi], color="black", lw=5, alpha=0.25)
-                ax.plot(np.mean(pub), yi, "D", mfc="none", mec="black", ms=6, mew=1.3)
-                values += list(pub)
-        ax.set_yticks(y, group["id"].tolist(), fontsize=8)
-        ax.set_ylim(-0.7, len(group) - 0.3)
-        ax.tick_params(axis="x", labelsize=8)
-        values = np.array([v for v in values if math.isfinite(v)])
-        if kind == "ratio":
-            ax.set_xscale("log")
-            ax.axvline(1.0, color="0.5", lw=0.8, ls="--")
-            span = max(abs(np.log10(values[values > 0])).max(initial=0.3), 0.3) * 1.15
-            ax.set_xlim(10 ** -span, 10 ** span)
-            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-            ax.xaxis.set_minor_formatter(NullFormatter())
-            ax.set_xlabel("ratio (log scale; 1 = no effect or as good as the reference)",
-                          fontsize=8)
-        else:
-            pad = 0.08 * (values.max() - min(values.min(), 0.0) or 1.0)
-            ax.set_xlim(min(values.min(), 0.0) - pad, values.max() + pad)
-            ax.set_xlabel(f"{kind}", fontsize=8)
-        ax.grid(axis="x", color="0.9", lw=0.6)
-        ax.set_axisbelow(True)
-    handles = [Line2D([], [], color=VERDICT_COLOURS[v], marker="o", lw=2.2, label=v)
-               for v in VERDICTS if v in set(res["verdict"])]
-    handles.append(Line2D([], [], color="black", marker="D", mfc="none", lw=0,
-                          label="published"))
-    if bounds:
-        handles.append(Line2D([], [], color="black", marker="|", ms=10, mew=1.6, lw=0,
-                              label="bound (no published figure)"))
-    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8,
-               frameon=False)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    computed = {r["id"]: r for _, r in res.iterrows()}
+    order = list(PAPERS) + sorted(set(register["paper"]) - set(PAPERS))
+    order = [p for p in order if papers is None or p in papers]
+    rows, groups = [], []  # (y, claim, row) and (y of the paper's label, paper)
+    y = 0.0
+    for paper in order:
+        group = register[(register["paper"] == paper) & register["id"].isin(list(computed))]
+        if group.empty:
+            continue
+        groups.append((y, paper))
+        y += 0.9
+        for _, claim in group.iterrows():
+            rows.append((y, claim, computed[claim["id"]]))
+            y += 1.0
+        y += 0.35
+    lo_x, hi_x = 0.05, 20.0
+    fig = Figure(figsize=(7.8, 1.2 + 0.3 * y))
+    ax = fig.add_axes((0.36, 1.0 / (1.2 + 0.3 * y) * 0.95, 0.61,
+                       (0.3 * y) / (1.2 + 0.3 * y)))
+    ax.set_xscale("log")
+    ax.set_xlim(lo_x, hi_x)
+    ax.set_ylim(y - 0.2, -0.2)
+    ax.axvline(1.0, color="0.35", lw=0.8, zorder=1)
+    shown = set()
+    for yi, claim, row in rows:
+        target = claim_target(claim, row)
+        verdict = typeset(row["verdict"])
+        med = float(row["reproduced"])
+        label = claim_label(claim["id"])
+        grey = not math.isfinite(med) or target.value is None
+        ax.text(-0.02, yi, label, transform=ax.get_yaxis_transform(), ha="right",
+                va="center", fontsize=10, color="0.45" if grey else "black")
+        if grey:
+            why = "not testable" if verdict == "not testable" else "no figure"
+            ax.text(1.0, yi, f"  {why}", va="center", fontsize=10, color="0.45",
+                    style="italic")
+            continue
+        band = (max(target.band[0], lo_x / 10), min(target.band[1], hi_x * 10))
+        ax.fill_betweenx([yi - 0.42, yi + 0.42], *band, color="#d8ecd9", lw=0, zorder=0)
+        if target.kind == "bound":
+            ax.plot([1, 1], [yi - 0.38, yi + 0.38], color="black", lw=2.4, zorder=2)
+        elif target.kind == "published":
+            ax.plot(1, yi, "D", mfc="white", mec="black", ms=7, mew=1.3, zorder=3)
+        colour = VERDICT_COLOURS.get(verdict, "#000000")
+        lo, hi = float(row["ci_low"]) / target.value, float(row["ci_high"]) / target.value
+        if math.isfinite(lo) and math.isfinite(hi) and hi > lo:
+            ax.plot([lo, hi], [yi, yi], color=colour, lw=2.4, solid_capstyle="butt", zorder=4)
+        ax.plot(med / target.value, yi, VERDICT_MARKERS.get(verdict, "o"), color=colour,
+                mec="white", mew=0.8, ms=9, zorder=5)
+        shown.add(verdict)
+    for yg, paper in groups:
+        ax.text(0.01, yg + 0.05, PAPER_NAMES.get(paper, paper),
+                transform=blended_transform_factory(fig.transFigure, ax.transData),
+                ha="left", va="center", fontsize=10, fontweight="bold")
+        if yg > 0:
+            ax.axhline(yg - 0.25, color="0.75", lw=0.8)
+    ax.set_yticks([])
+    ticks = [0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20]
+    ax.xaxis.set_major_locator(FixedLocator(ticks))
+    ax.set_xticklabels([f"{t:g}" for t in ticks], fontsize=10)
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.set_xlabel("reproduced ÷ target (published figure, bound or no effect; log scale)",
+                  fontsize=10)
+    ax.grid(axis="x", color="0.9", lw=0.6)
+    ax.set_axisbelow(True)
+    handles = [Line2D([], [], color=VERDICT_COLOURS[v], marker=VERDICT_MARKERS[v], ms=8,
+                      lw=2.2, label=v) for v in VERDICTS if v in shown]
+    handles += [
+        Line2D([], [], color="black", marker="D", mfc="white", lw=0, label="published"),
+        Line2D([], [], color="black", marker="|", ms=12, mew=2.4, lw=0, label="bound"),
+        Patch(color="#d8ecd9", label="accepted"),
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=10, frameon=False,
+               bbox_to_anchor=(0.5, 0.0), handlelength=1.6, columnspacing=1.2)
+    fig.subplots_adjust(bottom=0.9 / (1.2 + 0.3 * y))
+    ax.set_position((0.36, 0.95 / (1.2 + 0.3 * y), 0.61, (0.3 * y) / (1.2 + 0.3 * y)))
     out = write_figure(fig, path, dpi=150)
+    n_grey = sum(1 for _, _, r in rows if not math.isfinite(float(r["reproduced"])))
     alt = (
-        f"Published against reproduced figure for the {len(res)} computed claims, one panel "
-        f"per unit ({', '.join(order)}; ratios on a log axis with 1 marked): the reproduced "
-        "median as a dot with its 95 % interval as a bar, coloured by verdict, the published "
-        "figure as an open diamond, a bound the claim is judged against as a vertical bar."
+        f"Forest plot of {len(rows)} claims grouped by paper on one log axis, reproduced "
+        "median divided by its target (the published figure, the bound, or no effect), with "
+        "its 95 % interval, marker shape and colour by verdict, the accepted region shaded "
+        f"green around 1; {n_grey} claims without a reproduced figure are grey rows."
     )
     return out, alt
+
+
+def headline(res: pd.DataFrame, total: int) -> str:
+    """One sentence of the verdict counts: "Of the 18 claims, 7 are reproduced, ..."."""
+    counts = Counter(typeset(v) for v in res["verdict"])
+    parts = [f"{counts[v]} {v}" for v in VERDICTS if counts.get(v)]
+    pending = total - len(res)
+    if pending > 0:
+        parts.append(f"{pending} pending")
+    text = ", ".join(parts[:-1]) + f" and {parts[-1]}" if len(parts) > 1 else parts[0]
+    return (f"Of the {total} claims of the four papers, checked over Monte Carlo trials on "
+            f"synthetic data: {text}.")
+
+
+def claim_sentence(claim, row: pd.Series | None) -> str:
+    """One plain sentence on a claim's result: published against reproduced and what the
+    verdict means, or why it is not testable."""
+    name = claim_label(claim["id"])
+    name = name[0].upper() + name[1:]
+    if row is None:
+        return f"{name}: not computed yet."
+    verdict = typeset(row["verdict"])
+    if verdict == "not testable":
+        why = re.split(r"[:;(]", typeset(row["note"]))[0].strip() or "see the notebook"
+        return f"{name}: not testable, {why}."
+    unit = UNIT_LABELS.get(typeset(row["unit"]), typeset(row["unit"]))
+    target = claim_target(claim, row)
+    rep = f"{_number(row['reproduced'])} {unit} (95 % interval {_number(row['ci_low'])} to " \
+          f"{_number(row['ci_high'])}, median of {int(row['n'])} trials)"
+    if target.kind == "bound":
+        sign = "at least" if target.band[1] == math.inf else "at most"
+        against = f"the bound is {sign} {target.value:g} {unit}; reproduced {rep}"
+    elif target.kind == "published":
+        shown = _published(claim, row).text.removesuffix(typeset(row["unit"])).strip()
+        against = f"published {shown} {unit}, reproduced {rep}"
+    else:
+        against = f"the paper gives no figure; reproduced {rep}, against 1 for no effect"
+    if target.kind == "bound":
+        meaning = {
+            "reproduced": "it meets the bound in 95 % of the trials",
+            "direction only": "the median meets the bound, the 95th percentile does not",
+            "not reproduced": "it misses the bound",
+        }.get(verdict, verdict)
+    else:
+        meaning = {
+            "reproduced": "a significant effect within the accepted band",
+            "direction only": "a significant effect in the paper's direction, outside the band",
+            "not reproduced": "no significant effect in the paper's direction",
+        }.get(verdict, verdict)
+    rate = percent(row["replication_rate"])
+    single = f"; {rate} of single reruns go the paper's way" if rate else ""
+    return f"{name}: {against}, {meaning}{single}."
+
+
+def verdict_box(paper: str, reg: pd.DataFrame, computed: dict) -> str:
+    """The HTML box a chapter opens with: per claim its verdict badge and one sentence."""
+    group = reg[reg["paper"] == paper]
+    items = []
+    for _, claim in group.iterrows():
+        row = computed.get(claim["id"])
+        verdict = PENDING if row is None else typeset(row["verdict"])
+        items.append(f"<li>{_badge(verdict)} {html.escape(claim_sentence(claim, row))}</li>")
+    items = "".join(items)
+    return (f'<div class="verdict-box"><p class="verdict-box-title">The verdicts of this '
+            f'paper\'s {len(group)} claims</p><ul>{items}</ul></div>')
+
+
+#: Paper -> (notebook, figure of results/<notebook>/ that opens its chapter, its caption).
+KEY_FIGURES = {
+    "hybrid": ("01_hybrid_global_calibration", "handeye_methods",
+               "Hand-eye error by method, RMS over the trials, in the station and with sensor "
+               "noise only: the paper's sphere method, maximum likelihood (ML), the Cramér-Rao "
+               "bound (CRB), the null control and OpenCV's five solvers."),
+    "selfcal": ("03_selfcal_one_step_identification", "basin",
+                "Basin of convergence of the one-step identification: the share of trials that "
+                "reach the same solution, and that do so within 4 iterations, against the "
+                "distance of the start from the truth."),
+    "binocular": ("04_binocular_correction", "rmse_summary",
+                  "RMSE with / without each correction step: the paper's ratio (star) and the "
+                  "simulation's median with its 95 % interval, for each table of the paper and "
+                  "its oracle."),
+    "dualarm": ("05_dualarm_global_calibration", "error_budget",
+                "Error budget of the global calibration with coded markers: the mean "
+                "sphere-centre error per trial (median over the trials) with every error "
+                "source, with each source alone and with none."),
+}
+
+
+def chapter_fragment(paper: str, reg: pd.DataFrame, res: pd.DataFrame | None,
+                     book_dir: Path, results_dir: Path) -> str:
+    """The MyST text a chapter includes at its top: the verdict box, the paper's rows of the
+    forest plot and its key figure, each with a numbered caption (``fig-<paper>-claims``,
+    ``fig-<paper>-key``)."""
+    computed = {} if res is None else {r["id"]: r for _, r in res.iterrows()}
+    lines = [verdict_box(paper, reg, computed), ""]
+    key = KEY_FIGURES.get(paper)
+    if key is not None and (results_dir / key[0] / f"{key[1]}.png").is_file():
+        stem, name, caption = key
+        dest = book_dir / f"key-{paper}.png"
+        _copy(results_dir / stem / f"{name}.png", dest)
+        lines += [f"```{{figure}} {dest.name}", f":name: fig-{paper}-key",
+                  f":alt: {caption}", ":width: 100%", "",
+                  f"{caption} (Notebook {stem.split('_')[0]}.)", "```", ""]
+    return "\n".join(lines)
 
 
 def render_claims_page(
     out_path: str | Path,
     register: str | Path | None = None,
     results: str | Path | None = None,
+    figures: str | Path | None = None,
 ) -> Path:
-    """Write the MyST page summarising every claim and its verdict.
+    """Write the MyST page summarising every claim and its verdict, and the fragments the
+    other pages include.
 
-    Beside the page it writes the figure (:data:`FIGURE_NAME`) and copies of the register and
-    the results table (:data:`REGISTER_COPY`, :data:`RESULTS_COPY`), which the page offers
-    for download.
+    Beside the page it writes the forest plot (:data:`FIGURE_NAME`), copies of the register
+    and the results table (:data:`REGISTER_COPY`, :data:`RESULTS_COPY`), which the page offers
+    for download, the intro's headline (:data:`HEADLINE_NAME`) and each paper chapter's
+    opening (``verdicts-<paper>.md``, its figures ``claims-<paper>.png`` and
+    ``key-<paper>.png``).
 
     Parameters
     ----------
@@ -407,6 +698,9 @@ def render_claims_page(
     results : str or pathlib.Path, optional
         Aggregated verdicts; default ``results/claims.csv``. A missing file means every claim
         is pending.
+    figures : str or pathlib.Path, optional
+        The folder of the notebooks' result folders the chapters' key figures are copied
+        from (:data:`KEY_FIGURES`); default the folder of ``results``.
 
     Returns
     -------
@@ -414,14 +708,15 @@ def render_claims_page(
         ``out_path``.
     """
     out_path = Path(out_path)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
+    book_dir = out_path.parent
+    book_dir.mkdir(parents=True, exist_ok=True)
     reg_path = DATA_DIR / "claims.csv" if register is None else Path(register)
     reg = pd.read_csv(reg_path, dtype=str, keep_default_na=False)
     res_path = RESULTS_DIR / "claims.csv" if results is None else Path(results)
     res = read_results(res_path) if res_path.is_file() else None
     computed = {} if res is None else {r["id"]: r for _, r in res.iterrows()}
 
-    toc_path = out_path.parent / "_toc.yml"
+    toc_path = book_dir / "_toc.yml"
     toc = _toc_files(yaml.safe_load(toc_path.read_text())) if toc_path.is_file() else set()
 
     counts = Counter(res["verdict"]) if res is not None else Counter()
@@ -429,52 +724,75 @@ def render_claims_page(
     badges = " ".join(
         f"{_badge(v)} {counts.get(v, 0)}" for v in (*VERDICTS, PENDING) if counts.get(v, 0)
     )
-    _copy(reg_path, out_path.parent / REGISTER_COPY)
+    _copy(reg_path, book_dir / REGISTER_COPY)
     lines = [
         "# Claims and verdicts",
         "",
-        "Every claim of the four papers that this study checks: the figure the paper publishes,",
-        "the figure reproduced on synthetic data and the verdict. Generated by `make reproduce`",
-        f"from the claims register {{download}}`data/claims.csv <{REGISTER_COPY}>` and the",
-        "results",
-        f"{{download}}`results/claims.csv <{RESULTS_COPY}>`." if res is not None else
-        "(none computed yet).",
-        "",
         f'<p class="verdict-counts"><strong>{len(reg)} claims:</strong> {badges}</p>',
+        "",
+        *_table(reg, computed, toc, book_dir),
+        "",
+        "Published and reproduced figures in the unit shown (≤ or ≥: the bound a claim is",
+        "judged against); reproduced: median over the trials with its 95 % interval;",
+        "replic.: share of trials with the paper's direction. A claim's name opens its",
+        "statement and note.",
+        f"Tables: {{download}}`data/claims.csv <{REGISTER_COPY}>`"
+        + (f", {{download}}`results/claims.csv <{RESULTS_COPY}>`." if res is not None else "."),
         "",
     ]
     if res is not None and len(res):
-        _copy(res_path, out_path.parent / RESULTS_COPY)
-        figure, alt = claims_figure(res, out_path.parent / FIGURE_NAME, reg)
+        _copy(res_path, book_dir / RESULTS_COPY)
+        figure, alt = claims_figure(res, book_dir / FIGURE_NAME, reg)
         lines += [
             f"```{{figure}} {figure.name}",
+            ":name: fig-claims-forest",
             f":alt: {alt}",
             ":width: 100%",
             "",
-            "Published (open diamond; a grey bar for a range) against reproduced (dot: median over "
-            "the trials, bar: 95 % confidence interval), coloured by verdict; a black tick marks "
-            "the bound a claim without a published figure is judged against. The published "
-            "ratios are computed from the paper's figures (the table gives them).",
+            "Every claim on one axis: the reproduced median divided by its target (the "
+            "published figure, the bound, or 1 for no effect) with its 95 % interval; "
+            "marker and colour give the verdict, the shaded band is what the rule accepts for "
+            "the median (a bound asks the 95th percentile to meet it too).",
             "```",
             "",
         ]
-    lines += ["## How a verdict is computed", "", _RULE.rstrip(), ""]
-    papers = list(PAPERS) + sorted(set(reg["paper"]) - set(PAPERS))
-    for paper in papers:
-        group = reg[reg["paper"] == paper]
-        if group.empty:
-            continue
-        title, key = PAPERS.get(paper, (paper, ""))
-        cite = f" {{cite:p}}`{key}`" if key else ""
-        lines += [f"## {paper}", "", f"*{title}*{cite}.", ""]
-        lines += _table(group, computed, toc, out_path.parent)
-        lines.append("")
-
-    text = "\n".join(lines).rstrip("\n") + "\n"
-    tmp = out_path.with_name(f".{out_path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(out_path)
+    cites = ", ".join(f"*{title}* {{cite:p}}`{key}`" for title, key in PAPERS.values())
+    lines += [
+        ":::{admonition} How a verdict is computed",
+        ":class: dropdown",
+        "",
+        _RULE.rstrip(),
+        "",
+        f"The papers: {cites}.",
+        ":::",
+        "",
+    ]
+    _write(out_path, "\n".join(lines).rstrip("\n") + "\n")
+    total = len(reg)
+    head = headline(res, total) if res is not None and len(res) else (
+        f"None of the {total} claims has been computed yet.")
+    intro = [head, ""]
+    if res is not None and len(res):
+        intro += [f"```{{figure}} {FIGURE_NAME}", ":name: fig-intro-forest",
+                  f":alt: {alt}", ":width: 100%", "",
+                  "The claims on one axis (the {doc}`claims` page gives the figures).", "```",
+                  ""]
+    _write(book_dir / HEADLINE_NAME, "\n".join(intro))
+    for paper in PAPERS:
+        _write(book_dir / f"verdicts-{paper}.md",
+               chapter_fragment(paper, reg, res, book_dir,
+                                Path(figures) if figures is not None else res_path.parent))
     return out_path
+
+
+#: The intro's headline sentence and forest plot, written beside the claims page.
+HEADLINE_NAME = "claims-headline.md"
+
+
+def _write(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
 
 
 def _copy(src: Path, dest: Path) -> None:

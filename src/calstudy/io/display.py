@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.claims import claim_register
+from calstudy.core.labels import label, plain
 from calstudy.io.claims_cells import published_figure, typeset
 
 #: What a missing value is shown as.
@@ -32,36 +33,18 @@ MISSING = "—"
 
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
-#: Column-name suffixes read as units: ``rot_err_deg`` is shown as ``rot err (deg)``.
-UNIT_SUFFIXES = {
-    "mm": "mm",
-    "um": "µm",
-    "deg": "deg",
-    "rad": "rad",
-    "px": "px",
-    "pct": "%",
-    "percent": "%",
-    "s": "s",
-    "ms": "ms",
-}
-
-
 def header(name: object, unit: str | None = None) -> str:
-    """Column header with its unit: ``("err_mm", None)`` -> ``"err (mm)"``,
-    ``("err", "mm")`` -> ``"err (mm)"``; underscores become spaces."""
-    text = str(name)
-    if unit is None:
-        stem, _, suffix = text.rpartition("_")
-        if stem and suffix.lower() in UNIT_SUFFIXES:
-            text, unit = stem, UNIT_SUFFIXES[suffix.lower()]
-    text = text.replace("_", " ").strip()
-    return f"{text} ({unit})" if unit else text
+    """Column header in words with its unit (:func:`calstudy.core.labels.label`):
+    ``("err_mm", None)`` -> ``"err (mm)"``, ``("err", "mm")`` -> ``"err (mm)"``,
+    ``"within_0p3_pct"`` -> ``"within 0.3 mm (%)"``."""
+    return label(name, unit)
 
 
 def format_value(value: object, digits: int = 4) -> str:
     """One cell as text: floats to ``digits`` significant digits (no ``1e-16`` noise shown as
     more than it is; powers of ten as ``1.2×10⁻⁵``), integers as integers, booleans as yes/no,
-    missing as an em dash, text with ± µm ≤ ≥ → for ``+-``, ``um``, ``<=``, ``>=``, ``->``."""
+    missing as an em dash, text with ± µm ≤ ≥ → for ``+-``, ``um``, ``<=``, ``>=``, ``->`` and
+    claim ids and bare identifiers in words (:func:`calstudy.core.labels.plain`)."""
     if value is None or value is pd.NA or value is pd.NaT:
         return MISSING
     if isinstance(value, bool | np.bool_):
@@ -84,7 +67,9 @@ def format_value(value: object, digits: int = 4) -> str:
             return f"{mantissa}×10{str(int(exponent)).translate(_SUPERSCRIPT)}"
         return text
     text = str(value)
-    return MISSING if text.strip() in ("", "nan", "NaN", "None", "<NA>") else typeset(text)
+    if text.strip() in ("", "nan", "NaN", "None", "<NA>"):
+        return MISSING
+    return plain(typeset(text))
 
 
 def format_table(
@@ -104,13 +89,14 @@ def format_table(
         The table (its index is kept only if it is named or not a plain range).
     units : mapping, optional
         Unit of a column, shown in its header; columns named ``*_mm``, ``*_deg``, ... get their
-        unit from the suffix (:data:`UNIT_SUFFIXES`).
+        unit from the suffix (:data:`calstudy.core.labels.UNIT_SUFFIXES`).
     digits : int or mapping, default 4
         Significant digits of floats, for all columns or per column.
     max_columns : int, default 8
-        Widest table shown. A wider one with fewer than ``max_columns`` rows is transposed
-        (its rows become columns, headed by the first key column, beside a column of the
-        former headers); otherwise it is split into tables of at most ``max_columns``
+        Widest table shown. A wider one with a key column and fewer than ``max_columns`` rows
+        is transposed (its rows become columns, headed by the key's values, beside a column of
+        the former headers headed by the key's name); otherwise it is split into tables of at
+        most ``max_columns``
         columns, each repeating the key columns. In the book the tables also stay within the
         column at any width (``book/_static/calstudy.css``: long header words break).
     keys : sequence of str, optional
@@ -164,12 +150,11 @@ def format_table(
     key_headers = [header(k, units.get(k)) for k in keys]
     if text.shape[1] <= max_columns:
         return [text], notes
-    if len(text) + 1 <= max_columns:  # the rows become columns, beside one of labels
-        label = key_headers[0] if key_headers else None
-        body = text.set_index(label) if label else text
-        flipped = body.T
+    if key_headers and len(text) + 1 <= max_columns:  # rows become columns, headed by the key
+        label = key_headers[0]
+        flipped = text.set_index(label).T
         flipped.columns = [str(c) for c in flipped.columns]
-        flipped.insert(0, "", flipped.index)
+        flipped.insert(0, label, flipped.index)
         return [flipped.reset_index(drop=True)], notes
     rest = [c for c in text.columns if c not in key_headers]
     width = max(1, max_columns - len(key_headers))
@@ -192,17 +177,23 @@ def _table_html(table: pd.DataFrame, caption: str | None) -> str:
     rows = "".join(
         "<tr>" + "".join(_td(v) for v in row) + "</tr>" for row in table.itertuples(index=False)
     )
-    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+    cap = f"<caption>{html.escape(plain(typeset(caption)))}</caption>" if caption else ""
     return (
         f'<table class="calstudy-table">{cap}<thead><tr>{head}</tr></thead>'
         f"<tbody>{rows}</tbody></table>"
     )
 
 
+#: Rows of a table shown open; a longer one is folded into a dropdown headed by its caption.
+LONG_TABLE_ROWS = 12
+
+
 def table_html(
     df: pd.DataFrame, *, caption: str | None = None, **options
 ) -> str:
-    """HTML of :func:`show_table` (the options are those of :func:`format_table`)."""
+    """HTML of :func:`show_table` (the options are those of :func:`format_table`); a table of
+    more than :data:`LONG_TABLE_ROWS` rows is folded into a ``<details>`` dropdown whose
+    summary is its caption and row count."""
     tables, notes = format_table(df, **options)
     parts = [_table_html(t, caption if i == 0 else None) for i, t in enumerate(tables)]
     if notes:
@@ -211,6 +202,11 @@ def table_html(
             + "<br>".join(html.escape(n) for n in notes)
             + "</small></p>"
         )
+    rows = max(len(t) for t in tables)
+    if rows > LONG_TABLE_ROWS:
+        title = html.escape(plain(typeset(caption)).rstrip(".")) if caption else "Table"
+        parts = [f'<details class="calstudy-long"><summary>{title} ({rows} rows)</summary>',
+                 *parts, "</details>"]
     return "\n".join(parts)
 
 

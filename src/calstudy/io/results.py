@@ -132,11 +132,50 @@ def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FO
     )
 
 
+#: Smallest text of a saved figure, in points at the figure's size: a figure up to 8 in wide,
+#: shown at 100 % in the book's column (about 700 px at a 1366 px window), writes it at 10 px
+#: or more.
+MIN_FONT_PT = 9.0
+#: PNG text key holding the smallest font size of a figure (points), for the book's check.
+FONT_KEY = "calstudy:min-font-pt"
+
+
+def readable_text(fig, min_pt: float = MIN_FONT_PT) -> float:
+    """Raise every visible text of ``fig`` smaller than ``min_pt`` to ``min_pt``.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure (changed in place).
+    min_pt : float, default :data:`MIN_FONT_PT`
+        Smallest font size, in points.
+
+    Returns
+    -------
+    float
+        The smallest font size of a visible text afterwards (``min_pt`` if the figure has no
+        text).
+    """
+    from matplotlib.text import Text
+
+    sizes = []
+    for text in fig.findobj(Text):
+        if not text.get_visible() or not text.get_text().strip():
+            continue
+        if text.get_fontsize() < min_pt:
+            text.set_fontsize(min_pt)
+        sizes.append(float(text.get_fontsize()))
+    return min(sizes, default=float(min_pt))
+
+
 def write_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     """Save ``fig`` as PNG with the Agg renderer, atomically, then close it.
 
-    The PNG carries no software or time stamp (``metadata={"Software": None}``), so the same
-    figure gives the same bytes. Because the figure is closed, a notebook shows the saved file:
+    Text smaller than :data:`MIN_FONT_PT` is raised to it (:func:`readable_text`) and the
+    smallest size is written into the PNG (text key :data:`FONT_KEY`), so that the book can
+    tell the size of a figure's text on the page. The PNG carries no software or time stamp
+    (``metadata={"Software": None}``), so the same figure gives the same bytes. Because the
+    figure is closed, a notebook shows the saved file:
     ``display(Image(filename=write_figure(fig, out / "name.png")))``.
 
     Parameters
@@ -156,10 +195,12 @@ def write_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     import matplotlib.pyplot as plt
 
     try:
+        smallest = readable_text(fig)
+        metadata = {"Software": None, FONT_KEY: f"{smallest:g}"}
         atomic_write(
             path,
             lambda tmp: fig.savefig(
-                tmp, format="png", dpi=dpi, metadata={"Software": None}, backend="agg"
+                tmp, format="png", dpi=dpi, metadata=metadata, backend="agg"
             ),
         )
     finally:

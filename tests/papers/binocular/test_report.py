@@ -100,7 +100,8 @@ def test_calibrated_f_number_interpolates_log_log_between_bracketing_points():
     # ratio 0.9 against the paper's 0.837 and a significant oracle: reproduced at every point
     assert set(table["verdict_coc"]) == {"reproduced"}
     text = report.verdict_changes(table, "f_number", "binocular.coc", "F-number", "")
-    assert text == "Over the F-number sweep (f/4 to f/11) binocular.coc stays reproduced."
+    assert text == ("Over the F-number sweep (f/4 to f/11) the circle-of-confusion rectification "
+                    "claim stays reproduced.")  # the claim in words, not its id
     table.loc[2, "verdict_coc"] = "not testable"
     text = report.verdict_changes(table, "f_number", "binocular.coc", "F-number", "")
     assert text.endswith("is reproduced at f/4 to f/5.6, not testable at f/11.")

@@ -145,6 +145,10 @@ def test_whole_deviation_distribution_distances_and_where_a_verdict_changes():
     )
     same = report_sweeps.where_verdict_changes([1, 2], ["reproduced"] * 2, 1, "y")
     assert same == "y: reproduced at every value swept (1-2)"
+    # claim ids and input names in words
+    words = report_sweeps.where_verdict_changes(
+        [5, 60], ["reproduced"] * 2, 15, "hybrid.handeye against translation_range_mm", "mm")
+    assert words.startswith("hand-eye calibration against range of the pure translations (mm):")
 
 
 def test_deviation_oracle_removes_exactly_the_drift():

@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.claims import claim_row, control_rows
+from calstudy.core.labels import claim_label
 from calstudy.core.verdicts import (
     judge,
     judge_controls,
@@ -571,9 +572,11 @@ def calibrated_f_number(table: pd.DataFrame, target_mm: float) -> float | None:
 
 def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit: str) -> str:
     """One sentence: the verdict of ``claim`` along a sweep (column ``key`` of ``table``, verdicts
-    in ``verdict_<name>``) and where it changes."""
+    in ``verdict_<name>``) and where it changes; the claim is named in words
+    (:data:`calstudy.core.labels.CLAIM_LABELS`)."""
     vals = table[key].to_numpy()
     verdicts = table[f"verdict_{claim.split('.')[1]}"].tolist()
+    words = f"the {claim_label(claim)} claim"
 
     def fmt(x):
         if key == "f_number":
@@ -582,7 +585,7 @@ def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit:
 
     if len(set(verdicts)) == 1:
         return (
-            f"Over the {label} sweep ({fmt(vals[0])} to {fmt(vals[-1])}) {claim} stays "
+            f"Over the {label} sweep ({fmt(vals[0])} to {fmt(vals[-1])}) {words} stays "
             f"{verdicts[0]}."
         )
     parts, start = [], 0
@@ -592,7 +595,7 @@ def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit:
             where = last if i - 1 == start else f"{fmt(vals[start])} to {last}"
             parts.append(f"{verdicts[start]} at {where}")
             start = i
-    return f"Along the {label} sweep {claim} is " + ", ".join(parts) + "."
+    return f"Along the {label} sweep {words} is " + ", ".join(parts) + "."
 
 
 def optics_sweep_figure(tables: dict, target_mm: float):

@@ -15,6 +15,7 @@ import pandas as pd
 from scipy.stats import chi2
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core.labels import plain
 from calstudy.core.stats import median_and_spread
 from calstudy.core.verdicts import judge, judge_controls, oracle_gate
 from calstudy.papers.hybrid.scenario import load_published
@@ -142,7 +143,9 @@ def summarise_stationary_sweep(stationary: pd.DataFrame, key: str) -> pd.DataFra
 
 def where_verdict_changes(values, verdicts, default, what: str, unit: str = "") -> str:
     """One sentence: the verdict at the default value of a swept assumption and the values
-    between which it changes (``values`` ascending, one verdict each)."""
+    between which it changes (``values`` ascending, one verdict each). Claim ids and input
+    names in ``what`` are written as words (:func:`calstudy.core.labels.plain`)."""
+    what = plain(what)
     values = [float(v) for v in values]
     verdicts = list(verdicts)
     if len(values) != len(verdicts) or not values:

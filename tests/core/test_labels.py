@@ -1,0 +1,44 @@
+"""Plain words for claim ids, inputs and column names (calstudy.core.labels)."""
+
+from __future__ import annotations
+
+import pytest
+
+from calstudy.claims import claim_register
+from calstudy.core.labels import CLAIM_LABELS, label, plain
+
+
+@pytest.mark.parametrize(
+    ("name", "words"),
+    [
+        ("within_0p3_pct", "within 0.3 mm (%)"),
+        ("bin_le_0p1_pct", "bin ≤ 0.1 (%)"),
+        ("t2_without_mm", "Table 2 without (mm)"),
+        ("rot_err_updated_mrad", "rot err updated (mrad)"),
+        ("translation_range_mm", "range of the pure translations (mm)"),
+        ("err", "err"),
+        ("hybrid.handeye", "hand-eye calibration"),
+    ],
+)
+def test_label(name, words):
+    assert label(name) == words
+
+
+def test_label_with_a_unit_given():
+    assert label("err", "mm") == "err (mm)"
+    assert label("part_sigma_mm", "µm") == "part-to-part scatter (µm)"
+
+
+def test_plain_rewrites_ids_and_keeps_file_names():
+    text = "hybrid.handeye against part_sigma_mm: see robot_sweep.csv and results/a_b/"
+    assert plain(text) == (
+        "hand-eye calibration against part-to-part scatter (mm): see robot_sweep.csv and "
+        "results/a_b/"
+    )
+    assert plain("no identifier here.") == "no identifier here."
+
+
+def test_every_claim_of_the_register_has_words():
+    ids = set(claim_register()["id"])
+    assert ids <= set(CLAIM_LABELS), sorted(ids - set(CLAIM_LABELS))
+    assert len(set(CLAIM_LABELS.values())) == len(CLAIM_LABELS)  # no two claims alike
