@@ -23,9 +23,15 @@ from calstudy.core.verdicts import check_null_control
 #: The four verdicts of the claims register, in the order the book counts them.
 VERDICTS = ("reproduced", "direction only", "not reproduced", "not testable")
 
+#: Where a claim's criterion comes from (column ``criterion`` of ``data/claims.csv``): the paper's
+#: own figure or requirement, or the study's (rule 15), with ``criterion_source`` saying where in
+#: the paper, or why the study's.
+CRITERIA = ("published", "study")
+
 CLAIM_COLUMNS = (
     "id",
     "published",
+    "criterion",
     "reproduced",
     "ci_low",
     "ci_high",
@@ -167,12 +173,40 @@ def control_rows(claim_id: str, null: RuleVerdict, oracle: RuleVerdict) -> list[
     return rows
 
 
+#: Columns every claims register has.
+REGISTER_COLUMNS = (
+    "id", "paper", "where", "statement", "published", "unit", "comparison", "kind", "direction",
+    "reference", "null_control", "oracle_control", "criterion", "criterion_source",
+)
+
+
 def claim_register(register: str | Path | None = None) -> pd.DataFrame:
-    """The claims register ``data/claims.csv`` (or ``register``) as text, blanks as ``""``."""
+    """The claims register ``data/claims.csv`` (or ``register``) as text, blanks as ``""``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file does not exist.
+    CalibrationError
+        If a column of :data:`REGISTER_COLUMNS` is missing, or a row's ``criterion`` is not one
+        of :data:`CRITERIA` or has no ``criterion_source`` (no criterion of the study may pass
+        for a published one).
+    """
     path = DATA_DIR / "claims.csv" if register is None else Path(register)
     if not path.is_file():
         raise FileNotFoundError(f"claims register not found: {path.name}")
-    return pd.read_csv(path, dtype=str, keep_default_na=False)
+    reg = pd.read_csv(path, dtype=str, keep_default_na=False)
+    missing = [c for c in REGISTER_COLUMNS if c not in reg.columns]
+    if missing:
+        raise CalibrationError(f"{path.name}: the claims register lacks the columns {missing}")
+    for line, row in enumerate(reg.itertuples(index=False), start=2):
+        if row.criterion not in CRITERIA or not row.criterion_source.strip():
+            raise CalibrationError(
+                f"{path.name}: line {line} ({row.id}): criterion {row.criterion!r} must be one of "
+                f"{', '.join(CRITERIA)}, with criterion_source saying where in the paper or why "
+                "the study's"
+            )
+    return reg
 
 
 def claim_ids(register: str | Path | None = None) -> list[str]:

@@ -316,7 +316,7 @@ def test_ratio_of_and_bound_value():
     assert ratio_of("0.1 vs 0.5 (other 0.2)")[0] == pytest.approx(0.2)
     assert ratio_of("96.55") is None and ratio_of("1 / 2 -> 1") is None
     assert ratio_of("0 -> 1") is None  # nothing to divide by
-    assert bound_value({"kind": "bound", "reference": "3 x CRB RMS (stated multiple)"}) == 3.0
+    assert bound_value({"kind": "bound", "reference": "3 x CRB RMS (the study's multiple)"}) == 3.0
     assert bound_value({"kind": "bound", "reference": "1.36/sqrt(n) (5 %)"}) is None
     assert bound_value({"kind": "ratio", "reference": "1 (no effect)"}) is None
 

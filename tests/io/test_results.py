@@ -15,10 +15,11 @@ from calstudy.claims import (
     CLAIM_COLUMNS,
     ClaimRow,
     claim_ids,
+    claim_register,
     claim_row,
     control_rows,
 )
-from calstudy.core.paths import DATA_DIR
+from calstudy.core.paths import DATA_DIR, RESULTS_DIR
 from calstudy.core.stats import bootstrap_interval, percentile_interval, rmse
 from calstudy.core.verdicts import judge_controls
 from calstudy.io.results import (
@@ -324,6 +325,8 @@ def test_register_holds_every_claim():
         "reference",
         "null_control",
         "oracle_control",
+        "criterion",
+        "criterion_source",
     ]
     assert reg["id"].tolist() == REGISTER_IDS
     assert claim_ids() == REGISTER_IDS
@@ -348,9 +351,36 @@ def test_write_claims_rejects_unknown_or_duplicate_id(tmp_path):
         write_claims(tmp_path, [])
 
 
+def test_no_criterion_of_the_study_passes_for_published():
+    """Rule 15: a claim whose paper gives no figure is judged by the study's criterion, and the
+    register says so; the two criteria the review found shown as published are the study's."""
+    reg = claim_register()
+    assert set(reg["criterion"]) <= {"published", "study"}
+    assert (reg.loc[reg["published"] == "", "criterion"] == "study").all()
+    study = reg.set_index("id")["criterion"]
+    assert study["hybrid.handeye"] == study["hybrid.stationary"] == "study"
+    assert (reg["criterion_source"].str.len() > 10).all()
+    # results/claims.csv carries the register's criterion (once regenerated)
+    written = read_claims(RESULTS_DIR / "claims.csv")
+    if "criterion" in written.columns:
+        assert (written.set_index("id")["criterion"] == study[written["id"]].values).all()
+
+
+def test_a_register_without_its_criterion_is_refused(tmp_path):
+    reg = claim_register()
+    bad = tmp_path / "claims.csv"
+    reg.assign(criterion=["published"] * (len(reg) - 1) + ["paper"]).to_csv(bad, index=False)
+    with pytest.raises(CalibrationError, match=r"line 19 .*criterion 'paper' must be one of"):
+        claim_register(bad)
+    reg.drop(columns="criterion_source").to_csv(bad, index=False)
+    with pytest.raises(CalibrationError, match=r"lacks the columns \['criterion_source'\]"):
+        claim_register(bad)
+
+
 def test_write_claims_custom_register(tmp_path):
     reg = tmp_path / "register.csv"
-    reg.write_text("id,paper\nx.one,x\n")
+    one = claim_register().iloc[:1].assign(id="x.one", paper="x")
+    one.to_csv(reg, index=False)
     write_claims(tmp_path / "out", [row(claim_id="x.one")], register=reg)
     with pytest.raises(CalibrationError, match="not in the claims register"):
         write_claims(tmp_path / "out", [row()], register=reg)

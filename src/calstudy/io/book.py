@@ -168,10 +168,12 @@ def _badge(verdict: str) -> str:
 
 def read_results(path: str | Path) -> pd.DataFrame:
     """``results/claims.csv`` with every column of :data:`CLAIM_COLUMNS`; rows written before
-    rule v2 get ``n = 0``, no replication rate and empty controls."""
+    rule v2 get ``n = 0``, no replication rate and empty controls, rows written before the
+    register said whose criterion each claim has an empty ``criterion`` (the page takes it from
+    the register)."""
     res = read_claims(path)
     defaults = {"n": 0, "replication_rate": float("nan"), "null_control": "",
-                "oracle_control": ""}
+                "oracle_control": "", "criterion": ""}
     for col, value in defaults.items():
         if col not in res.columns:
             res[col] = value
@@ -331,6 +333,16 @@ def _target_html(claim, row: pd.Series | None) -> str:
     return f'<span class="why" title="{tip}">none</span>'
 
 
+def _criterion_tag(claim) -> str:
+    """A small tag saying whose criterion the claim is judged by: the paper's (``paper``) or the
+    study's (``study``, rule 15), its source in the title."""
+    source = html.escape(typeset(claim.get("criterion_source", "")), quote=True)
+    if typeset(claim.get("criterion", "")) == "study":
+        return (f' <span class="crit crit-study" title="criterion of the study: {source}">'
+                "study</span>")
+    return f' <span class="crit crit-paper" title="published: {source}">paper</span>'
+
+
 def _reproduced_cell(row: pd.Series | None) -> str:
     if row is None:
         return '<span class="why">not computed yet</span>'
@@ -387,7 +399,7 @@ def _notebook_cell(claim, row, context) -> str:
 #: The columns of the claims table, in order; a column is added by adding an entry.
 COLUMNS = [
     Column("claim", "claim", _claim_cell, "claim"),
-    Column("published", "published", lambda c, r, x: _target_html(c, r), "num"),
+    Column("published", "criterion", lambda c, r, x: _target_html(c, r) + _criterion_tag(c), "num"),
     Column("reproduced", "reproduced [95 % CI]", lambda c, r, x: _reproduced_cell(r), "num"),
     Column("unit", "unit", lambda c, r, x: _unit_cell(c, r), "unit"),
     Column("rate", "replic.", lambda c, r, x: (

@@ -28,7 +28,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS, VERDICTS, ClaimRow, claim_ids
+from calstudy.claims import (
+    CLAIM_COLUMNS,
+    CONTROL_COLUMNS,
+    VERDICTS,
+    ClaimRow,
+    claim_ids,
+    claim_register,
+)
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
 from calstudy.io.dependencies import label, notebook_inputs
@@ -518,6 +525,8 @@ def write_claims(
             raise CalibrationError(f"claim {row.id!r} names no notebook")
         seen.add(row.id)
     df = pd.DataFrame([dataclasses.asdict(r) for r in rows], columns=list(CLAIM_COLUMNS))
+    criteria = claim_register(register).set_index("id")["criterion"]
+    df["criterion"] = df["id"].map(criteria)  # declared once, in the register
     return write_table(df, Path(out_dir) / "claims.csv")
 
 
