@@ -24,7 +24,7 @@ def test_rows_and_manifest_rebuild_the_same_trials(tmp_path):
     assert record["seed"] == 7
     entry = record["experiments"]["toy"]
     assert entry["factory"] == "mc_trials:toy_experiment" and entry["kwargs"]["scale"] == 2.0
-    exp = rebuild(entry)
+    exp = rebuild(entry, extra=[toy_experiment])
     fresh = trial_rows(exp, 7, 1, 2)
     want = frames["toy"][(frames["toy"]["trial"] == 2) & (frames["toy"]["robot"] == "kuka")]
     pd.testing.assert_frame_equal(fresh, want.reset_index(drop=True))
