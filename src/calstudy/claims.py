@@ -167,12 +167,59 @@ def control_rows(claim_id: str, null: RuleVerdict, oracle: RuleVerdict) -> list[
     return rows
 
 
+#: Columns every claims register has (``data/claims.csv``).
+REGISTER_COLUMNS = (
+    "id",
+    "paper",
+    "where",
+    "statement",
+    "published",
+    "unit",
+    "comparison",
+    "kind",
+    "direction",
+    "reference",
+    "null_control",
+    "oracle_control",
+)
+
+
 def claim_register(register: str | Path | None = None) -> pd.DataFrame:
-    """The claims register ``data/claims.csv`` (or ``register``) as text, blanks as ``""``."""
+    """The claims register ``data/claims.csv`` (or ``register``) as text, blanks as ``""``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file does not exist.
+    CalibrationError
+        Naming the file, if it is not a CSV table, lacks a column of :data:`REGISTER_COLUMNS`,
+        or has an empty or repeated id.
+    """
     path = DATA_DIR / "claims.csv" if register is None else Path(register)
     if not path.is_file():
         raise FileNotFoundError(f"claims register not found: {path.name}")
-    return pd.read_csv(path, dtype=str, keep_default_na=False)
+    try:
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (ValueError, UnicodeDecodeError) as exc:  # pandas' ParserError is a ValueError
+        raise CalibrationError(f"claims register {path.name} is not a CSV table: {exc}") from None
+    missing = [c for c in REGISTER_COLUMNS if c not in df.columns]
+    if missing:
+        raise CalibrationError(
+            f"claims register {path.name} lacks the column(s) {missing}; its header is "
+            f"{list(df.columns)}"
+        )
+    ids = df["id"]
+    if (ids.str.strip() == "").any():
+        raise CalibrationError(
+            f"claims register {path.name}: row {int((ids.str.strip() == '').idxmax()) + 2} "
+            "has an empty id"
+        )
+    if ids.duplicated().any():
+        raise CalibrationError(
+            f"claims register {path.name}: id {ids[ids.duplicated()].iloc[0]!r} appears more "
+            "than once"
+        )
+    return df
 
 
 def claim_ids(register: str | Path | None = None) -> list[str]:
