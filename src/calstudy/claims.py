@@ -139,7 +139,7 @@ def control_rows(claim_id: str, null: RuleVerdict, oracle: RuleVerdict) -> list[
         register defines no control for the claim.
     """
     check_null_control(null)
-    register = claim_register().set_index("id")
+    register = claim_register(columns=("null_control", "oracle_control")).set_index("id")
     if claim_id not in register.index:
         raise CalibrationError(f"claim id {claim_id!r} is not in the claims register")
     rows = []
@@ -184,16 +184,25 @@ REGISTER_COLUMNS = (
 )
 
 
-def claim_register(register: str | Path | None = None) -> pd.DataFrame:
+def claim_register(
+    register: str | Path | None = None, columns: tuple[str, ...] = ("id",)
+) -> pd.DataFrame:
     """The claims register ``data/claims.csv`` (or ``register``) as text, blanks as ``""``.
+
+    Parameters
+    ----------
+    register : path-like, optional
+        A register of one's own; ``data/claims.csv`` by default.
+    columns : tuple of str, default ``("id",)``
+        The columns the caller reads (``data/claims.csv`` has :data:`REGISTER_COLUMNS`).
 
     Raises
     ------
     FileNotFoundError
         If the file does not exist.
     CalibrationError
-        Naming the file, if it is not a CSV table, lacks a column of :data:`REGISTER_COLUMNS`,
-        or has an empty or repeated id.
+        Naming the file, if it is not a CSV table, lacks a column of ``columns``, or has an
+        empty or repeated id.
     """
     path = DATA_DIR / "claims.csv" if register is None else Path(register)
     if not path.is_file():
@@ -202,7 +211,7 @@ def claim_register(register: str | Path | None = None) -> pd.DataFrame:
         df = pd.read_csv(path, dtype=str, keep_default_na=False)
     except (ValueError, UnicodeDecodeError) as exc:  # pandas' ParserError is a ValueError
         raise CalibrationError(f"claims register {path.name} is not a CSV table: {exc}") from None
-    missing = [c for c in REGISTER_COLUMNS if c not in df.columns]
+    missing = [c for c in ("id", *columns) if c not in df.columns]
     if missing:
         raise CalibrationError(
             f"claims register {path.name} lacks the column(s) {missing}; its header is "

@@ -17,6 +17,7 @@ import dataclasses
 import hashlib
 import importlib.metadata
 import json
+import math
 import os
 import platform
 import re
@@ -83,6 +84,11 @@ def _atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
 def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FORMAT) -> Path:
     """Write ``df`` as CSV (no index, floats as ``%.6g``, ``\\n`` line ends), atomically.
 
+    Non-finite numbers follow one rule: NaN (and None, ``pd.NA``) is a missing value and is
+    written as an empty field, which :func:`pandas.read_csv` reads back as NaN; an infinity is
+    refused, since no table of the study has one and ``inf`` in a CSV is usually a division by
+    zero upstream. A quantity that may be unbounded is written as a missing value with a note.
+
     Parameters
     ----------
     df : pandas.DataFrame
@@ -100,14 +106,37 @@ def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FO
     Raises
     ------
     CalibrationError
-        If ``df`` is not a DataFrame.
+        If ``df`` is not a DataFrame, or holds an infinity (the message names the column, the
+        row and the file); nothing is written then.
     """
     if not isinstance(df, pd.DataFrame):
         raise CalibrationError(f"write_table needs a pandas DataFrame, got {type(df).__name__}")
+    _check_no_infinity(df, path)
     return _atomic_write(
         path,
         lambda tmp: df.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n"),
     )
+
+
+def _check_no_infinity(df: pd.DataFrame, path: str | Path) -> None:
+    """Refuse a table holding +-inf in a numeric column or as a float in an object column."""
+    for i, (name, column) in enumerate(df.items()):
+        values = column.to_numpy()
+        if values.dtype.kind == "f":
+            bad = np.isinf(values)
+        elif values.dtype.kind == "O":
+            bad = np.array(
+                [isinstance(v, float | np.floating) and math.isinf(v) for v in values], bool
+            )
+        else:
+            continue
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise CalibrationError(
+                f"{Path(path).name}: column {name!r} (#{i + 1}) holds {values[row]} at row "
+                f"{row + 1}: tables are written without infinities (NaN is written as an empty "
+                "field, a missing value); make it a missing value and say why in a note"
+            )
 
 
 def write_figure(fig, path: str | Path, dpi: int = 120) -> Path:
