@@ -185,7 +185,7 @@ REGISTER_COLUMNS = (
 
 
 def claim_register(
-    register: str | Path | None = None, columns: tuple[str, ...] = ("id",)
+    register: str | Path | None = None, columns: tuple[str, ...] = ()
 ) -> pd.DataFrame:
     """The claims register ``data/claims.csv`` (or ``register``) as text, blanks as ``""``.
 
@@ -193,16 +193,17 @@ def claim_register(
     ----------
     register : path-like, optional
         A register of one's own; ``data/claims.csv`` by default.
-    columns : tuple of str, default ``("id",)``
-        The columns the caller reads (``data/claims.csv`` has :data:`REGISTER_COLUMNS`).
+    columns : tuple of str, optional
+        The columns the caller reads besides ``id`` (``data/claims.csv`` has
+        :data:`REGISTER_COLUMNS`).
 
     Raises
     ------
     FileNotFoundError
         If the file does not exist.
     CalibrationError
-        Naming the file, if it is not a CSV table, lacks a column of ``columns``, or has an
-        empty or repeated id.
+        Naming the file, if it is not a CSV table, lacks ``id`` or a column of ``columns``, or
+        has an empty or repeated id.
     """
     path = DATA_DIR / "claims.csv" if register is None else Path(register)
     if not path.is_file():
@@ -211,7 +212,7 @@ def claim_register(
         df = pd.read_csv(path, dtype=str, keep_default_na=False)
     except (ValueError, UnicodeDecodeError) as exc:  # pandas' ParserError is a ValueError
         raise CalibrationError(f"claims register {path.name} is not a CSV table: {exc}") from None
-    missing = [c for c in ("id", *columns) if c not in df.columns]
+    missing = [c for c in dict.fromkeys(("id", *columns)) if c not in df.columns]
     if missing:
         raise CalibrationError(
             f"claims register {path.name} lacks the column(s) {missing}; its header is "
