@@ -367,13 +367,31 @@ def translation_error(estimate, truth) -> np.ndarray:
 
 
 def random_rotation(rng: np.random.Generator, size: int | None = None) -> np.ndarray:
-    """Uniformly distributed rotations, ``(3, 3)`` or ``(size, 3, 3)``."""
+    """Uniformly distributed rotations, ``(3, 3)`` or ``(size, 3, 3)``.
+
+    Raises
+    ------
+    CalibrationError
+        If ``size`` is not None or an integer >= 0.
+    """
+    if size is not None and not (isinstance(size, int | np.integer) and size >= 0):
+        raise CalibrationError(f"random_rotation: size = {size!r} must be None or an integer >= 0")
     return Rotation.random(size, random_state=rng).as_matrix()
 
 
 def perturb(transform, sigma_rot: float, sigma_trans: float, rng: np.random.Generator):
     """Right-multiply by a small random motion: rotation vector ~ N(0, sigma_rot^2 I) in rad,
-    translation ~ N(0, sigma_trans^2 I) in mm. Works on ``(4, 4)`` or ``(N, 4, 4)``."""
+    translation ~ N(0, sigma_trans^2 I) in mm. Works on ``(4, 4)`` or ``(N, 4, 4)``.
+
+    Raises
+    ------
+    CalibrationError
+        If a sigma is negative or not finite.
+    """
+    if not (math.isfinite(sigma_rot) and sigma_rot >= 0):
+        raise CalibrationError(f"perturb: sigma_rot = {sigma_rot} rad must be finite and >= 0")
+    if not (math.isfinite(sigma_trans) and sigma_trans >= 0):
+        raise CalibrationError(f"perturb: sigma_trans = {sigma_trans} mm must be finite and >= 0")
     t = np.asarray(transform, dtype=float)
     lead = t.shape[:-2]
     d = make_transform(
@@ -411,12 +429,19 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
 
     The camera x axis is horizontal (perpendicular to ``up``); if the viewing direction is parallel
     to ``up``, the world x axis is used as the reference instead.
+
+    Raises
+    ------
+    CalibrationError
+        If eye and target coincide, or eye, target or up is not finite.
     """
     eye = np.asarray(eye, dtype=float)
     z = np.asarray(target, dtype=float) - eye
     norm = _norm3(z)
     if norm == 0:
         raise CalibrationError("look_at: eye and target coincide (distance 0 mm)")
+    if not (math.isfinite(norm) and math.isfinite(_norm3(np.asarray(up, dtype=float)))):
+        raise CalibrationError(f"look_at: eye {eye}, target {target} and up {up} must be finite")
     z = z / norm
     x = _cross3(z, np.asarray(up, dtype=float))
     if _norm3(x) < 1e-9:
