@@ -452,7 +452,11 @@ def check_rotation_diversity(
         )
     if not (np.isfinite(min_rotation) and min_rotation > 0.0):
         raise CalibrationError(f"min_rotation must be a positive angle in rad, got {min_rotation}")
-    r = poses[:, :3, :3]
+    _check_diversity(poses[:, :3, :3], min_rotation)
+
+
+def _check_diversity(r: np.ndarray, min_rotation: float) -> None:
+    """:func:`check_rotation_diversity` on checked rotations ``(N, 3, 3)``, ``N >= 3``."""
     i, j = np.triu_indices(len(r), 1)
     rotvec = geo.matrix_to_rotvec(np.swapaxes(r[i], -1, -2) @ r[j])
     angles = np.linalg.norm(rotvec, axis=1)
@@ -535,7 +539,7 @@ def opencv_handeye(
             f"min_pair_rotation = {min_pair_rotation} must be a finite angle >= 0 in rad"
         )
     # before OpenCV: on degenerate motions it prints to stderr and returns a wrong answer
-    check_rotation_diversity(g2b, max(float(min_pair_rotation), DEGENERATE_ROTATION), tol)
+    _check_diversity(g2b[:, :3, :3], max(float(min_pair_rotation), DEGENERATE_ROTATION))
     try:
         rot, trans = cv2.calibrateHandEye(
             list(g2b[:, :3, :3]),
