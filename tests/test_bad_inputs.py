@@ -157,6 +157,14 @@ def _stereo_table(rotation):
     return table | {"extrinsic": table["extrinsic"] | {"rotation": rotation}}
 
 
+def _raise_refused(forms):
+    """Raise the reasons of refused closed forms (they are reported, not raised)."""
+    refused = [f"{f.method}: {f.refused}" for f in forms if f.refused]
+    if refused:
+        raise CalibrationError("; ".join(refused))
+    return forms
+
+
 def _register(tmp_path, text):
     path = tmp_path / "register.csv"
     path.write_text(text)
@@ -534,6 +542,7 @@ CASES = [
     ("opencv_handeye-pure_translations", lambda p: he.opencv_handeye(_degenerate("translations"), _camera_poses(_degenerate("translations")), "Tsai"), E, r"no pair of the 6 poses rotates by 0\.01 deg or more \(largest 0 deg\): pure translations"),
     ("opencv_handeye-one_axis", lambda p: he.opencv_handeye(_degenerate("one_axis"), _camera_poses(_degenerate("one_axis")), "Daniilidis"), E, r"6 poses turn about one axis \(axes within [0-9.e-]+ deg, minimum 0\.01 deg\).*translation along it are undetermined"),
     ("opencv_handeye-repeated_pose", lambda p: he.opencv_handeye(CELL_A[[0, 1, 1]], CELL_B[[0, 1, 1]], "Horaud"), E, r"the 2 rotating motions of the 3 poses turn about one axis"),
+    ("closed_forms-robot_world_one_axis", lambda p: _raise_refused(hr.closed_forms(_degenerate("one_axis"), _camera_poses(_degenerate("one_axis")), ["Shah", "Li"])), E, r"Shah: solver failed: the 15 rotating motions of the 6 poses turn about one axis"),
     ("opencv_handeye-min_pair_rotation_nan", lambda p: he.opencv_handeye(CELL_A, CELL_B, "Park", min_pair_rotation=np.nan), E, r"min_pair_rotation = nan"),
     # other exception types, now a CalibrationError naming the input
     ("calibrate_handeye_csv-two_sigmas", lambda p: hhe.calibrate_handeye(str(_csv(p, _sphere_rows(), "mine.csv")), 1, [0.02, 0.03]), E, r"sensor_sigma_mm = \[0\.02, 0\.03\]: .*one per sensor axis \(3 values\)"),

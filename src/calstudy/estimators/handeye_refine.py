@@ -20,7 +20,11 @@ from scipy.spatial.transform import Rotation
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.estimation import Estimate, covariance_from_jacobian
-from calstudy.estimators.handeye import opencv_handeye
+from calstudy.estimators.handeye import (
+    DEGENERATE_ROTATION,
+    check_rotation_diversity,
+    opencv_handeye,
+)
 
 #: OpenCV's AX = ZB (robot-world-hand-eye) solvers
 OPENCV_RWHE_METHODS = {
@@ -138,7 +142,10 @@ def check_proper(name: str, t: np.ndarray) -> np.ndarray:
 
 def _opencv_rwhe(a: np.ndarray, b: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
     """``(X, Z)`` by ``cv2.calibrateRobotWorldHandEye``: it solves ``B = inv(X) inv(A) Z`` and
-    returns ``inv(Z)`` ("base2world") and ``inv(X)`` ("gripper2cam")."""
+    returns ``inv(Z)`` ("base2world") and ``inv(X)`` ("gripper2cam"). Degenerate motions (pure
+    translations, rotations about one axis, a repeated pose) are refused first, as by
+    :func:`calstudy.estimators.handeye.opencv_handeye`: OpenCV would return a wrong answer."""
+    check_rotation_diversity(a, DEGENERATE_ROTATION)
     ainv = geo.invert(a)
     r_w, t_w, r_g, t_g = cv2.calibrateRobotWorldHandEye(
         list(b[:, :3, :3]),
