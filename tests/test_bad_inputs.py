@@ -861,3 +861,12 @@ def test_tampered_trial_cache_runs_nothing(tmp_path):
         with pytest.raises(CalibrationError, match=f"trial cache file .*{files[0].name}.* {match}"):
             run(exp, 3, n_jobs=1, cache_dir=cache, progress=False)
     assert not marker.exists()
+
+
+def test_degenerate_handeye_is_refused_before_opencv_prints(capfd):
+    """OpenCV's Tsai prints its failure on a repeated pose to stderr and returns a pose; the
+    wrapper refuses the motions first, so nothing reaches stderr."""
+    for method in sorted(he.OPENCV_METHODS):
+        with pytest.raises(CalibrationError, match="no pair of the 3 poses rotates"):
+            he.opencv_handeye(CELL_A[[0, 0, 0]], CELL_B[[0, 0, 0]], method)
+    assert capfd.readouterr().err == ""
