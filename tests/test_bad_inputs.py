@@ -20,6 +20,7 @@ from hypothesis.configuration import set_hypothesis_home_dir
 from hypothesis.extra import numpy as hnp
 
 from calstudy import CalibrationError
+from calstudy.claims import claim_ids, claim_register
 from calstudy.core import estimation, schema
 from calstudy.core import geometry as geo
 from calstudy.core.circles import fit_circle_2d
@@ -27,16 +28,23 @@ from calstudy.estimators import binocular as bino
 from calstudy.estimators import coc
 from calstudy.estimators import fitting as ft
 from calstudy.estimators import handeye as he
+from calstudy.estimators import handeye_refine as hr
 from calstudy.estimators import sphere_csv as spc
 from calstudy.estimators import workpiece as wp
 from calstudy.estimators.handeye_poses import calibrate_handeye
 from calstudy.estimators.posefile import read_pose_list, write_pose_list
-from calstudy.io.results import aggregate_claims
-from calstudy.models import optics
+from calstudy.io.params import check_parameters
+from calstudy.io.results import aggregate_claims, write_table
+from calstudy.io.runs import load_factory, rebuild
+from calstudy.models import exposure, optics
 from calstudy.models.robots import load_robot
 from calstudy.models.sensors import PinholeCamera
-from calstudy.models.stereo import stereo_rig
+from calstudy.models.stereo import StereoRig, stereo_rig
 from calstudy.models.targets import Sphere
+from calstudy.papers.hybrid import compensation
+from calstudy.papers.hybrid import handeye_experiments as hhe
+from calstudy.papers.hybrid.scenario import Scenario as ProductionScenario
+from calstudy.papers.selfcal.identify import identify
 
 # hypothesis keeps a cache folder (.hypothesis/) even without an example database: put it in a
 # temporary folder removed at exit, so no run leaves one in the checkout
@@ -117,6 +125,54 @@ def _cell(n=8, seed=3):
 
 
 CELL_A, CELL_B = _cell()
+CELL_Z = geo.make_transform(np.eye(3), [800.0, 0, 0])
+
+
+def _camera_poses(flange2base):
+    """Target-to-camera poses of the cell of :func:`_cell` at the given flange poses."""
+    return geo.invert(flange2base @ S2F) @ CELL_Z
+
+
+def _degenerate(kind, n=6, seed=4):
+    """Flange poses ``(n, 4, 4)`` whose motions are pure translations or turn about one axis."""
+    rng = np.random.default_rng(seed)
+    if kind == "translations":
+        rot = np.broadcast_to(CELL_A[0, :3, :3], (n, 3, 3))
+    else:
+        rot = geo.rotvec_to_matrix(np.outer(np.deg2rad(rng.uniform(-40, 40, n)), [0.3, 0.4, 0.866]))
+    return geo.make_transform(rot, rng.uniform(-300, 300, (n, 3)))
+
+
+def _arc(deg, n=20, radius=100.0, noise=0.0, seed=2):
+    a = np.deg2rad(np.linspace(-deg / 2, deg / 2, n))
+    pts = radius * np.column_stack([np.cos(a), np.sin(a)])
+    return pts + np.random.default_rng(seed).normal(0.0, noise, pts.shape)
+
+
+def _stereo_table(rotation):
+    from calstudy.core.config import read_toml
+    from calstudy.core.paths import data_path
+
+    table = read_toml(data_path("binocular", "sensor.toml"), "stereo sensor")
+    return table | {"extrinsic": table["extrinsic"] | {"rotation": rotation}}
+
+
+def _raise_refused(forms):
+    """Raise the reasons of refused closed forms (they are reported, not raised)."""
+    refused = [f"{f.method}: {f.refused}" for f in forms if f.refused]
+    if refused:
+        raise CalibrationError("; ".join(refused))
+    return forms
+
+
+def _register(tmp_path, text):
+    path = tmp_path / "register.csv"
+    path.write_text(text)
+    return path
+
+
+PRODUCTION = dict(part_sigma_mm=0.1, feature_sigma_mm=0.02, repeatability_mm=0.03, drift_sigma_mm=0.01, cmm_sigma_mm=0.002, n_before=10, n_compensation=10, n_compensation_max=20, n_follow_up=30)
+NB06 = {"seed": 6, "results_dir": "", "poses_csv": "", "setup": "eye_in_hand", "n_poses": 20, "n_duplicates": 3, "outlier_mm": 68.0, "outlier_deg": 1.8, "sigma_rot_rad": 0.0, "sigma_trans_mm": 0.0, "robust": "cauchy", "tool_point_mm": [0.0, 0.0, 500.0], "n_trials": 200, "n_jobs": None, "scheduler": "", "cache_dir": "", "progress": True}
 
 # ----------------------------------------------------------------------------------------------
 # user files
@@ -456,6 +512,60 @@ CASES = [
     ("stereorig.perturbed-negative_sigma", lambda p: RIG.perturbed(SIGMAS | {"focal_px": -1.0}, np.random.default_rng(0)), E, r"calibration sigma focal_px = -1\.0"),
     ("stereorig.perturbed-missing_sigma", lambda p: RIG.perturbed({"focal_px": 1.0}, np.random.default_rng(0)), E, "calibration sigma principal_point_px = None"),
     ("stereorig.aim_point-negative", lambda p: RIG.aim_point(-850.0), E, r"aim distance -850\.0 mm"),
+    # silent NaN or inf in the shared layers, now refused at the entry
+    ("fit_circle_2d-geometric_point_at_centre", lambda p: fit_circle_2d(np.r_[SQUARE[:4], [[50.0, 50.0]]], method="geometric"), E, r"geometric circle fit of 5 points gave no finite circle"),
+    ("fit_circle_2d-2deg_arc", lambda p: fit_circle_2d(_arc(2.0)), E, r"span an arc of 2 deg .*radius 100\).*at least 10 deg"),
+    ("fit_circle_2d-2deg_arc_noisy", lambda p: fit_circle_2d(_arc(2.0, noise=0.01)), E, r"the 20 points .*the radius (of a shorter arc )?is ill-conditioned"),
+    ("euler_zyx_to_matrix-nan", lambda p: geo.euler_zyx_to_matrix(np.nan, 0.0, 0.0), E, r"Euler angles \(A, B, C\) in deg holds a non-finite value \(nan\)"),
+    ("euler_zyx_to_matrix-text", lambda p: geo.euler_zyx_to_matrix("ten", 0.0, 0.0), E, "Euler angles A, B, C are not numbers"),
+    ("matrix_to_euler_zyx-inf", lambda p: geo.matrix_to_euler_zyx(np.diag([1.0, 1.0, np.inf])), E, r"rotation holds a non-finite value \(inf\)"),
+    ("look_at-nan_eye", lambda p: geo.look_at([0.0, 0.0, np.nan], [0.0, 0.0, 0.0]), E, r"look_at: eye \[ 0\.  0\. nan\], target .* must be finite"),
+    ("perturb-negative_sigma", lambda p: geo.perturb(np.eye(4), -1.0, 0.1, np.random.default_rng(0)), E, r"perturb: sigma_rot = -1\.0 rad must be finite and >= 0"),
+    ("perturb-nan_sigma", lambda p: geo.perturb(np.eye(4), 0.01, np.nan, np.random.default_rng(0)), E, r"perturb: sigma_trans = nan mm"),
+    ("random_rotation-negative_size", lambda p: geo.random_rotation(np.random.default_rng(0), -1), E, r"random_rotation: size = -1 must be None or an integer >= 0"),
+    ("project_to_so3-nan", lambda p: geo.project_to_so3(np.full((3, 3), np.nan)), E, "matrix to project to SO\\(3\\) holds a non-finite value"),
+    ("compensate-nan_offset", lambda p: compensation.compensate(np.zeros((3, 2, 3)), [[np.nan, 0, 0], [0, 0, 0]]), E, r"offset holds a non-finite value \(nan\) at index \(0, 0\)"),
+    ("coc_radius_far_mm-zero_distance", lambda p: optics.coc_radius_far_mm(0.0, 850.0, 16.0, 5.6), E, r"object distance d_B = 0\.0 mm must be a finite number > 0"),
+    ("coc_radius_far_mm-zero_focus", lambda p: optics.coc_radius_far_mm(800.0, 0.0, 16.0, 5.6), E, r"focused distance d_A = 0\.0 mm"),
+    ("coc_radius_far_mm-negative_f_number", lambda p: optics.coc_radius_far_mm(800.0, 850.0, 16.0, -5.6), E, r"F -5\.6 must be finite positive"),
+    ("fuse_exposures-nan_pixel", lambda p: optics.fuse_exposures([DOT, np.where(DOT > 0, np.nan, 0.0)]), E, r"image 1 holds nan at pixel \(13, 17\)"),
+    ("fuse_exposures-above_one", lambda p: optics.fuse_exposures([DOT * 1.5]), E, r"image 0 holds 1\.5 at pixel .*\[0, 1\]"),
+    ("expose-negative_gain", lambda p: exposure.expose(DOT, 100.0, 1.3, 0.06, 1.5, -40.0, np.random.default_rng(0)), E, r"electrons_per_dn = -40\.0 must be > 0"),
+    ("expose-zero_time", lambda p: exposure.expose(DOT, 0.0, 1.3, 0.06, 1.5, 40.0, np.random.default_rng(0)), E, r"exposure_ms = 0\.0 must be a finite number > 0"),
+    ("expose-negative_read_noise", lambda p: exposure.expose(DOT, 100.0, 1.3, 0.06, -1.5, 40.0, np.random.default_rng(0)), E, r"read_noise_dn = -1\.5 must be a finite number >= 0"),
+    ("expose-nan_radiance", lambda p: exposure.expose(DOT * np.nan, 100.0, 1.3, 0.06, 1.5, 40.0, np.random.default_rng(0)), E, r"radiance holds 1600 NaN or inf pixel"),
+    ("expose-bits", lambda p: exposure.expose(DOT, 100.0, 1.3, 0.06, 1.5, 40.0, np.random.default_rng(0), bits=24), E, r"bits = 24 must be an integer from 1 to 16"),
+    ("expose_and_fuse-negative_time", lambda p: exposure.expose_and_fuse(DOT, [100.0, -10.0], 1.3, 0.06, 1.5, 40.0, np.random.default_rng(0)), E, r"exposure_ms = -10\.0"),
+    ("stereorig.from_table-scaled_rotation", lambda p: StereoRig.from_table(_stereo_table((2 * np.eye(3)).tolist())), E, r"extrinsic\.rotation is not orthonormal \(max \|R\^T R - I\| = 3"),
+    ("stereorig.from_table-reflection", lambda p: StereoRig.from_table(_stereo_table(np.diag([1.0, 1.0, -1.0]).tolist())), E, r"extrinsic\.rotation is a reflection"),
+    ("sphere_handeye-camera_in_metres", lambda p: he.sphere_handeye(TRANS, CENTRES[:4] * 1e-3, ROT, CENTRES[4:] * 1e-3), E, r"sphere centre moves 0\.001\d* times as far .*metres give 0\.001"),
+    ("opencv_handeye-pure_translations", lambda p: he.opencv_handeye(_degenerate("translations"), _camera_poses(_degenerate("translations")), "Tsai"), E, r"no pair of the 6 poses rotates by 0\.01 deg or more \(largest 0 deg\): pure translations"),
+    ("opencv_handeye-one_axis", lambda p: he.opencv_handeye(_degenerate("one_axis"), _camera_poses(_degenerate("one_axis")), "Daniilidis"), E, r"6 poses turn about one axis \(axes within [0-9.e-]+ deg, minimum 0\.01 deg\).*translation along it are undetermined"),
+    ("opencv_handeye-repeated_pose", lambda p: he.opencv_handeye(CELL_A[[0, 1, 1]], CELL_B[[0, 1, 1]], "Horaud"), E, r"the 2 rotating motions of the 3 poses turn about one axis"),
+    ("closed_forms-robot_world_one_axis", lambda p: _raise_refused(hr.closed_forms(_degenerate("one_axis"), _camera_poses(_degenerate("one_axis")), ["Shah", "Li"])), E, r"Shah: solver failed: the 15 rotating motions of the 6 poses turn about one axis"),
+    ("opencv_handeye-min_pair_rotation_nan", lambda p: he.opencv_handeye(CELL_A, CELL_B, "Park", min_pair_rotation=np.nan), E, r"min_pair_rotation = nan"),
+    # other exception types, now a CalibrationError naming the input
+    ("calibrate_handeye_csv-two_sigmas", lambda p: hhe.calibrate_handeye(str(_csv(p, _sphere_rows(), "mine.csv")), 1, [0.02, 0.03]), E, r"sensor_sigma_mm = \[0\.02, 0\.03\]: .*one per sensor axis \(3 values\)"),
+    ("identify-29_parameters", lambda p: identify(None, np.zeros(29)), E, r"start \(the parameter vector\) has shape \(29,\); expected \(30\)"),
+    ("refine_ml-zero_weights", lambda p: hr.refine_ml(CELL_A, CELL_B, S2F, CELL_Z, 1e-3, 0.1, weights=np.zeros(8)), E, r"weights leave 0 of the 8 poses with a weight > 0; AX = ZB needs at least 3"),
+    ("calibrate_handeye-zero_weights", lambda p: calibrate_handeye(CELL_A, CELL_B, weights=np.zeros(8)), E, r"weights leave 0 of the 8 poses"),
+    ("calibrate_handeye-negative_weight", lambda p: calibrate_handeye(CELL_A, CELL_B, weights=np.r_[np.ones(7), -1.0]), E, r"weight 7 is -1"),
+    ("handeye_crb-two_weighted_poses", lambda p: hr.handeye_crb(CELL_A, CELL_B, S2F, CELL_Z, 1e-3, 0.1, weights=np.r_[np.zeros(6), 1.0, 1.0]), E, r"weights leave 2 of the 8 poses"),
+    ("production_scenario-huge_count", lambda p: ProductionScenario(**PRODUCTION | {"n_compensation_max": 10**9}), E, r"n_compensation_max is 1000000000; expected a whole number of products from 3 to 10000"),
+    ("production_scenario-fractional_count", lambda p: ProductionScenario(**PRODUCTION | {"n_follow_up": 12.5}), E, r"n_follow_up is 12\.5"),
+    ("claim_ids-no_id_column", lambda p: claim_ids(_register(p, "name,paper\nx,hybrid\n")), E, r"register\.csv lacks the column\(s\) \['id'\]"),
+    ("claim_register-duplicate_id", lambda p: claim_register(_register(p, "id,paper\na.b,x\na.b,y\n")), E, r"id 'a\.b' appears more than once"),
+    ("claim_register-empty_id", lambda p: claim_register(_register(p, "id,paper\na.b,x\n,y\n")), E, r"row 3 has an empty id"),
+    # write paths
+    ("write_table-inf", lambda p: write_table(__import__("pandas").DataFrame({"a": [1.0, np.inf]}), p / "t.csv"), E, r"t\.csv: column 'a' \(#1\) holds inf at row 2"),
+    ("write_table-inf_in_object_column", lambda p: write_table(__import__("pandas").DataFrame({"a": ["x", -np.inf]}), p / "t.csv"), E, r"column 'a' \(#1\) holds -inf at row 2"),
+    # data that names code
+    ("load_factory-outside_registry", lambda p: load_factory("os:system"), E, r"'os:system' is not one of the study's factories.*Nothing was imported or run"),
+    ("rebuild-malformed_entry", lambda p: rebuild({"factory": "calstudy.papers.selfcal.experiments:basin_experiment"}), E, r"must be an object with a 'factory' string and a 'kwargs' object"),
+    ("rebuild-unknown_kwarg", lambda p: rebuild({"factory": "calstudy.papers.selfcal.experiments:basin_experiment", "kwargs": {"n_trial": 3}}), E, r"keyword arguments \['n_trial'\] do not fit its signature"),
+    # notebook parameters
+    ("check_parameters-06_n_trials_negative", lambda p: check_parameters("06_handeye_your_cell", NB06 | {"n_trials": -5}), E, r"notebook 06_handeye_your_cell parameters: n_trials = -5: must be >= 0"),
+    ("check_parameters-06_sigma_negative", lambda p: check_parameters("06_handeye_your_cell", NB06 | {"sigma_rot_rad": -0.001}), E, r"sigma_rot_rad = -0\.001: must be >= 0"),
 ]
 
 
@@ -546,6 +656,9 @@ def test_property_point_fitters(data):
     _check(ft.fit_rotation, a, b)
     _check(ft.fit_sphere, a)
     _check(fit_circle_2d, a[:, :2])
+    _check(fit_circle_2d, a[:, :2], method="geometric")
+    if len(a) >= 4:  # the same points with the first one moved to the centroid of the others
+        _check(fit_circle_2d, np.r_[a[1:, :2], a[1:, :2].mean(axis=0, keepdims=True)], "geometric")
 
 
 @PROFILE
@@ -591,3 +704,169 @@ def test_property_calibrate_handeye(data):
         np.stack([_pose(v) for v in camera]),
         check_convention="off",
     )
+
+
+_ANY = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False, width=64)
+
+
+@PROFILE
+@given(_arrays((5,)), _arrays((5,)), _arrays((5,)), _arrays((3, 3)))
+def test_property_rotation_converters(a, b, c, m):
+    _check(geo.euler_zyx_to_matrix, a, b, c)
+    _check(geo.euler_zyx_to_matrix, float(a[0]), float(b[0]), float(c[0]))
+    _check(geo.project_to_so3, m)
+    try:
+        r = geo.project_to_so3(m)
+    except CalibrationError:
+        r = np.eye(3)
+    _check(geo.matrix_to_euler_zyx, r)
+
+
+@PROFILE
+@given(_arrays((4,)) , _ANY, _ANY, _ANY, _ANY)
+def test_property_circle_of_confusion(d_b, d_a, focal, f_number, pitch):
+    _check(optics.coc_radius_far_mm, d_b, d_a, focal, f_number)
+    _check(optics.coc_radius_mm, d_b, d_a, focal, f_number)
+    _check(optics.coc_radius_px, d_b, d_a, focal, f_number, pitch)
+
+
+@PROFILE
+@given(
+    st.lists(hnp.arrays(np.float64, (6, 6), elements=st.floats(-0.5, 1.5, width=64)), min_size=1, max_size=3),
+    st.floats(-1.0, 3.0),
+    st.floats(-1.0, 3.0),
+    st.floats(-0.1, 1.0),
+)
+def test_property_fusion(images, wc, we, sigma):
+    _check(optics.fuse_exposures, images, wc, we, sigma)
+
+
+@PROFILE
+@given(_ANY, _ANY, _ANY, _ANY, st.floats(-100.0, 1e3), st.integers(0, 17))
+def test_property_exposure(time_ms, peak, background, read_noise, gain, bits):
+    """An exposure is an image of integers in [0, 2**bits - 1], or refused."""
+    try:
+        out = optics.expose(DOT, time_ms, peak, background, read_noise, gain, np.random.default_rng(0), bits)
+    except CalibrationError:
+        return
+    assert out.min() >= 0 and out.max() <= 2**bits - 1
+
+
+@settings(PROFILE, max_examples=20)
+@given(st.integers(3, 6).flatmap(lambda n: st.tuples(_arrays((n, 6)), _arrays((n, 6)))), st.sampled_from(sorted(he.OPENCV_METHODS)))
+def test_property_opencv_handeye(data, method):
+    robot, camera = data
+    _check(he.opencv_handeye, np.stack([_pose(v) for v in robot]), np.stack([_pose(v) for v in camera]), method)
+    # the same poses as pure translations and as rotations about one axis are always refused
+    flange = np.stack([_pose(v) for v in robot])
+    for poses in (
+        geo.make_transform(np.broadcast_to(flange[0, :3, :3], flange[:, :3, :3].shape), flange[:, :3, 3]),
+        geo.make_transform(geo.rotvec_to_matrix(np.outer(np.clip(robot[:, 0], -3, 3), [0.0, 0.6, 0.8])), flange[:, :3, 3]),
+    ):
+        with pytest.raises(CalibrationError, match="pure translations|turn about one axis"):
+            he.opencv_handeye(poses, _camera_poses(poses), method)
+
+
+@PROFILE
+@given(st.integers(1, 4).flatmap(lambda n: st.tuples(_arrays((n, 2, 3)), _arrays((2, 3)))))
+def test_property_compensation(data):
+    readings, offset = data
+    _check(compensation.compensate, readings, offset)
+
+
+@PROFILE
+@given(_arrays((3, 3)), _arrays((3,)))
+def test_property_stereo_table(rotation, translation):
+    """A stereo table with any finite extrinsic gives a rig of finite rigid transforms, or is
+    refused."""
+    table = _stereo_table(rotation.tolist())
+    table["extrinsic"] = table["extrinsic"] | {"translation_mm": translation.tolist()}
+    try:
+        rig = StereoRig.from_table(table)
+    except CalibrationError:
+        return
+    geo.check_transform("left2right", rig.left2right)
+    geo.check_transform("right2left", rig.right2left)
+
+
+# ----------------------------------------------------------------------------------------------
+# data stays data: a tampered results folder or trial cache runs nothing
+
+
+class _Command:
+    """Pickles as a call of ``os.system(command)``: what a hostile pickle file holds."""
+
+    def __init__(self, command):
+        self.command = command
+
+    def __reduce__(self):
+        import os
+
+        return (os.system, (self.command,))
+
+
+def test_tampered_experiments_json_runs_nothing(tmp_path, monkeypatch):
+    """An experiments.json naming a function outside the registry is refused before any import:
+    the command it names does not run, whatever module it names."""
+    import json
+    import sys
+
+    marker = tmp_path / "marker"
+    monkeypatch.chdir(tmp_path)
+    entries = [
+        {"factory": "subprocess:run", "kwargs": {"args": ["touch", str(marker)]}},
+        {"factory": "os:system", "kwargs": {"command": f"touch {marker}"}},
+        {"factory": "calstudy_not_a_module:run", "kwargs": {}},
+        {"factory": "calstudy.papers.selfcal.experiments:os", "kwargs": {}},
+    ]
+    (tmp_path / "experiments.json").write_text(json.dumps({"seed": 1, "experiments": {"x": entries[0]}}))
+    record = json.loads((tmp_path / "experiments.json").read_text())
+    with pytest.raises(CalibrationError, match="'subprocess:run' is not one of the study's factories"):
+        rebuild(record["experiments"]["x"])
+    for entry in entries[1:]:
+        with pytest.raises(CalibrationError, match="is not one of the study's factories"):
+            rebuild(entry)
+    assert not marker.exists()
+    assert "calstudy_not_a_module" not in sys.modules
+
+
+def test_tampered_trial_cache_runs_nothing(tmp_path):
+    """A cache file replaced by a hostile pickle, or by JSON naming a type, is refused naming the
+    file; a pickle left beside the JSON records is never read; nothing runs."""
+    import pickle
+
+    from mc_trials import experiment
+
+    from calstudy.core.montecarlo import run
+
+    marker = tmp_path / "marker"
+    cache = tmp_path / "cache"
+    exp = experiment("tamper", n_trials=2, points=[{"sigma": 0.1}])
+    first = run(exp, 3, n_jobs=1, cache_dir=cache, progress=False)
+    files = sorted(cache.rglob("trial-*.json"))
+    assert len(files) == 2
+    # a pickle beside the records (the former format) is ignored
+    (files[0].parent / "trial-000000.pkl").write_bytes(pickle.dumps(_Command(f"touch {marker}")))
+    again = run(exp, 3, n_jobs=1, cache_dir=cache, progress=False)
+    assert again.equals(first) and not marker.exists()
+    # a record replaced by a pickle, or by JSON asking for another type, is refused
+    original = files[0].read_bytes()
+    assert b'"numpy":"<f8"' in original
+    for payload, match in (
+        (pickle.dumps(_Command(f"touch {marker}")), "is not a JSON trial record"),
+        (original.replace(b'"numpy":"<f8"', b'"numpy":"|O"', 1), "is not a scalar the trial cache stores"),
+        (b'{"key": {}, "trial": 0}', "is not a trial record"),
+    ):
+        files[0].write_bytes(payload)
+        with pytest.raises(CalibrationError, match=f"trial cache file .*{files[0].name}.* {match}"):
+            run(exp, 3, n_jobs=1, cache_dir=cache, progress=False)
+    assert not marker.exists()
+
+
+def test_degenerate_handeye_is_refused_before_opencv_prints(capfd):
+    """OpenCV's Tsai prints its failure on a repeated pose to stderr and returns a pose; the
+    wrapper refuses the motions first, so nothing reaches stderr."""
+    for method in sorted(he.OPENCV_METHODS):
+        with pytest.raises(CalibrationError, match="no pair of the 3 poses rotates"):
+            he.opencv_handeye(CELL_A[[0, 0, 0]], CELL_B[[0, 0, 0]], method)
+    assert capfd.readouterr().err == ""

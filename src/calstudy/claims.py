@@ -145,7 +145,7 @@ def control_rows(claim_id: str, null: RuleVerdict, oracle: RuleVerdict) -> list[
         register defines no control for the claim.
     """
     check_null_control(null)
-    register = claim_register().set_index("id")
+    register = claim_register(columns=("null_control", "oracle_control")).set_index("id")
     if claim_id not in register.index:
         raise CalibrationError(f"claim id {claim_id!r} is not in the claims register")
     rows = []
@@ -173,40 +173,83 @@ def control_rows(claim_id: str, null: RuleVerdict, oracle: RuleVerdict) -> list[
     return rows
 
 
-#: Columns every claims register has.
+#: Columns every claims register has (``data/claims.csv``).
 REGISTER_COLUMNS = (
-    "id", "paper", "where", "statement", "published", "unit", "comparison", "kind", "direction",
-    "reference", "null_control", "oracle_control", "criterion", "criterion_source",
+    "id",
+    "paper",
+    "where",
+    "statement",
+    "published",
+    "unit",
+    "comparison",
+    "kind",
+    "direction",
+    "reference",
+    "null_control",
+    "oracle_control",
+    "criterion",
+    "criterion_source",
 )
 
 
-def claim_register(register: str | Path | None = None) -> pd.DataFrame:
+def claim_register(
+    register: str | Path | None = None, columns: tuple[str, ...] = ()
+) -> pd.DataFrame:
     """The claims register ``data/claims.csv`` (or ``register``) as text, blanks as ``""``.
+
+    Parameters
+    ----------
+    register : path-like, optional
+        A register of one's own; ``data/claims.csv`` by default (which must have every column of
+        :data:`REGISTER_COLUMNS`).
+    columns : tuple of str, optional
+        The columns the caller reads besides ``id``.
 
     Raises
     ------
     FileNotFoundError
         If the file does not exist.
     CalibrationError
-        If a column of :data:`REGISTER_COLUMNS` is missing, or a row's ``criterion`` is not one
-        of :data:`CRITERIA` or has no ``criterion_source`` (no criterion of the study may pass
-        for a published one).
+        Naming the file, if it is not a CSV table, lacks ``id`` or a column of ``columns``, or
+        has an empty or repeated id; if a row's ``criterion`` is not one of :data:`CRITERIA` or
+        has no ``criterion_source`` (no criterion of the study may pass for a published one).
     """
     path = DATA_DIR / "claims.csv" if register is None else Path(register)
     if not path.is_file():
         raise FileNotFoundError(f"claims register not found: {path.name}")
-    reg = pd.read_csv(path, dtype=str, keep_default_na=False)
-    missing = [c for c in REGISTER_COLUMNS if c not in reg.columns]
+    try:
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (ValueError, UnicodeDecodeError) as exc:  # pandas' ParserError is a ValueError
+        raise CalibrationError(f"claims register {path.name} is not a CSV table: {exc}") from None
+    wanted = REGISTER_COLUMNS if register is None else ("id", *columns)
+    missing = [c for c in dict.fromkeys(wanted) if c not in df.columns]
     if missing:
-        raise CalibrationError(f"{path.name}: the claims register lacks the columns {missing}")
-    for line, row in enumerate(reg.itertuples(index=False), start=2):
-        if row.criterion not in CRITERIA or not row.criterion_source.strip():
-            raise CalibrationError(
-                f"{path.name}: line {line} ({row.id}): criterion {row.criterion!r} must be one of "
-                f"{', '.join(CRITERIA)}, with criterion_source saying where in the paper or why "
-                "the study's"
-            )
-    return reg
+        raise CalibrationError(
+            f"claims register {path.name} lacks the column(s) {missing}; its header is "
+            f"{list(df.columns)}"
+        )
+    ids = df["id"]
+    if (ids.str.strip() == "").any():
+        raise CalibrationError(
+            f"claims register {path.name}: row {int((ids.str.strip() == '').idxmax()) + 2} "
+            "has an empty id"
+        )
+    if ids.duplicated().any():
+        raise CalibrationError(
+            f"claims register {path.name}: id {ids[ids.duplicated()].iloc[0]!r} appears more "
+            "than once"
+        )
+    if "criterion" in df.columns:
+        source = df.get("criterion_source", pd.Series("", index=df.index))
+        rows = zip(ids, df["criterion"], source, strict=True)
+        for line, (cid, crit, src) in enumerate(rows, start=2):
+            if crit not in CRITERIA or not str(src).strip():
+                raise CalibrationError(
+                    f"claims register {path.name}: line {line} ({cid}): criterion {crit!r} must "
+                    f"be one of {', '.join(CRITERIA)}, with criterion_source saying where in the "
+                    "paper or why the study's"
+                )
+    return df
 
 
 def claim_ids(register: str | Path | None = None) -> list[str]:

@@ -268,7 +268,7 @@ def test_interrupted_run_resumes_without_recomputing(tmp_path, n_jobs):
     with pytest.raises(CalibrationError, match="trial 3 failed"):
         run(exp, SEED, n_jobs=n_jobs, cache_dir=cache, progress=False)
     first_calls = calls(state)
-    stored = {int(p.stem.split("-")[1]) for p in cache.rglob("trial-*.pkl")}
+    stored = {int(p.stem.split("-")[1]) for p in cache.rglob("trial-*.json")}
     assert 3 not in stored
     resumed = run(exp, SEED, n_jobs=n_jobs, cache_dir=cache, progress=False)
     second_calls = calls(state)
@@ -323,8 +323,8 @@ def test_cache_key_is_the_same_in_another_process(tmp_path):
 def test_stale_temporary_files_are_removed(tmp_path):
     folder = tmp_path / "cache" / "stale" / "somewhere"
     folder.mkdir(parents=True)
-    stale, kept = folder / ".trial-000001.pkl.999.tmp", folder / "notes.txt"
-    stale.write_bytes(b"half a pickle")
+    stale, kept = folder / ".trial-000001.json.999.tmp", folder / "notes.txt"
+    stale.write_bytes(b"half a record")
     kept.write_text("mine")
     an_hour_ago = time.time() - 3600
     os.utime(stale, (an_hour_ago, an_hour_ago))

@@ -373,7 +373,9 @@ def test_a_register_without_its_criterion_is_refused(tmp_path):
     with pytest.raises(CalibrationError, match=r"line 19 .*criterion 'paper' must be one of"):
         claim_register(bad)
     reg.drop(columns="criterion_source").to_csv(bad, index=False)
-    with pytest.raises(CalibrationError, match=r"lacks the columns \['criterion_source'\]"):
+    with pytest.raises(CalibrationError, match=r"lacks the column\(s\) \['criterion_source'\]"):
+        claim_register(bad, columns=("criterion_source",))
+    with pytest.raises(CalibrationError, match="with criterion_source saying where"):
         claim_register(bad)
 
 

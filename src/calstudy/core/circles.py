@@ -12,11 +12,27 @@ from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import check_not_collinear, check_points
 
 CIRCLE_METHODS = ("kasa", "geometric")
+#: Shortest arc (deg, about the fitted centre) :func:`fit_circle_2d` accepts: on a shorter arc
+#: the radius rests on the sagitta alone (``r theta^2 / 8``, 0.4 % of the radius at 10 deg) and
+#: a scatter of a thousandth of the radius moves it by tens of percent.
+MIN_ARC_DEG = 10.0
+#: The points' bend (largest distance from their best-fit line) must reach this many RMS
+#: residuals of the fitted circle, or the circle fits the scatter rather than a curvature.
+MIN_BEND_TO_RESIDUAL = 5.0
 
 
 def _solve_sym3(m: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve ``M x = rhs`` for a stack of symmetric 3 x 3 systems ``(M, 3, 3)``, ``(M, 3)``."""
-    return np.linalg.solve(m, rhs[..., None])[..., 0]
+    """Solve ``M x = rhs`` for a stack of symmetric 3 x 3 systems ``(M, 3, 3)``, ``(M, 3)``; a
+    singular system (a point at the centre, coincident points) gives NaN for its set alone, which
+    the caller refuses as a non-finite fit."""
+    try:
+        return np.linalg.solve(m, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        out = np.full(rhs.shape, np.nan)
+        ok = np.abs(np.linalg.det(m)) > 0
+        if ok.any():
+            out[ok] = np.linalg.solve(m[ok], rhs[ok][..., None])[..., 0]
+        return out
 
 
 def _kasa_batch(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -129,9 +145,48 @@ def fit_circle_2d(points, method: str = "kasa") -> tuple[np.ndarray, float]:
     Raises
     ------
     CalibrationError
-        On wrong shapes, non-finite values, fewer than 3 points or collinear points.
+        On wrong shapes, non-finite values, fewer than 3 points or collinear points; when the
+        circle is ill-conditioned: the points span less than :data:`MIN_ARC_DEG` about its
+        centre, or their bend away from a line is below :data:`MIN_BEND_TO_RESIDUAL` times the
+        circle's RMS residual (an arc too short for its scatter); or when the geometric
+        refinement does not give a finite circle (a point at the centre).
     """
     p = check_points("points", points, 2, 3, "circle fit")
     check_not_collinear("points", p)
-    centres, radii = fit_circles_2d_batch(p[None], method)
-    return centres[0], float(radii[0])
+    if method not in CIRCLE_METHODS:
+        raise CalibrationError(f"circle fit method must be one of {CIRCLE_METHODS}; got {method!r}")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        centres, radii = fit_circles_2d_batch(p[None], method)
+    centre, radius = centres[0], float(radii[0])
+    if not (np.all(np.isfinite(centre)) and np.isfinite(radius) and radius > 0):
+        raise CalibrationError(
+            f"{method} circle fit of {len(p)} points gave no finite circle (centre {centre}, "
+            f"radius {radius}): a point lies at the centre, or the points fit no circle"
+        )
+    _check_conditioning(p, centre, radius)
+    return centre, radius
+
+
+def _check_conditioning(p: np.ndarray, centre: np.ndarray, radius: float) -> None:
+    """Refuse a circle that the points ``(N, 2)`` do not determine (see :func:`fit_circle_2d`)."""
+    d = p - centre
+    angles = np.sort(np.arctan2(d[:, 1], d[:, 0]))
+    gaps = np.diff(np.append(angles, angles[0] + 2 * np.pi))
+    arc = np.degrees(2 * np.pi - gaps.max())
+    if arc < MIN_ARC_DEG:
+        raise CalibrationError(
+            f"the {len(p)} points span an arc of {arc:.3g} deg about the fitted centre (radius "
+            f"{radius:.4g}); a circle fit needs at least {MIN_ARC_DEG:g} deg: the radius of a "
+            "shorter arc is ill-conditioned"
+        )
+    q = p - p.mean(axis=0)
+    normal = np.linalg.svd(q, full_matrices=False)[2][-1]
+    bend = float(np.abs(q @ normal).max())
+    residual = float(np.sqrt(np.mean((np.linalg.norm(d, axis=1) - radius) ** 2)))
+    if bend < MIN_BEND_TO_RESIDUAL * residual:
+        raise CalibrationError(
+            f"the {len(p)} points do not determine a circle: they bend {bend:.3g} away from a "
+            f"line, only {bend / residual:.3g} times the RMS residual {residual:.3g} of the "
+            f"fitted circle (radius {radius:.4g}; {MIN_BEND_TO_RESIDUAL:g} needed): an arc too "
+            "short for its scatter (the radius is ill-conditioned), or points not on a circle"
+        )

@@ -4,6 +4,15 @@ Conventions (see DESIGN): a transform is named for what it maps, ``sensor2flange
 in the sensor frame to the flange frame, ``p_flange = sensor2flange @ p_sensor``. Millimetres and
 radians throughout. Rotations are converted with :mod:`scipy.spatial.transform` and rigid motions
 with :mod:`pinocchio` where a library already does the job.
+
+Checks: the ``check_*`` functions below are what estimators run at their entry. The elementary
+kernels (:func:`make_transform`, :func:`invert`, :func:`apply`, :func:`rotvec_to_matrix`,
+:func:`matrix_to_rotvec`, :func:`pose_from_vector`, :func:`pose_to_vector`,
+:func:`rotation_angle`) run inside solvers' residuals, thousands of times per fit, and do not
+check: they return finite values for finite input and pass NaN through; their callers check
+their own input once. The converters a user calls directly (:func:`euler_zyx_to_matrix`,
+:func:`matrix_to_euler_zyx`, :func:`project_to_so3`, :func:`mean_transform`) refuse non-finite
+input.
 """
 
 from __future__ import annotations
@@ -248,23 +257,59 @@ def to_se3(transform) -> pin.SE3:
 
 
 def euler_zyx_to_matrix(a, b, c) -> np.ndarray:
-    """Rotation ``Rz(a) Ry(b) Rx(c)`` from angles in degrees (the KUKA A, B, C convention)."""
-    angles = np.stack(np.broadcast_arrays(a, b, c), axis=-1)
+    """Rotation ``Rz(a) Ry(b) Rx(c)`` from angles in degrees (the KUKA A, B, C convention).
+
+    Parameters
+    ----------
+    a, b, c : float or array_like, broadcastable
+        The angles A, B, C in degrees.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3, 3)
+
+    Raises
+    ------
+    CalibrationError
+        If an angle is not a finite number.
+    """
+    try:
+        angles = np.stack(np.broadcast_arrays(a, b, c), axis=-1).astype(float, copy=False)
+    except (ValueError, TypeError) as exc:
+        raise CalibrationError(
+            f"Euler angles A, B, C are not numbers of one shape: {exc}"
+        ) from None
+    if not np.isfinite(angles).all():
+        check_finite("Euler angles (A, B, C) in deg", angles)
     flat = angles.reshape(-1, 3)
     mats = Rotation.from_euler("ZYX", flat, degrees=True).as_matrix()
     return mats.reshape(angles.shape[:-1] + (3, 3))
 
 
 def matrix_to_euler_zyx(rotation) -> np.ndarray:
-    """Angles ``(A, B, C)`` in degrees with ``R = Rz(A) Ry(B) Rx(C)``; inverse of the above."""
-    r = np.asarray(rotation, dtype=float)
+    """Angles ``(A, B, C)`` in degrees with ``R = Rz(A) Ry(B) Rx(C)``; inverse of the above.
+
+    Raises
+    ------
+    CalibrationError
+        If ``rotation`` is not ``(..., 3, 3)`` or holds a non-finite value.
+    """
+    r = check_finite("rotation", rotation)
+    if r.shape[-2:] != (3, 3):
+        raise CalibrationError(f"rotation has shape {r.shape}; expected (..., 3, 3)")
     out = Rotation.from_matrix(r.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True)
     return out.reshape(r.shape[:-2] + (3,))
 
 
 def project_to_so3(matrix) -> np.ndarray:
-    """Nearest rotation (Frobenius norm) to a 3 x 3 matrix, by SVD with a determinant fix."""
-    u, _, vt = np.linalg.svd(np.asarray(matrix, dtype=float))
+    """Nearest rotation (Frobenius norm) to a 3 x 3 matrix, by SVD with a determinant fix.
+
+    Raises
+    ------
+    CalibrationError
+        If ``matrix`` holds a non-finite value.
+    """
+    u, _, vt = np.linalg.svd(check_finite("matrix to project to SO(3)", matrix))
     d = np.sign(np.linalg.det(u @ vt))
     return u @ np.diag([1.0, 1.0, d]) @ vt
 
@@ -322,13 +367,31 @@ def translation_error(estimate, truth) -> np.ndarray:
 
 
 def random_rotation(rng: np.random.Generator, size: int | None = None) -> np.ndarray:
-    """Uniformly distributed rotations, ``(3, 3)`` or ``(size, 3, 3)``."""
+    """Uniformly distributed rotations, ``(3, 3)`` or ``(size, 3, 3)``.
+
+    Raises
+    ------
+    CalibrationError
+        If ``size`` is not None or an integer >= 0.
+    """
+    if size is not None and not (isinstance(size, int | np.integer) and size >= 0):
+        raise CalibrationError(f"random_rotation: size = {size!r} must be None or an integer >= 0")
     return Rotation.random(size, random_state=rng).as_matrix()
 
 
 def perturb(transform, sigma_rot: float, sigma_trans: float, rng: np.random.Generator):
     """Right-multiply by a small random motion: rotation vector ~ N(0, sigma_rot^2 I) in rad,
-    translation ~ N(0, sigma_trans^2 I) in mm. Works on ``(4, 4)`` or ``(N, 4, 4)``."""
+    translation ~ N(0, sigma_trans^2 I) in mm. Works on ``(4, 4)`` or ``(N, 4, 4)``.
+
+    Raises
+    ------
+    CalibrationError
+        If a sigma is negative or not finite.
+    """
+    if not (math.isfinite(sigma_rot) and sigma_rot >= 0):
+        raise CalibrationError(f"perturb: sigma_rot = {sigma_rot} rad must be finite and >= 0")
+    if not (math.isfinite(sigma_trans) and sigma_trans >= 0):
+        raise CalibrationError(f"perturb: sigma_trans = {sigma_trans} mm must be finite and >= 0")
     t = np.asarray(transform, dtype=float)
     lead = t.shape[:-2]
     d = make_transform(
@@ -366,12 +429,19 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
 
     The camera x axis is horizontal (perpendicular to ``up``); if the viewing direction is parallel
     to ``up``, the world x axis is used as the reference instead.
+
+    Raises
+    ------
+    CalibrationError
+        If eye and target coincide, or eye, target or up is not finite.
     """
     eye = np.asarray(eye, dtype=float)
     z = np.asarray(target, dtype=float) - eye
     norm = _norm3(z)
     if norm == 0:
         raise CalibrationError("look_at: eye and target coincide (distance 0 mm)")
+    if not (math.isfinite(norm) and math.isfinite(_norm3(np.asarray(up, dtype=float)))):
+        raise CalibrationError(f"look_at: eye {eye}, target {target} and up {up} must be finite")
     z = z / norm
     x = _cross3(z, np.asarray(up, dtype=float))
     if _norm3(x) < 1e-9:

@@ -21,10 +21,11 @@ data-dependent number of draws in one component cannot shift the draws of anothe
 
 Cache
 -----
-With ``cache_dir``, every finished trial's rows are pickled at once (temporary file, then
-:func:`os.replace`) to::
+With ``cache_dir``, every finished trial's rows are written at once as JSON (temporary file,
+then :func:`os.replace`; scalars only, numpy scalars tagged with their dtype, read back without
+building any object from a name: :mod:`calstudy.core.trialcache`) to::
 
-    cache_dir/<experiment>/<point-slug>/<key>/trial-<trial:06d>.pkl
+    cache_dir/<experiment>/<point-slug>/<key>/trial-<trial:06d>.json
 
 ``<point-slug>`` is a readable form of the point (``sigma=0.05``, ``_`` for the single point
 ``{}``); ``<key>`` is the first 16 hex digits of the SHA-256 of the canonical JSON of the seed,

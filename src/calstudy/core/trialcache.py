@@ -1,8 +1,16 @@
 """The per-trial cache of the Monte Carlo engine (:mod:`calstudy.core.montecarlo`).
 
-Layout and key are described in that module's docstring: one pickle per finished trial under
+Layout and key are described in that module's docstring: one JSON file per finished trial under
 ``cache_dir/<experiment>/<point-slug>/<key>/``, written atomically, reused only when the seed,
 experiment, point, trial function and scenario fingerprint all match.
+
+The files are data, never code: a trial's rows are dicts of scalars, written as JSON with every
+numpy scalar tagged by its dtype (``{"numpy": "<f4", "value": 0.5}``) so that a row read back is
+the same Python or numpy scalar, bit for bit (floats are written by ``repr``, which round-trips,
+and NaN and infinities as JSON's ``NaN`` and ``Infinity``). Reading one is ``json.loads`` and a
+check of its form: no object is built from a name in the file, so a cache folder from elsewhere
+can at worst supply wrong rows (for this seed, experiment and point), never run anything. A file
+that is not such a record is refused with a :class:`CalibrationError` naming it.
 """
 
 from __future__ import annotations
@@ -13,7 +21,6 @@ import enum
 import hashlib
 import json
 import os
-import pickle
 import re
 from collections.abc import Callable, Mapping
 from pathlib import Path, PurePath
@@ -25,14 +32,12 @@ import pandas as pd
 from calstudy.core.errors import CalibrationError
 
 #: Version of the cache file layout and key; bump it when either changes.
-CACHE_FORMAT = 1
-_PICKLE_PROTOCOL = 4
+CACHE_FORMAT = 2
 
 Rows = list[dict[str, Any]]
 
 if TYPE_CHECKING:  # the engine imports this module, not the other way round
     from calstudy.core.montecarlo import Experiment
-
 
 
 class TrialCache:
@@ -66,20 +71,23 @@ class TrialCache:
                         tmp.unlink()
 
     def _path(self, point: int, trial: int) -> Path:
-        return self.dirs[point] / f"trial-{trial:06d}.pkl"
+        return self.dirs[point] / f"trial-{trial:06d}.json"
 
     def load(self, point: int, trial: int) -> Rows | None:
-        """The stored rows of one trial, or None if absent or stored under another key."""
+        """The stored rows of one trial, or None if absent or stored under another key.
+
+        Raises
+        ------
+        CalibrationError
+            If the file is not a trial record (:func:`decode_record`).
+        """
+        path = self._path(point, trial)
         try:
-            with open(self._path(point, trial), "rb") as f:
-                stored = pickle.load(f)
+            data = path.read_bytes()
         except FileNotFoundError:
             return None
-        except Exception:
-            return None  # unreadable (e.g. a class renamed since): computed again, overwritten
-        if not isinstance(stored, dict) or stored.get("key") != self.keys[point]:
-            return None
-        if stored.get("trial") != trial:
+        stored = decode_record(data, path)
+        if stored["key"] != self.keys[point] or stored["trial"] != trial:
             return None
         return stored["rows"]
 
@@ -99,7 +107,88 @@ class TrialCache:
             folder.mkdir(parents=True, exist_ok=True)
             _write_atomic(folder / "key.json", (_dumps(self.keys[point]) + "\n").encode())
         record = {"key": self.keys[point], "trial": trial, "rows": rows}
-        _write_atomic(self._path(point, trial), pickle.dumps(record, protocol=_PICKLE_PROTOCOL))
+        _write_atomic(self._path(point, trial), encode_record(record))
+
+
+# ----------------------------------------------------------------------------------------------
+# the record file: JSON of scalars, numpy scalars tagged with their dtype
+
+_PLAIN = (type(None), bool, int, float, str)
+#: numpy scalar types a record may hold: bool, signed and unsigned integers, float16/32/64
+_DTYPES = frozenset(np.dtype(t).str for t in "?bhilqBHILQefd")
+
+
+def _encode_value(value: object) -> object:
+    if type(value) in _PLAIN:
+        return value
+    if isinstance(value, np.bool_ | np.integer | np.floating) and value.dtype.str in _DTYPES:
+        return {"numpy": value.dtype.str, "value": value.item()}
+    if isinstance(value, str):  # numpy.str_
+        return str(value)
+    raise CalibrationError(
+        f"a trial row holds {value!r} of type {type(value).__name__}: the trial cache stores "
+        "None, bool, int, float, str and numpy scalars"
+    )
+
+
+def encode_record(record: Mapping[str, Any]) -> bytes:
+    """The bytes of a trial record ``{"key": dict, "trial": int, "rows": [dict, ...]}``.
+
+    Raises
+    ------
+    CalibrationError
+        If a row holds a value other than None, bool, int, float, str or a numpy scalar.
+    """
+    rows = [{str(k): _encode_value(v) for k, v in row.items()} for row in record["rows"]]
+    body = {"key": record["key"], "trial": record["trial"], "rows": rows}
+    # the column order of a row is kept (it is the column order of the table)
+    return (json.dumps(body, separators=(",", ":")) + "\n").encode()
+
+
+def _decode_value(value: object, where: str) -> object:
+    if type(value) in _PLAIN:
+        return value
+    if isinstance(value, dict) and value.keys() == {"numpy", "value"} and value["numpy"] in _DTYPES:
+        dtype, item = np.dtype(value["numpy"]), value["value"]
+        wanted = {"b": (bool,), "i": (int,), "u": (int,), "f": (float, int)}[dtype.kind]
+        if type(item) in wanted:
+            with contextlib.suppress(OverflowError):
+                return dtype.type(item)
+    raise CalibrationError(f"{where}: {value!r} is not a scalar the trial cache stores")
+
+
+def decode_record(data: bytes, path: str | Path) -> dict[str, Any]:
+    """The trial record stored in ``data`` (the bytes of the file ``path``), checked.
+
+    Only JSON is parsed and only scalars are built (Python's, or numpy's of a bool, integer or
+    float dtype): nothing named in the file is imported or called.
+
+    Raises
+    ------
+    CalibrationError
+        Naming ``path``, if ``data`` is not UTF-8 JSON of the form :func:`encode_record` writes.
+    """
+    try:
+        body = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise CalibrationError(
+            f"trial cache file {path} is not a JSON trial record ({exc}); delete it"
+        ) from None
+    if not (
+        isinstance(body, dict)
+        and body.keys() == {"key", "trial", "rows"}
+        and isinstance(body["key"], dict)
+        and type(body["trial"]) is int
+        and isinstance(body["rows"], list)
+        and all(isinstance(row, dict) for row in body["rows"])
+    ):
+        raise CalibrationError(
+            f"trial cache file {path} is not a trial record (a JSON object with the keys "
+            "'key', 'trial' and 'rows', a list of objects); delete it"
+        )
+    where = f"trial cache file {path}"
+    rows = [{k: _decode_value(v, where) for k, v in row.items()} for row in body["rows"]]
+    return {"key": body["key"], "trial": body["trial"], "rows": rows}
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
@@ -202,5 +291,3 @@ def _canonical(obj: object) -> object:
     if re.search(r" at 0x[0-9a-fA-F]+", text):
         raise _Unstable(text)
     return {"repr": _qualified(type(obj)), "text": text}
-
-

@@ -48,6 +48,10 @@ MAX_ML_CONDITION = 1e10
 #: smallest rotation (rad) of a motion between two poses that counts for Tsai-Lenz, and smallest
 #: angle between the axes of two such motions (the dualarm chain's rotation diversity check)
 MIN_PAIR_ROTATION = np.deg2rad(0.5)
+#: Rotation (rad) below which a motion counts as none, and axes this close as one axis, in every
+#: call of :func:`opencv_handeye`: 0.01 deg (36 arc seconds), below the orientation repeatability
+#: of an industrial robot, so such motions carry no information on the hand-eye rotation.
+DEGENERATE_ROTATION = np.deg2rad(0.01)
 
 OPENCV_METHODS = {
     "Tsai": cv2.CALIB_HAND_EYE_TSAI,
@@ -87,7 +91,9 @@ def rotation_from_translations(flange2base, centres, center: bool = True) -> np.
     Raises
     ------
     CalibrationError
-        If the orientations differ, if there are too few moves or they are collinear.
+        If the orientations differ, if there are too few moves or they are collinear, or if the
+        sphere centre does not move as far as the flange (:data:`MAX_SCALE_RATIO`: a unit
+        mismatch such as centres in metres).
     """
     poses, x_f = _check_measurements("translation", flange2base, centres)
     n = poses.shape[0]
@@ -115,7 +121,30 @@ def rotation_from_translations(flange2base, centres, center: bool = True) -> np.
             f"(singular values {', '.join(f'{s:.3g}' for s in sv)} mm); "
             "add a translation off that line"
         )
+    _check_same_scale(p1, p0)
     return fit_rotation(p1, p0, center=center)
+
+
+#: Largest ratio (either way) of the RMS displacement of the sphere centre in the sensor frame to
+#: that of the flange over pure translations: equal for a rigid sensor (up to the noise); a unit
+#: mismatch gives 1000 (metres) or 25.4 (inches).
+MAX_SCALE_RATIO = 2.0
+
+
+def _check_same_scale(moved_sensor: np.ndarray, moved_flange: np.ndarray) -> None:
+    """Refuse pure translations whose sensor-frame displacements ``(n, 3)`` are not as long as
+    the flange's ``(n, 3)`` (a rotation keeps lengths): a unit mismatch between the two."""
+    rms_s = float(np.sqrt(np.mean(np.sum(moved_sensor**2, axis=1))))
+    rms_f = float(np.sqrt(np.mean(np.sum(moved_flange**2, axis=1))))
+    ratio = rms_s / rms_f
+    if not (1.0 / MAX_SCALE_RATIO <= ratio <= MAX_SCALE_RATIO):
+        raise CalibrationError(
+            f"over the pure translations the sphere centre moves {ratio:.4g} times as far in the "
+            f"sensor frame as the flange (RMS {rms_s:.4g} against {rms_f:.4g} mm; a rigidly "
+            f"mounted sensor gives 1, allowed {1 / MAX_SCALE_RATIO:g} to {MAX_SCALE_RATIO:g}): "
+            "the sensor data and the flange poses look like different units (metres give "
+            "0.001); give both in mm"
+        )
 
 
 def translation_from_rotations(flange2base, centres, rotation) -> tuple[np.ndarray, float]:
@@ -403,7 +432,9 @@ def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x
     return np.linalg.pinv(jac.T @ jac)
 
 
-def check_rotation_diversity(flange2base: np.ndarray, min_rotation: float) -> None:
+def check_rotation_diversity(
+    flange2base: np.ndarray, min_rotation: float, tol: float = geo.ORTHONORMAL_TOL
+) -> None:
     """Raise a :class:`CalibrationError` unless the flange poses ``(N, 4, 4)`` rotate enough for
     Tsai-Lenz.
 
@@ -412,16 +443,20 @@ def check_rotation_diversity(flange2base: np.ndarray, min_rotation: float) -> No
     The hand-eye rotation is determined once at least two motions rotate by ``min_rotation``
     (rad) or more about axes at least ``min_rotation`` apart (each axis in the frame of the
     motion's first flange, as the method uses it). The message says which condition fails and
-    the number behind it.
+    the number behind it. ``tol`` is the orthonormality tolerance of the rotations.
     """
-    poses = geo.check_transform("flange poses", flange2base)
+    poses = geo.check_transform("flange poses", flange2base, tol)
     if poses.ndim != 3 or poses.shape[0] < 3:
         raise CalibrationError(
             f"flange poses of shape {poses.shape}: the rotation check needs (N, 4, 4) with N >= 3"
         )
     if not (np.isfinite(min_rotation) and min_rotation > 0.0):
         raise CalibrationError(f"min_rotation must be a positive angle in rad, got {min_rotation}")
-    r = poses[:, :3, :3]
+    _check_diversity(poses[:, :3, :3], min_rotation)
+
+
+def _check_diversity(r: np.ndarray, min_rotation: float) -> None:
+    """:func:`check_rotation_diversity` on checked rotations ``(N, 3, 3)``, ``N >= 3``."""
     i, j = np.triu_indices(len(r), 1)
     rotvec = geo.matrix_to_rotvec(np.swapaxes(r[i], -1, -2) @ r[j])
     angles = np.linalg.norm(rotvec, axis=1)
@@ -429,7 +464,8 @@ def check_rotation_diversity(flange2base: np.ndarray, min_rotation: float) -> No
     if not np.any(moving):
         raise CalibrationError(
             f"no pair of the {len(r)} poses rotates by {np.degrees(min_rotation):.3g} deg or "
-            f"more (largest {np.degrees(angles.max()):.3g} deg); Tsai-Lenz needs rotating motions"
+            f"more (largest {np.degrees(angles.max()):.3g} deg): pure translations or repeated "
+            "orientations leave the hand-eye rotation undetermined; include rotating motions"
         )
     axes = rotvec[moving] / angles[moving, None]
     cos = np.clip(np.abs(axes @ axes.T), 0.0, 1.0)
@@ -438,7 +474,8 @@ def check_rotation_diversity(flange2base: np.ndarray, min_rotation: float) -> No
         raise CalibrationError(
             f"the {int(moving.sum())} rotating motions of the {len(r)} poses turn about one "
             f"axis (axes within {np.degrees(spread):.3g} deg, minimum "
-            f"{np.degrees(min_rotation):.3g} deg); Tsai-Lenz needs motions about two axes"
+            f"{np.degrees(min_rotation):.3g} deg): the hand-eye rotation about that axis and the "
+            "translation along it are undetermined; include motions about two axes"
         )
 
 
@@ -446,7 +483,7 @@ def opencv_handeye(
     flange2base,
     target2sensor,
     method: str,
-    min_pair_rotation: float = 0.0,
+    min_pair_rotation: float = DEGENERATE_ROTATION,
     tol: float = geo.ORTHONORMAL_TOL,
 ) -> np.ndarray:
     """``sensor2flange`` by ``cv2.calibrateHandEye`` (AX = XB) with a named method.
@@ -459,12 +496,15 @@ def opencv_handeye(
         Pose of a fixed target in the sensor frame at each robot pose, mm.
     method : str
         One of ``"Tsai"``, ``"Park"``, ``"Horaud"``, ``"Andreff"``, ``"Daniilidis"``.
-    min_pair_rotation : float, default 0
-        With a positive value, the poses must rotate enough overall
-        (:func:`check_rotation_diversity`): at least two motions between pose pairs rotating by
-        this much (rad) or more about axes this far apart. Tsai-Lenz takes the rotation axis of
-        each motion, undefined for a pure translation; poses with equal orientations are fine
-        as long as others rotate (:data:`MIN_PAIR_ROTATION` is a safe value). 0 checks nothing.
+    min_pair_rotation : float, default :data:`DEGENERATE_ROTATION`
+        The poses must rotate enough overall (:func:`check_rotation_diversity`): at least two
+        motions between pose pairs rotating by this much (rad) or more about axes this far
+        apart. Every method takes the rotation axes of the motions, undefined for a pure
+        translation, and OpenCV returns a wrong answer (with a message on stderr at most) on
+        degenerate motions; poses with equal orientations are fine as long as others rotate.
+        :data:`MIN_PAIR_ROTATION` is a safe value for designed poses; values below
+        :data:`DEGENERATE_ROTATION` are raised to it (pure translations, rotations about one
+        axis and a repeated pose are always refused).
     tol : float
         Orthonormality tolerance of the input rotations. For measured poses with rounded
         rotations, :func:`calstudy.estimators.handeye_poses.calibrate_handeye` re-projects them.
@@ -478,8 +518,9 @@ def opencv_handeye(
     ------
     CalibrationError
         For an unknown method, fewer than 3 poses, bad shapes, poses without two motions rotating
-        by ``min_pair_rotation`` about axes that far apart (the message names the largest
-        rotation or the spread of the axes), or a non-finite OpenCV result.
+        by ``min_pair_rotation`` about axes that far apart (pure translations, rotations about
+        one axis, repeated poses: the message names the largest rotation or the spread of the
+        axes), OpenCV's own failure, or a non-finite OpenCV result.
     """
     if method not in OPENCV_METHODS:
         raise CalibrationError(
@@ -493,8 +534,12 @@ def opencv_handeye(
         )
     if g2b.shape[0] < 3:
         raise CalibrationError(f"AX = XB needs at least 3 poses; got {g2b.shape[0]}")
-    if min_pair_rotation > 0.0:
-        check_rotation_diversity(g2b, min_pair_rotation)
+    if not (np.isfinite(min_pair_rotation) and min_pair_rotation >= 0.0):
+        raise CalibrationError(
+            f"min_pair_rotation = {min_pair_rotation} must be a finite angle >= 0 in rad"
+        )
+    # before OpenCV: on degenerate motions it prints to stderr and returns a wrong answer
+    _check_diversity(g2b[:, :3, :3], max(float(min_pair_rotation), DEGENERATE_ROTATION))
     try:
         rot, trans = cv2.calibrateHandEye(
             list(g2b[:, :3, :3]),

@@ -71,6 +71,7 @@ from calstudy.estimators.handeye_refine import (
     OPENCV_RWHE_METHODS,
     PARAM_NAMES,
     ClosedForm,
+    check_pose_weights,
     closed_forms,
     pose_residuals,
     refine_ml,
@@ -255,9 +256,7 @@ def _start(a, b, start: ClosedForm, opt: _Options, notes: list) -> _Fit:
     """Weights (user's, times RANSAC's inliers), start ``(X, Z)`` and the noise level."""
     n = a.shape[0]
     weights = opt.weights
-    w_user = np.ones(n) if weights is None else geo.check_shape("weights", weights, (n,))
-    if np.any(w_user < 0):
-        raise CalibrationError(f"weights must be >= 0; got {w_user.min():g}")
+    w_user = check_pose_weights(weights, n)
     w = w_user.copy()
     if opt.robust == "ransac":
         if opt.rng is None:

@@ -20,7 +20,11 @@ from scipy.spatial.transform import Rotation
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.estimation import Estimate, covariance_from_jacobian
-from calstudy.estimators.handeye import opencv_handeye
+from calstudy.estimators.handeye import (
+    DEGENERATE_ROTATION,
+    check_rotation_diversity,
+    opencv_handeye,
+)
 
 #: OpenCV's AX = ZB (robot-world-hand-eye) solvers
 OPENCV_RWHE_METHODS = {
@@ -138,7 +142,10 @@ def check_proper(name: str, t: np.ndarray) -> np.ndarray:
 
 def _opencv_rwhe(a: np.ndarray, b: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
     """``(X, Z)`` by ``cv2.calibrateRobotWorldHandEye``: it solves ``B = inv(X) inv(A) Z`` and
-    returns ``inv(Z)`` ("base2world") and ``inv(X)`` ("gripper2cam")."""
+    returns ``inv(Z)`` ("base2world") and ``inv(X)`` ("gripper2cam"). Degenerate motions (pure
+    translations, rotations about one axis, a repeated pose) are refused first, as by
+    :func:`calstudy.estimators.handeye.opencv_handeye`: OpenCV would return a wrong answer."""
+    check_rotation_diversity(a, DEGENERATE_ROTATION)
     ainv = geo.invert(a)
     r_w, t_w, r_g, t_g = cv2.calibrateRobotWorldHandEye(
         list(b[:, :3, :3]),
@@ -313,6 +320,34 @@ def _solve(problem: PoseProblem, x, z) -> tuple[np.ndarray, np.ndarray, int]:
     return x1, z1, int(sol.nfev)
 
 
+#: AX = ZB needs this many poses with a weight above 0.
+MIN_WEIGHTED_POSES = 3
+
+
+def check_pose_weights(weights, n: int) -> np.ndarray:
+    """Per-pose weights ``(n,)`` as a float array: 1 for None, else finite, >= 0, and above 0 for
+    at least :data:`MIN_WEIGHTED_POSES` poses.
+
+    Raises
+    ------
+    CalibrationError
+        Naming the shape, the offending weight or the number of poses left.
+    """
+    if weights is None:
+        return np.ones(n)
+    w = geo.check_shape("weights", weights, (n,))
+    if np.any(w < 0):
+        i = int(np.argmin(w))
+        raise CalibrationError(f"weights must be >= 0; weight {i} is {w[i]:g}")
+    kept = int(np.count_nonzero(w > 0))
+    if kept < MIN_WEIGHTED_POSES:
+        raise CalibrationError(
+            f"weights leave {kept} of the {n} poses with a weight > 0; AX = ZB needs at least "
+            f"{MIN_WEIGHTED_POSES}"
+        )
+    return w
+
+
 def whitened_at(a, b, x, z, sigma_rot, sigma_trans, weights):
     """Whitened residuals ``(6N,)`` and Jacobian ``(6N, 12)`` in public coordinates at (x, z)."""
     prob = PoseProblem.build(a, b, x, z, sigma_rot, sigma_trans, weights)
@@ -357,11 +392,7 @@ def refine_ml(
     """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    w = np.ones(a.shape[0]) if weights is None else np.asarray(weights, dtype=float)
-    if w.shape != (a.shape[0],) or np.any(w < 0) or not np.all(np.isfinite(w)):
-        raise CalibrationError(
-            f"weights must be {a.shape[0]} finite values >= 0; got shape {w.shape}"
-        )
+    w = check_pose_weights(weights, a.shape[0])
     if not (sigma_rot > 0 and sigma_trans > 0):
         raise CalibrationError(
             f"sigma_rot and sigma_trans must be positive; got {sigma_rot:g}, {sigma_trans:g}"
@@ -389,11 +420,17 @@ def handeye_crb(a, b_true, x, z, sigma_rot: float, sigma_trans: float, weights=N
     ``Z`` and noise-free ``B_i`` (rad, mm). Per-pose ``weights`` scale the information as in
     :func:`refine_ml` (a weight w means a noise ``sigma / sqrt(w)`` for that pose).
     """
-    w = np.ones(len(a)) if weights is None else np.asarray(weights, dtype=float)
+    w = check_pose_weights(weights, len(a))
     _, jac = whitened_at(
         np.asarray(a, float), np.asarray(b_true, float), x, z, sigma_rot, sigma_trans, w
     )
-    return np.linalg.inv(jac.T @ jac)
+    try:
+        return np.linalg.inv(jac.T @ jac)
+    except np.linalg.LinAlgError:
+        raise CalibrationError(
+            f"the Cramer-Rao bound is undefined: these {len(a)} poses leave the calibration "
+            "unobservable (singular information matrix); add poses rotating about other axes"
+        ) from None
 
 
 # ----------------------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ import dataclasses
 import hashlib
 import importlib.metadata
 import json
+import math
 import os
 import platform
 import re
@@ -112,6 +113,11 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
 def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FORMAT) -> Path:
     """Write ``df`` as CSV (no index, floats as ``%.6g``, ``\\n`` line ends), atomically.
 
+    Non-finite numbers follow one rule: NaN (and None, ``pd.NA``) is a missing value and is
+    written as an empty field, which :func:`pandas.read_csv` reads back as NaN; an infinity is
+    refused, since no table of the study has one and ``inf`` in a CSV is usually a division by
+    zero upstream. A quantity that may be unbounded is written as a missing value with a note.
+
     Parameters
     ----------
     df : pandas.DataFrame
@@ -129,10 +135,12 @@ def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FO
     Raises
     ------
     CalibrationError
-        If ``df`` is not a DataFrame.
+        If ``df`` is not a DataFrame, or holds an infinity (the message names the column, the
+        row and the file); nothing is written then.
     """
     if not isinstance(df, pd.DataFrame):
         raise CalibrationError(f"write_table needs a pandas DataFrame, got {type(df).__name__}")
+    _check_no_infinity(df, path)
     return atomic_write(
         path,
         lambda tmp: df.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n"),
@@ -173,6 +181,27 @@ def readable_text(fig, min_pt: float = MIN_FONT_PT) -> float:
             text.set_fontsize(min_pt)
         sizes.append(float(text.get_fontsize()))
     return min(sizes, default=float(min_pt))
+
+
+def _check_no_infinity(df: pd.DataFrame, path: str | Path) -> None:
+    """Refuse a table holding +-inf in a numeric column or as a float in an object column."""
+    for i, (name, column) in enumerate(df.items()):
+        values = column.to_numpy()
+        if values.dtype.kind == "f":
+            bad = np.isinf(values)
+        elif values.dtype.kind == "O":
+            bad = np.array(
+                [isinstance(v, float | np.floating) and math.isinf(v) for v in values], bool
+            )
+        else:
+            continue
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise CalibrationError(
+                f"{Path(path).name}: column {name!r} (#{i + 1}) holds {values[row]} at row "
+                f"{row + 1}: tables are written without infinities (NaN is written as an empty "
+                "field, a missing value); make it a missing value and say why in a note"
+            )
 
 
 def write_figure(fig, path: str | Path, dpi: int = 120) -> Path:
@@ -525,8 +554,9 @@ def write_claims(
             raise CalibrationError(f"claim {row.id!r} names no notebook")
         seen.add(row.id)
     df = pd.DataFrame([dataclasses.asdict(r) for r in rows], columns=list(CLAIM_COLUMNS))
-    criteria = claim_register(register).set_index("id")["criterion"]
-    df["criterion"] = df["id"].map(criteria)  # declared once, in the register
+    reg = claim_register(register).set_index("id")
+    # declared once, in the register (a register of one's own may leave it out)
+    df["criterion"] = df["id"].map(reg["criterion"]) if "criterion" in reg.columns else ""
     return write_table(df, Path(out_dir) / "claims.csv")
 
 

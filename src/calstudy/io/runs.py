@@ -7,11 +7,18 @@ them with the Monte Carlo engine, writes ``trials_<name>.csv`` per experiment in
 folder and records in ``experiments.json`` how to build each one again: with it, the tests
 recompute a few stored trials of every experiment (chosen by the seed) and compare them with the
 committed rows, without rerunning the notebook.
+
+``experiments.json`` is data, not code: :func:`rebuild` builds only the factories of
+:data:`FACTORIES` (the study's own), looked up by name before anything is imported, with
+keyword arguments the factory's signature accepts. Any other name is refused; a factory of
+one's own is passed in as a function (``rebuild(entry, extra=[my_factory])``), never imported
+from the name a file gives.
 """
 
 from __future__ import annotations
 
 import importlib
+import inspect
 import json
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -42,13 +49,85 @@ def factory_name(factory: Callable) -> str:
     return f"{module}:{qualname}"
 
 
-def load_factory(name: str) -> Callable[..., montecarlo.Experiment]:
-    """The function named ``module:qualname`` by :func:`factory_name`."""
+#: The study's own experiment factories, by :func:`factory_name`: the only names
+#: :func:`load_factory` imports.
+FACTORIES = frozenset(
+    {
+        "calstudy.estimators.handeye_cell:tool_point_experiment",
+        *(
+            f"calstudy.papers.binocular.experiments:{name}_experiment"
+            for name in ("binocular", "field", "optics")
+        ),
+        *(
+            f"calstudy.papers.dualarm.experiments:{name}_experiment"
+            for name in ("budget", "drift", "plate", "station", "survey")
+        ),
+        *(
+            f"calstudy.papers.hybrid.experiments:{name}_experiment"
+            for name in (
+                "production",
+                "robot_accuracy",
+                "robot_error",
+                "rps_penalty",
+                "sensitivity",
+                "stationary",
+                "stationary_pixel",
+            )
+        ),
+        *(
+            f"calstudy.papers.hybrid.handeye_experiments:{name}_experiment"
+            for name in ("handeye", "handeye_moves", "handeye_noise", "handeye_ranges")
+        ),
+        *(
+            f"calstudy.papers.selfcal.experiments:{name}_experiment"
+            for name in (
+                "basin",
+                "calibration",
+                "compliance_sweep",
+                "noise_sweep",
+                "pose_selection",
+            )
+        ),
+    }
+)
+
+
+def load_factory(
+    name: str, extra: Sequence[Callable[..., montecarlo.Experiment]] = ()
+) -> Callable[..., montecarlo.Experiment]:
+    """The experiment factory named ``module:qualname`` (:func:`factory_name`).
+
+    Parameters
+    ----------
+    name : str
+        The name, as ``experiments.json`` stores it.
+    extra : sequence of callables, optional
+        Factories of the caller's own, matched by their :func:`factory_name` (never imported).
+
+    Returns
+    -------
+    callable
+        A function of :data:`FACTORIES` (imported from the study's own modules) or of ``extra``.
+
+    Raises
+    ------
+    CalibrationError
+        If ``name`` is neither in :data:`FACTORIES` nor the name of a function of ``extra``;
+        nothing is imported then.
+    """
+    if not isinstance(name, str):
+        raise CalibrationError(f"experiment factory {name!r} must be a 'module:name' string")
+    for factory in extra:
+        if factory_name(factory) == name:
+            return factory
+    if name not in FACTORIES:
+        raise CalibrationError(
+            f"experiment factory {name!r} is not one of the study's factories "
+            "(calstudy.io.runs.FACTORIES); a results folder may name only those. Nothing was "
+            "imported or run"
+        )
     module, _, qualname = name.partition(":")
-    try:
-        return getattr(importlib.import_module(module), qualname)
-    except (ImportError, AttributeError) as exc:
-        raise CalibrationError(f"experiment factory {name!r} not found ({exc})") from exc
+    return getattr(importlib.import_module(module), qualname)
 
 
 def default_cache_dir(results_dir: str | Path | None = "") -> Path:
@@ -124,6 +203,45 @@ def run_experiments(
     return frames
 
 
-def rebuild(entry: Mapping[str, Any]) -> montecarlo.Experiment:
-    """The Experiment of one ``experiments.json`` entry, built again from its factory."""
-    return load_factory(entry["factory"])(**entry["kwargs"])
+def rebuild(
+    entry: Mapping[str, Any], extra: Sequence[Callable[..., montecarlo.Experiment]] = ()
+) -> montecarlo.Experiment:
+    """The Experiment of one ``experiments.json`` entry, built again from its factory.
+
+    Parameters
+    ----------
+    entry : mapping
+        ``{"factory": "module:name", "kwargs": {...}, ...}`` as :func:`run_experiments` wrote it.
+    extra : sequence of callables, optional
+        Factories of the caller's own (see :func:`load_factory`).
+
+    Returns
+    -------
+    calstudy.core.montecarlo.Experiment
+
+    Raises
+    ------
+    CalibrationError
+        If the entry is malformed, names a factory outside :data:`FACTORIES` and ``extra``
+        (refused before any import), or passes keyword arguments the factory does not take.
+    """
+    if not (
+        isinstance(entry, Mapping)
+        and isinstance(entry.get("factory"), str)
+        and isinstance(entry.get("kwargs"), Mapping)
+        and all(isinstance(key, str) for key in entry["kwargs"])
+    ):
+        raise CalibrationError(
+            f"experiment entry {entry!r} must be an object with a 'factory' string and a "
+            "'kwargs' object"
+        )
+    factory = load_factory(entry["factory"], extra)
+    kwargs = dict(entry["kwargs"])
+    try:
+        inspect.signature(factory).bind(**kwargs)
+    except TypeError as exc:
+        raise CalibrationError(
+            f"experiment factory {entry['factory']!r}: keyword arguments {sorted(kwargs)} do not "
+            f"fit its signature {inspect.signature(factory)} ({exc})"
+        ) from None
+    return factory(**kwargs)

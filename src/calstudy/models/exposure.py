@@ -38,7 +38,8 @@ def expose(
     peak_at_100ms, background_at_100ms : float
         Dot peak and background at 100 ms, in units of full scale.
     read_noise_dn, electrons_per_dn : float
-        Read noise (DN) and conversion gain; shot noise is ``sqrt(DN / electrons_per_dn)`` DN.
+        Read noise (DN, >= 0) and conversion gain (> 0; ``inf`` for no shot noise); shot noise
+        is ``sqrt(DN / electrons_per_dn)`` DN.
     rng : numpy.random.Generator
         Noise source.
     bits : int, default 8
@@ -47,10 +48,27 @@ def expose(
     Returns
     -------
     uint8 or uint16 array
+
+    Raises
+    ------
+    CalibrationError
+        If the radiance holds a value that is not finite, the exposure time is not a finite
+        number > 0, the conversion gain is not > 0, a level or the read noise is negative or
+        not finite,
+        or ``bits`` is not an integer from 1 to 16.
     """
+    _check_exposure(
+        exposure_ms, peak_at_100ms, background_at_100ms, read_noise_dn, electrons_per_dn, bits
+    )
+    rad = np.asarray(radiance, dtype=np.float32)
+    if not np.isfinite(rad).all():
+        raise CalibrationError(
+            f"radiance holds {int((~np.isfinite(rad)).sum())} NaN or inf pixel(s); it must be a "
+            "finite image in [0, 1]"
+        )
     full = 2**bits - 1
     levels = _exposed(
-        np.asarray(radiance, dtype=np.float32),
+        rad,
         exposure_ms,
         peak_at_100ms,
         background_at_100ms,
@@ -60,6 +78,27 @@ def expose(
         full,
     )
     return levels.astype(np.uint8 if bits <= 8 else np.uint16)
+
+
+def _check_exposure(exposure_ms, peak, background, read_noise_dn, electrons_per_dn, bits) -> None:
+    """Refuse exposure settings outside their domain (scalars only: cheap, once per call)."""
+    if not (isinstance(bits, (int, np.integer)) and not isinstance(bits, bool) and 1 <= bits <= 16):
+        raise CalibrationError(f"bit depth bits = {bits!r} must be an integer from 1 to 16")
+    if not (np.isfinite(exposure_ms) and exposure_ms > 0):
+        raise CalibrationError(f"exposure_ms = {exposure_ms} must be a finite number > 0")
+    # an infinite gain is allowed: no shot noise (the noise-free control)
+    if not electrons_per_dn > 0:
+        raise CalibrationError(
+            f"conversion gain electrons_per_dn = {electrons_per_dn} must be > 0 (inf: no shot "
+            "noise)"
+        )
+    for name, value in (
+        ("peak_at_100ms", peak),
+        ("background_at_100ms", background),
+        ("read_noise_dn", read_noise_dn),
+    ):
+        if not (np.isfinite(value) and value >= 0):
+            raise CalibrationError(f"{name} = {value} must be a finite number >= 0")
 
 
 def _exposed(rad, exposure_ms, peak, background, read_noise_dn, electrons_per_dn, rng, full):
@@ -130,11 +169,22 @@ def expose_and_fuse(
     Returns
     -------
     float32 array in [0, 1], the shape of ``radiance``
+
+    Raises
+    ------
+    CalibrationError
+        On settings outside their domain, as :func:`expose` and :func:`fuse_exposures`. The
+        radiance itself is not scanned here (this runs once per simulated image pair; its
+        producer, :func:`calstudy.models.optics.defocus`, refuses NaN and inf pixels).
     """
     _check_fusion(weight_contrast, weight_exposure, sigma)
     times = list(exposures_ms)
     if not times:
         raise CalibrationError("fusion needs at least one exposure time")
+    for t in times:
+        _check_exposure(
+            t, peak_at_100ms, background_at_100ms, read_noise_dn, electrons_per_dn, bits
+        )
     rad = np.asarray(radiance, dtype=np.float32)
     full = 2**bits - 1
     # one image is filtered as it is, a stack ROI by ROI (_laplacian: the same numbers)
@@ -200,16 +250,29 @@ def fuse_exposures(
     ------
     CalibrationError
         On images of different shapes, bad weights, a bit depth outside 1 to the dtype's width,
-        or integer values above ``2**bits - 1``.
+        integer values above ``2**bits - 1``, or float values that are NaN, inf or outside
+        [0, 1].
 
     Returns
     -------
     float32 array in [0, 1]
     """
     stack = []
-    for img in images:
+    for i, img in enumerate(images):
         a = np.asarray(img)
-        full = _full_scale(a, bits) if np.issubdtype(a.dtype, np.integer) else 1.0
+        if np.issubdtype(a.dtype, np.integer):
+            full = _full_scale(a, bits)
+        elif not np.issubdtype(a.dtype, np.floating):
+            raise CalibrationError(f"image {i} has dtype {a.dtype}; expected integers or floats")
+        else:
+            full = 1.0
+            ok = np.isfinite(a) & (a >= 0) & (a <= 1)
+            if not ok.all():
+                idx = tuple(int(k) for k in np.argwhere(~ok)[0])
+                raise CalibrationError(
+                    f"image {i} holds {float(a[idx])!r} at pixel {idx}: a float image must "
+                    "hold finite values in [0, 1]"
+                )
         stack.append(a.astype(np.float32) / full)
     if len(stack) < 1 or any(s.shape != stack[0].shape for s in stack):
         raise CalibrationError(f"fusion needs >= 1 images of one shape, got {len(stack)}")

@@ -77,8 +77,36 @@ def coc_radius_far_mm(d_b, d_a: float, focal_mm: float, f_number: float) -> np.n
     """Far-field form of Eq. 4 (the paper's Eq. 5, ``d_A, d_B >> f``).
 
     ``|d_B - d_A| f^2 / (2 d_B d_A F)``, mm on the sensor.
+
+    Parameters
+    ----------
+    d_b : float or array_like
+        Object distance(s) from the lens, mm, > 0.
+    d_a : float
+        Focused distance, mm, > 0.
+    focal_mm, f_number : float
+        Focal length (mm) and aperture number F, > 0.
+
+    Returns
+    -------
+    numpy.ndarray
+        The radius, mm, the shape of ``d_b``.
+
+    Raises
+    ------
+    CalibrationError
+        If a distance, f or F is not a finite positive number (a distance of 0 has no image).
     """
     d_b = np.asarray(d_b, dtype=float)
+    if not all(math.isfinite(v) and v > 0 for v in (focal_mm, f_number)):
+        raise CalibrationError(
+            f"focal length {focal_mm} mm and F {f_number} must be finite positive numbers"
+        )
+    if not (math.isfinite(d_a) and d_a > 0):
+        raise CalibrationError(f"focused distance d_A = {d_a} mm must be a finite number > 0")
+    if not (np.all(np.isfinite(d_b)) and np.all(d_b > 0)):
+        bad = d_b[~(np.isfinite(d_b) & (d_b > 0))].ravel()[0]
+        raise CalibrationError(f"object distance d_B = {bad} mm must be a finite number > 0")
     return np.abs(d_b - d_a) * focal_mm**2 / (2.0 * d_b * d_a * f_number)
 
 

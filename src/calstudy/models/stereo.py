@@ -23,6 +23,10 @@ from calstudy.models.sensors import PinholeCamera
 
 #: Largest ``|left2right @ right2left - I|`` accepted when both transforms are given.
 INVERSE_TOL = 1e-9
+#: Largest ``|R^T R - I|`` (per entry) of the extrinsic rotation of a stereo table: a rotation
+#: printed to 4 decimals (the binocular paper's Table 1 is within 1e-4); the table's matrix is
+#: then projected onto SO(3).
+TABLE_ROTATION_TOL = 2e-3
 
 
 #: the standard deviations :meth:`StereoRig.perturbed` draws with
@@ -90,6 +94,14 @@ class StereoRig:
         (px) and ``dist`` (OpenCV ``k1 k2 p1 p2``), and ``[extrinsic] rotation`` (3 x 3, re-
         orthonormalised) and ``translation_mm`` of ``left2right``. ``source`` names the table in
         the message of a missing key.
+
+        Raises
+        ------
+        CalibrationError
+            On a missing key, a camera outside its domain (:class:`PinholeCamera`), a rotation
+            that is not one within :data:`TABLE_ROTATION_TOL` (``|R^T R - I|`` per entry; a
+            reflection or a scaled matrix is refused, never projected), or a translation that
+            is not 3 finite numbers.
         """
 
         def camera(side: str) -> PinholeCamera:
@@ -103,8 +115,17 @@ class StereoRig:
                 dist=tuple(require(table, f"{side}.dist", source)),
             )
 
-        rotation = np.array(require(table, "extrinsic.rotation", source), dtype=float)
-        translation = np.array(require(table, "extrinsic.translation_mm", source), dtype=float)
+        try:
+            rotation = np.array(require(table, "extrinsic.rotation", source), dtype=float)
+            translation = np.array(require(table, "extrinsic.translation_mm", source), dtype=float)
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, CalibrationError):
+                raise
+            raise CalibrationError(
+                f"{source}: extrinsic rotation or translation_mm: {exc}"
+            ) from None
+        geo.check_rotation(f"{source}: extrinsic.rotation", rotation, TABLE_ROTATION_TOL)
+        geo.check_shape(f"{source}: extrinsic.translation_mm", translation, (3,))
         left2right = geo.make_transform(geo.project_to_so3(rotation), translation)
         return cls.from_left2right(camera("left"), camera("right"), left2right)
 

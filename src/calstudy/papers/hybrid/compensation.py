@@ -292,10 +292,27 @@ def offsets(hybrid, cmm) -> np.ndarray:
 
 
 def compensate(hybrid, offset) -> np.ndarray:
-    """Compensated readings (Eq. 25): ``hybrid + offset``, the offset broadcast over products."""
-    h = np.asarray(hybrid, dtype=float)
-    o = np.asarray(offset, dtype=float)
-    if h.shape[1:] != o.shape:
+    """Compensated readings (Eq. 25): ``hybrid + offset``, the offset broadcast over products.
+
+    Parameters
+    ----------
+    hybrid : (n, ...) array
+        Readings, products on axis 0, mm.
+    offset : (...) array
+        The offset of each coordinate (:func:`offsets`), mm.
+
+    Returns
+    -------
+    numpy.ndarray, the shape of ``hybrid``
+
+    Raises
+    ------
+    CalibrationError
+        If the shapes do not match or a value is not finite.
+    """
+    h = geo.check_finite("hybrid readings", hybrid)
+    o = geo.check_finite("offset", offset)
+    if h.ndim == 0 or h.shape[1:] != o.shape:
         raise CalibrationError(f"offset has shape {o.shape}; readings {h.shape} need {h.shape[1:]}")
     return h + o
 

@@ -265,6 +265,21 @@ def handeye_ranges_experiment(
     return Experiment("handeye_ranges", handeye_range_run, _handeye_setup(False), n_trials, points)
 
 
+def _sensor_sigma(sensor_sigma_mm) -> np.ndarray:
+    """``sensor_sigma_mm`` (one value or one per sensor axis) as 3 finite values > 0, mm."""
+    try:
+        sigma = np.asarray(sensor_sigma_mm, dtype=float)
+    except (TypeError, ValueError):
+        sigma = np.asarray(np.nan)
+    if sigma.shape not in ((), (3,)) or not (np.all(np.isfinite(sigma)) and np.all(sigma > 0)):
+        raise CalibrationError(
+            f"sensor_sigma_mm = {sensor_sigma_mm!r}: give the standard deviation of a measured "
+            "sphere centre as one value or one per sensor axis (3 values), each a finite "
+            "number > 0 mm"
+        )
+    return np.broadcast_to(sigma, (3,))
+
+
 def calibrate_handeye(
     measurements_csv: str, seed: int, sensor_sigma_mm=None, misfit: str = "raise"
 ):
@@ -295,7 +310,7 @@ def calibrate_handeye(
     if measurements_csv:
         meas = read_sphere_measurements(measurements_csv)
         source = f"user measurements from {measurements_csv} ({len(meas.ids)} rows)"
-        sigma = np.broadcast_to(np.asarray(sensor_sigma_mm, dtype=float), (3,))
+        sigma = _sensor_sigma(sensor_sigma_mm)
     else:
         station = make_station(rng)
         meas, _ = simulate_sphere_measurements(station, *paper_moves(station), rng)

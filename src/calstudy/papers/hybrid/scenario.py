@@ -152,9 +152,23 @@ def _published(path: str) -> Published:
 # the production assumptions
 
 
+#: Most products a protocol count may ask for: every simulated product's readings are held in
+#: memory at once, so the counts are bounded before anything is allocated (the paper's protocol
+#: uses tens).
+MAX_PRODUCTS = 10_000
+
+
 @dataclass(frozen=True)
 class Scenario:
-    """The production assumptions (mm) and protocol (product counts) of one simulation."""
+    """The production assumptions (mm) and protocol (product counts) of one simulation.
+
+    Raises
+    ------
+    CalibrationError
+        On a noise level that is negative or not finite, a product count that is not an
+        integer from 3 to :data:`MAX_PRODUCTS`, or ``n_compensation_max`` below ``n_before`` or
+        ``n_compensation``.
+    """
 
     part_sigma_mm: float
     feature_sigma_mm: float
@@ -173,6 +187,19 @@ class Scenario:
                 raise CalibrationError(f"{name} is {value!r}; expected a finite value >= 0")
         if not (np.isfinite(self.cmm_sigma_mm) and self.cmm_sigma_mm >= 0):
             raise CalibrationError(f"cmm_sigma_mm is {self.cmm_sigma_mm!r}; expected >= 0")
+        for name in ("n_before", "n_compensation", "n_compensation_max", "n_follow_up"):
+            value = getattr(self, name)
+            if not (
+                isinstance(value, int | np.integer | float)
+                and not isinstance(value, bool)
+                and np.isfinite(value)
+                and float(value).is_integer()
+                and value <= MAX_PRODUCTS
+            ):
+                raise CalibrationError(
+                    f"{name} is {value!r}; expected a whole number of products from 3 to "
+                    f"{MAX_PRODUCTS} (each product's readings are held in memory)"
+                )
         for name in ("n_before", "n_compensation", "n_follow_up"):
             if int(getattr(self, name)) < 3:
                 raise CalibrationError(

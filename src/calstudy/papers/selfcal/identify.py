@@ -346,14 +346,15 @@ def identify(
     Raises
     ------
     CalibrationError
-        Measurements of the wrong shape or not finite, too few measurements, or LM not converged
-        (the message gives the iterations and cost).
+        Measurements of the wrong shape or not finite, a start that is not 30 finite numbers,
+        too few measurements, or LM not converged (the message gives the iterations and cost).
     """
     model = default_model() if model is None else model
+    start = check_shape("start (the parameter vector)", start, (N_PARAMS,))
     mask = _free_mask(free)
     _check_measurements(meas, int(mask.sum()))
     white = _whitening(meas) if weighted else None
-    problem = _Problem(model, meas, np.asarray(start, dtype=float), mask, white)
+    problem = _Problem(model, meas, start.copy(), mask, white)
     est = _solve(problem, max_evaluations)
     est.params = problem.full(est.params)
     est.value = est.params
