@@ -16,20 +16,25 @@ flange (``setup="eye_to_hand"``) the robot poses are inverted, ``A_i = base2flan
 unknowns become ``X = camera2base`` and ``Z = target2flange``.
 
 Steps of :func:`calibrate_handeye` and :func:`calibrate_robot_world_handeye`, in the modules
-:mod:`~calstudy.estimators.handeye_inputs` (1, 2, 4), :mod:`~calstudy.estimators.handeye_refine`
-(3, 5) and :mod:`~calstudy.estimators.handeye_robust` (noise level, outliers):
+:mod:`~calstudy.estimators.handeye_inputs` (1, 2), :mod:`~calstudy.estimators.handeye_refine`
+(3, 4) and :mod:`~calstudy.estimators.handeye_robust` (noise level, outliers):
 
 1. ``prepare_poses``: storage convention, units, near-orthonormal rotations re-projected to
    SO(3) (largest correction reported), beyond ``ortho_tol`` a :class:`CalibrationError`.
 2. ``motion_conditioning``: refuses too few or duplicate poses, pure translations and rotations
    about a single axis, naming the cause.
-3. Closed forms (OpenCV's Tsai, Park, Horaud, Andreff, Daniilidis; or Shah, Li), each scored by
-   its per-pose residual; a result far above the best (factor ``REFUSE_FACTOR``) is refused.
-4. ``convention_check``: the other storage conventions and a factor-1000 unit mix are tried;
-   if one fits far better, the call refuses (or warns) and says which.
-5. ``refine_ml``: maximum likelihood on SE(3) residuals of the target pose (per-pose weights,
+3. Closed forms (OpenCV's Tsai, Park, Horaud, Andreff, Daniilidis; or Shah, Li) on a fixed
+   number of well-spread poses (OpenCV forms every pair of the poses it is given), each scored by
+   its per-pose residual on all poses; a result far above the best (factor ``REFUSE_FACTOR``) is
+   refused. The whole fit is linear in the pose count.
+4. ``refine_ml``: maximum likelihood on SE(3) residuals of the target pose (per-pose weights,
    analytic Jacobian), optionally robust (Huber or Cauchy by iterative reweighting, or RANSAC over
    pose triplets), or on the reprojection error when target points and pixels are given.
+5. ``check_cell`` (:mod:`~calstudy.estimators.handeye_checks`), on every path: the camera's and
+   the robot's ranges, a noise level estimated robustly and compared with what any instrument
+   gives, a step of the target in time order. After a failure only,
+   :mod:`~calstudy.estimators.handeye_diagnose` tries the common reading mistakes and the
+   calibration refuses naming the ones that fit (``check_convention="warn"``: warns and goes on).
 
 Pose-list files are read and written by :mod:`~calstudy.estimators.posefile`; a simulated cell
 is drawn by :mod:`~calstudy.estimators.handeye_sim`.
@@ -43,13 +48,13 @@ poses are exact. The residuals are whitened with these, so the covariance at the
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from calstudy.core import geometry as geo
-from calstudy.core.errors import CalibrationError
+from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.estimation import (
     MISFIT_POLICIES,
     Estimate,
@@ -58,12 +63,11 @@ from calstudy.core.estimation import (
     goodness_of_fit,
 )
 from calstudy.estimators.handeye import OPENCV_METHODS
+from calstudy.estimators.handeye_checks import CellCheck, CellLimits, check_cell
 from calstudy.estimators.handeye_inputs import (
     ORTHO_TOL,
     Conditioning,
-    ConventionCheck,
     PreparedPoses,
-    convention_check,
     motion_conditioning,
     prepare_poses,
 )
@@ -129,7 +133,9 @@ class HandEyeResult:
         Noise level used (given, or estimated robustly from the residuals), rad and mm.
     conditioning : Conditioning
     closed_forms : list of ClosedForm
-    convention : ConventionCheck
+    check : CellCheck
+        The plausibility check of the fit (ranges, noise level, time order) and, after a
+        failure with ``check_convention="warn"``, its diagnosis.
     prepared : PreparedPoses
         The canonical input, with the largest re-orthonormalisation correction.
     """
@@ -150,7 +156,7 @@ class HandEyeResult:
     sigma_trans: float
     conditioning: Conditioning
     closed_forms: list
-    convention: ConventionCheck
+    check: CellCheck
     prepared: PreparedPoses
     notes: list = field(default_factory=list)
 
@@ -204,6 +210,8 @@ class _Options:
     camera_matrix: object
     pixel_sigma: float | None
     misfit: str = "flag"
+    limits: CellLimits | None = None
+    rereadings: Callable[[], dict] | None = None
 
 
 @dataclass
@@ -238,17 +246,52 @@ def _check_options(opt: _Options) -> None:
         raise CalibrationError(f"misfit must be one of {MISFIT_POLICIES}; got {opt.misfit!r}")
 
 
-def _check_convention(a, b, check: str, notes: list) -> ConventionCheck:
-    conv = ConventionCheck({})
-    if check != "off":
-        conv = convention_check(a, b)
-        if conv.message and check == "raise":
-            raise CalibrationError(conv.message)
-        if conv.message:
-            # the caller of calibrate_handeye: _check_convention, _calibrate, the entry point
-            warnings.warn(conv.message, stacklevel=4)
-            notes.append(conv.message)
-    return conv
+def _check_cell(prep: PreparedPoses, x, res, w, opt: _Options, notes: list) -> CellCheck:
+    """The plausibility check of the fit; after a failure the diagnosis, then a refusal (or a
+    warning) naming the failures and the likely causes, best first."""
+    limits = opt.limits if opt.limits is not None else CellLimits()
+    check = check_cell(prep.a, prep.b, x, res, w, limits)
+    if not check.failures or opt.check_convention == "off":
+        return check
+    from calstudy.estimators.handeye_diagnose import diagnose
+
+    reread = None
+    if opt.rereadings is not None:
+
+        def reread():
+            out = {}
+            for cause, (robot, camera) in opt.rereadings().items():
+                try:
+                    p = _reprepare(prep, robot, camera)
+                except CalibrationError:
+                    continue
+                out[cause] = (p.a, p.b)
+            return out
+
+    check.diagnosis, cause = diagnose(prep.a, prep.b, limits, reread, check.break_after)
+    check.message = (
+        "implausible hand-eye fit: " + "; ".join(check.failures) + ". Likely causes: " + cause
+    )
+    if opt.check_convention == "raise":
+        raise CalibrationError(check.message)
+    # the caller of calibrate_handeye: _check_cell, _calibrate, the entry point
+    warnings.warn(check.message, CalibrationWarning, stacklevel=4)
+    notes.append(check.message)
+    return check
+
+
+def _reprepare(prep: PreparedPoses, robot, camera) -> PreparedPoses:
+    """Other stored poses through the declared conventions, units and setup of ``prep``."""
+    return prepare_poses(
+        robot,
+        camera,
+        setup=prep.setup,
+        convention=(prep.robot_convention, prep.camera_convention),
+        robot_unit=prep.robot_unit,
+        camera_unit=prep.camera_unit,
+        ortho_tol=0.099,
+        ids=prep.ids,
+    )
 
 
 def _start(a, b, start: ClosedForm, opt: _Options, notes: list) -> _Fit:
@@ -405,7 +448,6 @@ def _calibrate(
     cond = motion_conditioning(a)
     _check_options(opt)
     notes: list[str] = []
-    conv = _check_convention(a, b, opt.check_convention, notes)
     start = _choose(forms, method)
     fit = _start(a, b, start, opt, notes)
     if not opt.refine:
@@ -415,6 +457,7 @@ def _calibrate(
     _check_condition(fit.jc, cond)
     x, z = fit.x, fit.z
     res = pose_residuals(a, b, x, z)
+    check = _check_cell(prep, x, res, fit.w, opt, notes)
     score = outlier_scores(res, fit.s_rot, fit.s_trans)
     cov, basis = _covariance(fit, opt)
     _check_fit(prep.ids, fit, opt, notes)
@@ -437,7 +480,7 @@ def _calibrate(
         sigma_trans=fit.s_trans,
         conditioning=cond,
         closed_forms=forms,
-        convention=conv,
+        check=check,
         prepared=prep,
         notes=notes,
     )
@@ -474,7 +517,19 @@ _COMMON_DOC = """
     outlier_alpha : float
         False-alarm probability per pose of the outlier flag.
     check_convention : {"raise", "warn", "off"}
-        What to do when another storage convention or a unit factor 1000 fits far better.
+        What to do when the fit is implausible (:func:`~calstudy.estimators.handeye_checks.\
+check_cell`: translations outside the camera's range or the robot's reach, a pose noise no
+        instrument gives, a target that moved during the series): refuse with the likely causes
+        tried and ranked (:func:`~calstudy.estimators.handeye_diagnose.diagnose`: storage
+        convention, transposed rotations, unit factors 10, 25.4 and 1000, shifted rows, rotation
+        formats of the file), warn with them (a :class:`calstudy.CalibrationWarning`) and go on,
+        or skip the check.
+    limits : CellLimits, optional
+        The plausible ranges and noise of the check (default :class:`CellLimits()`).
+    rereadings : callable, optional
+        ``{cause: (flange2base, target2camera)}`` of other readings of the same file's columns
+        for the diagnosis (:meth:`calstudy.estimators.posefile.PoseList.rereadings`; passed by
+        :meth:`~calstudy.estimators.posefile.PoseList.arguments`).
     rng : numpy.random.Generator, optional
         Needed for ``robust="ransac"``.
     target_points, pixels, camera_matrix, pixel_sigma : optional
@@ -494,7 +549,8 @@ _COMMON_DOC = """
     ------
     CalibrationError
         Bad input (named pose and number), degenerate motions (duplicates, pure translations, one
-        rotation axis), a convention or unit mismatch (``check_convention="raise"``), a requested
+        rotation axis), an implausible fit with its likely causes (``check_convention="raise"``), a
+        requested
         closed form inconsistent with the data, or a refinement that does not converge.
 """
 
@@ -528,6 +584,8 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
         camera_matrix=None,
         pixel_sigma: float | None = None,
         misfit: str = "flag",
+        limits: CellLimits | None = None,
+        rereadings: Callable[[], dict] | None = None,
     ) -> HandEyeResult:
         prep = prepare_poses(
             flange2base,
@@ -560,6 +618,8 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             camera_matrix=camera_matrix,
             pixel_sigma=pixel_sigma,
             misfit=misfit,
+            limits=limits,
+            rereadings=rereadings,
         )
         return _calibrate(prep, forms, method, options)
 

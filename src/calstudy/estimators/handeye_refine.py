@@ -48,9 +48,27 @@ def _so3_jr(phi: np.ndarray) -> np.ndarray:
     return geo.so3_left_jacobian(-np.atleast_2d(phi))
 
 
+#: above this angle (rad) the axis is taken from scipy (the skew part vanishes near pi)
+_LOG_NEAR_PI = np.pi - 1e-2
+
+
 def log_so3(rot: np.ndarray) -> np.ndarray:
-    """Rotation vectors ``(N, 3)`` of rotation matrices ``(..., 3, 3)``."""
-    return Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_rotvec()
+    """Rotation vectors ``(N, 3)`` of rotation matrices ``(..., 3, 3)`` (proper rotations).
+
+    ``v * a / |v|`` with ``v`` the skew part and ``a`` the angle of
+    :func:`calstudy.core.geometry.rotation_angle` (accurate at every angle; a fifth of the cost
+    of scipy's conversion, which the refinement calls at every evaluation); within 0.01 rad of
+    pi, where the skew part loses the axis, scipy's conversion.
+    """
+    r = rot.reshape(-1, 3, 3)
+    v = np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], 1)
+    s = np.sqrt(np.sum(v * v, axis=1))
+    ang = np.arctan2(s, r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2] - 1.0)
+    out = v * np.where(s > 1e-300, ang / np.maximum(s, 1e-300), 0.5)[:, None]
+    far = ang > _LOG_NEAR_PI
+    if np.any(far):
+        out[far] = Rotation.from_matrix(r[far]).as_rotvec()
+    return out
 
 
 def _exp_so3(rotvec: np.ndarray) -> np.ndarray:
@@ -91,6 +109,33 @@ def pose_scale(b: np.ndarray) -> float:
     """Median camera-target distance of the poses ``b`` (mm, at least 1e-9): the scale of
     :func:`residual_score`."""
     return max(float(np.median(np.linalg.norm(b[:, :3, 3], axis=1))), 1e-9)
+
+
+#: poses the closed forms start from: OpenCV's solvers form every pair of their poses, so a
+#: fixed number of well-spread poses keeps the start's cost constant and the whole fit linear
+START_POSES = 12
+
+
+def spread_subset(a: np.ndarray, k: int = START_POSES) -> np.ndarray:
+    """Indices (sorted) of ``k`` well-spread robot poses of ``a`` (N, 4, 4), all if ``N <= k``.
+
+    Greedy farthest-point selection on the orientations (chordal distance ``|R_i - R_j|``, the
+    relative rotations the closed forms need) and, in a tenth of the weight, the positions
+    relative to their spread: ``O(N k)``, deterministic (starts at the first pose).
+    """
+    n = a.shape[0]
+    if n <= k:
+        return np.arange(n)
+    t = a[:, :3, 3]
+    scale = max(float(np.sqrt(np.mean(np.sum((t - t.mean(0)) ** 2, 1)))), 1e-12)
+    feat = np.concatenate([a[:, :3, :3].reshape(n, 9), 0.1 * t / scale], 1)
+    picked = [0]
+    dist = np.sum((feat - feat[0]) ** 2, 1)
+    for _ in range(k - 1):
+        j = int(np.argmax(dist))
+        picked.append(j)
+        dist = np.minimum(dist, np.sum((feat - feat[j]) ** 2, 1))
+    return np.unique(picked)
 
 
 @dataclass
@@ -155,6 +200,10 @@ def _opencv_rwhe(a: np.ndarray, b: np.ndarray, method: str) -> tuple[np.ndarray,
 def closed_forms(a: np.ndarray, b: np.ndarray, methods: Sequence[str]) -> list[ClosedForm]:
     """Run OpenCV closed forms on canonical poses and score them; refuse the inconsistent ones.
 
+    The solvers see the :data:`START_POSES` well-spread poses of :func:`spread_subset` (all poses
+    up to that many; OpenCV forms every pair of the poses it is given, a cost quadratic in their
+    number); every result is scored on all poses.
+
     Parameters
     ----------
     a, b : (N, 4, 4) arrays
@@ -172,16 +221,18 @@ def closed_forms(a: np.ndarray, b: np.ndarray, methods: Sequence[str]) -> list[C
     import time
 
     scale = pose_scale(b)
+    sub = spread_subset(a)
+    a_s, b_s = a[sub], b[sub]
     out = []
     for m in methods:
         start = time.perf_counter()
         reason = ""
         try:
             if m in OPENCV_RWHE_METHODS:
-                x, z = _opencv_rwhe(a, b, m)
+                x, z = _opencv_rwhe(a_s, b_s, m)
                 check_proper(m, z)
             else:
-                x = opencv_handeye(a, b, m)
+                x = opencv_handeye(a_s, b_s, m)
             x = check_proper(m, x)
             if m not in OPENCV_RWHE_METHODS:
                 z = target_in_world(a, b, x)
