@@ -14,8 +14,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import OptimizeResult, _minpack, least_squares, leastsq
-from scipy.stats import chi2 as _chi2
 
 from calstudy.core.errors import CalibrationError, CalibrationWarning
 
@@ -153,6 +151,8 @@ def goodness_of_fit(
     chi2 = float(r @ r)
     if dof <= 0:
         return FitCheck(chi2, max(dof, 0), float("nan"), float("nan"))
+    from scipy.stats import chi2 as _chi2  # lazy: scipy.stats takes about 1 s to import
+
     low = float(_chi2.ppf(alpha / 2, dof) / dof)
     high = float(_chi2.isf(alpha / 2, dof) / dof)
     ratio = chi2 / dof
@@ -281,6 +281,8 @@ def minpack_lm(
     CalibrationError
         If ``fun`` returns fewer residuals than ``x0`` has parameters (MINPACK's improper input).
     """
+    from scipy.optimize import _minpack  # lazy, as every scipy import of this module
+
     x = np.asarray(x0, dtype=float).flatten()
     maxfev = 100 * x.size if max_nfev is None else max_nfev
     out = _minpack._lmder(fun, jac, x, args, 1, 0, ftol, xtol, gtol, maxfev, 100.0, None)
@@ -297,6 +299,8 @@ def _leastsq(fun, x0: np.ndarray, jac, args: tuple, xtol, ftol, gtol, max_nfev) 
     ``least_squares(method="lm")``: ``x_scale="jac"`` (no ``diag``), step bound factor 100, at
     most ``100 n`` evaluations; ``full_output`` also keeps it from warning on a stop at the
     tolerances, as least_squares does. Returns leastsq's ``(x, cov_x, info, message, ier)``."""
+    from scipy.optimize import leastsq
+
     return leastsq(
         fun,
         x0.copy(),
@@ -319,7 +323,7 @@ _FD_STEP = np.finfo(np.float64).eps ** 0.5
 _MINPACK_STATUS = {0: -1, 1: 2, 2: 3, 3: 4, 4: 1, 5: 0}
 
 
-def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev, f0=None) -> OptimizeResult:
+def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev, f0=None):
     """What ``least_squares(fun, x0, jac=jac, method="lm", ...)`` returns (the fields
     :func:`levenberg_marquardt` reads: x, fun, jac, cost, nfev, status, message), computed by the
     same MINPACK call through :func:`scipy.optimize.leastsq`'s thinner wrapper. As in
@@ -376,6 +380,8 @@ def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev, f0=None) -> OptimizeResu
             return j
 
         jac = remembered_jac
+    from scipy.optimize import OptimizeResult
+
     x, _, info, message, ier = _leastsq(remembered, x0, jac, (), xtol, ftol, gtol, max_nfev)
     x = np.asarray(x, dtype=float)
     f = np.asarray(info["fvec"], dtype=float)
@@ -464,6 +470,8 @@ def levenberg_marquardt(
     elif method == "lm" and jac == "2-point":
         res = _lmder(wrapped, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
     else:
+        from scipy.optimize import least_squares
+
         res = least_squares(
             wrapped, x0, jac=jac, method=method, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev
         )

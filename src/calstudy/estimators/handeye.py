@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-import pinocchio as pin
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
@@ -271,6 +270,8 @@ class _SphereProblem:
         # R_F = base exp(delta); exp(delta + e) = exp(delta) exp(Jr(delta) e), so
         # d(R_F^T q)/d(delta) = [R_F^T q]_x Jr(delta), Jr the right Jacobian of SO(3)
         pred = q @ r_f
+        import pinocchio as pin
+
         jac[:, :, 3:6] = geo.skew(pred) @ pin.Jexp3(np.asarray(x[3:6], dtype=float))
         jac[:, :, 6:9] = np.einsum("ji,njk->nik", r_f, r0.transpose(0, 2, 1))
         return (self.whiten @ jac).reshape(n * 3, 9)

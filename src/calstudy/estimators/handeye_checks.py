@@ -31,6 +31,8 @@ from calstudy.estimators.handeye_robust import robust_sigmas
 
 #: false-alarm probability of the time-order break test over the whole series
 BREAK_ALPHA = 1e-4
+#: median of chi-square with 6 degrees of freedom (``scipy.stats.chi2.median(6)``)
+CHI2_6_MEDIAN = 5.348120627447118
 #: a break must also step by this many per-pose standard deviations
 MIN_STEP = 5.0
 
@@ -153,7 +155,7 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
         Row after which the step is largest, the step (mm), the scatter ``s`` (mm) and the
         statistic's ratio to its Bonferroni limit at :data:`BREAK_ALPHA` (above 1: a break).
     """
-    from scipy.stats import chi2
+    from scipy.special import chdtri  # chi2.isf without importing scipy.stats
 
     keep = np.ones(len(a), bool) if weights is None else np.asarray(weights) > 0
     idx = np.flatnonzero(keep)
@@ -165,11 +167,11 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     v = np.concatenate([zs[:, :3, 3], rot], 1)
     d2 = np.sum(np.diff(v, axis=0) ** 2, 1)
     # successive differences: 2 s^2 chi2(6) each; their median is not moved by one step
-    s2 = max(float(np.median(d2) / (2.0 * chi2.median(6))), 1e-24)
+    s2 = max(float(np.median(d2) / (2.0 * CHI2_6_MEDIAN)), 1e-24)
     # an outlier pose differs from both neighbours in time, a break from one only: leave the
     # outliers out (the outlier flag reports them); the end poses are compared with the two
     # poses next to them
-    lim = 2.0 * s2 * chi2.isf(1e-3, 6)
+    lim = 2.0 * s2 * chdtri(6, 1e-3)
     prev = np.concatenate([[np.sum((v[0] - v[2]) ** 2)], d2])
     nxt = np.concatenate([d2, [np.sum((v[-1] - v[-3]) ** 2)]])
     inl = np.minimum(prev, nxt) <= lim
@@ -186,7 +188,7 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     # splits near the ends rest on few poses: leave the outer two out
     stat[:2] = stat[-2:] = 0.0
     j = int(np.argmax(stat))
-    limit = float(chi2.isf(BREAK_ALPHA / max(n - 5, 1), 6))
+    limit = float(chdtri(6, BREAK_ALPHA / max(n - 5, 1)))
     return int(idx[j]), float(np.sqrt(step[j])), float(np.sqrt(s2)), float(stat[j] / limit)
 
 

@@ -14,8 +14,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
@@ -67,12 +65,14 @@ def log_so3(rot: np.ndarray) -> np.ndarray:
     out = v * np.where(s > 1e-300, ang / np.maximum(s, 1e-300), 0.5)[:, None]
     far = ang > _LOG_NEAR_PI
     if np.any(far):
+        from scipy.spatial.transform import Rotation
+
         out[far] = Rotation.from_matrix(r[far]).as_rotvec()
     return out
 
 
 def _exp_so3(rotvec: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(np.atleast_2d(rotvec)).as_matrix()
+    return geo.rotvec_to_matrix(np.atleast_2d(rotvec))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -346,6 +346,8 @@ class PoseProblem:
 
 
 def _solve(problem: PoseProblem, x, z) -> tuple[np.ndarray, np.ndarray, int]:
+    from scipy.optimize import least_squares  # lazy: the tool imports in well under a second
+
     sol = least_squares(
         problem.residuals,
         problem.x0(x, z),
@@ -546,6 +548,8 @@ def refine_reprojection(
     prob = PoseProblem.build(a, b0, x0, z0, 1.0, 1.0, w)
     rep = _Reprojection(prob, pts, k, sw, pxf)
     fun, jac = rep.residuals, rep.jacobian
+    from scipy.optimize import least_squares
+
     sol = least_squares(fun, prob.x0(x0, z0), jac=jac, method="lm", xtol=1e-12, ftol=1e-12)
     if sol.status <= 0:
         raise CalibrationError(

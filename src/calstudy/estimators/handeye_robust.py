@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.stats import chi2
 
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.handeye import opencv_handeye
@@ -21,13 +20,16 @@ from calstudy.estimators.handeye_refine import (
     target_in_world,
 )
 
-#: median of the chi-square distribution with 3 degrees of freedom (robust noise estimate)
-_CHI2_3_MEDIAN = float(chi2.median(3))
+#: median of the chi-square distribution with 3 degrees of freedom (robust noise estimate;
+#: ``scipy.stats.chi2.median(3)``, which a test checks: scipy.stats is imported only when needed)
+CHI2_3_MEDIAN = 2.3659738843753377
 
 
 def outlier_limit(alpha: float = 1e-3) -> float:
     """Outlier flag limit: the ``1 - alpha`` quantile of chi-square with 6 degrees of freedom."""
-    return float(chi2.ppf(1.0 - alpha, 6))
+    from scipy.special import chdtri  # chi2.isf without importing scipy.stats
+
+    return float(chdtri(6, alpha))
 
 
 def robust_sigmas(res: np.ndarray, alpha: float = 1e-3) -> tuple[float, float]:
@@ -41,9 +43,9 @@ def robust_sigmas(res: np.ndarray, alpha: float = 1e-3) -> tuple[float, float]:
     rr = np.sum(res[:, 3:] ** 2, 1)
     tt = np.sum(res[:, :3] ** 2, 1)
     keep = (n - 2.0) / n  # 12 parameters take 2 of the 6 N degrees of freedom per pose
-    s_r = np.sqrt(max(np.median(rr) / (_CHI2_3_MEDIAN * keep), 1e-30))
-    s_t = np.sqrt(max(np.median(tt) / (_CHI2_3_MEDIAN * keep), 1e-30))
-    inl = rr / s_r**2 + tt / s_t**2 <= chi2.ppf(1.0 - alpha, 6)
+    s_r = np.sqrt(max(np.median(rr) / (CHI2_3_MEDIAN * keep), 1e-30))
+    s_t = np.sqrt(max(np.median(tt) / (CHI2_3_MEDIAN * keep), 1e-30))
+    inl = rr / s_r**2 + tt / s_t**2 <= outlier_limit(alpha)
     m = int(inl.sum())
     if m > 2:
         s_r = np.sqrt(max(rr[inl].sum() / (3.0 * (m - 2)), 1e-30))

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from calstudy.core import geometry as geo
 from calstudy.core import schema
@@ -180,6 +179,12 @@ EULER_SEQUENCES = (
 )
 
 
+def _from_euler(seq: str, angles: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_euler(seq, angles, degrees=True).as_matrix()
+
+
 def _euler_name(seq: str, angles: str) -> str:
     return "R = " + " ".join(
         f"R{axis.lower()}({ang})" for axis, ang in zip(seq, angles, strict=True)
@@ -210,7 +215,7 @@ def alternative_rotations(form: str, columns: np.ndarray) -> dict:
             if seq == "ZYX" and angles == "abc":
                 continue
             out[f"Euler angles as {_euler_name(seq, angles)} instead of Rz(a) Ry(b) Rx(c)"] = (
-                Rotation.from_euler(seq, vv, degrees=True).as_matrix()
+                _from_euler(seq, vv)
             )
     return out
 
@@ -307,6 +312,8 @@ def _rotation_columns(rotation: str, rot: np.ndarray) -> np.ndarray:
     """Rotations ``(N, 3, 3)`` as the columns of the form ``rotation`` (:data:`ROTATION_FORMS`);
     quaternions scalar first with ``qw >= 0``."""
     if rotation == "quaternion":
+        from scipy.spatial.transform import Rotation
+
         q = Rotation.from_matrix(rot).as_quat()  # scalar last
         r = np.concatenate([q[:, 3:], q[:, :3]], 1)
         r *= np.where(r[:, :1] < 0, -1.0, 1.0)
