@@ -20,6 +20,7 @@ from one robot pose and two images of a two-sided target.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import cv2
@@ -443,6 +444,18 @@ def check_rotation_diversity(flange2base: np.ndarray, min_rotation: float) -> No
         )
 
 
+@contextmanager
+def quiet_opencv():
+    """OpenCV's log silenced within the block (its hand-eye solvers log failures on stderr,
+    which the callers report as :class:`CalibrationError` instead), the level restored after."""
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+
+
 def opencv_handeye(
     flange2base,
     target2sensor,
@@ -497,13 +510,14 @@ def opencv_handeye(
     if min_pair_rotation > 0.0:
         check_rotation_diversity(g2b, min_pair_rotation)
     try:
-        rot, trans = cv2.calibrateHandEye(
-            list(g2b[:, :3, :3]),
-            list(g2b[:, :3, 3:]),
-            list(t2c[:, :3, :3]),
-            list(t2c[:, :3, 3:]),
-            method=OPENCV_METHODS[method],
-        )
+        with quiet_opencv():
+            rot, trans = cv2.calibrateHandEye(
+                list(g2b[:, :3, :3]),
+                list(g2b[:, :3, 3:]),
+                list(t2c[:, :3, :3]),
+                list(t2c[:, :3, 3:]),
+                method=OPENCV_METHODS[method],
+            )
     except cv2.error as exc:
         raise CalibrationError(
             f"OpenCV {method} hand-eye failed on {g2b.shape[0]} poses: {exc.err or exc}"
@@ -511,6 +525,12 @@ def opencv_handeye(
     if rot is None or trans is None:
         raise CalibrationError(f"OpenCV {method} hand-eye returned no result")
     out = geo.make_transform(rot, trans.ravel())
+    if np.array_equal(out, np.eye(4)):
+        # what OpenCV's Tsai returns (logging an error) when no motion rotates enough
+        raise CalibrationError(
+            f"OpenCV {method} hand-eye failed on {g2b.shape[0]} poses: not enough informative "
+            "motions (include larger rotations)"
+        )
     if not np.all(np.isfinite(out)):
         raise CalibrationError(f"OpenCV {method} hand-eye returned a non-finite result")
     return out

@@ -192,14 +192,16 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     return int(idx[j]), float(np.sqrt(step[j])), float(np.sqrt(s2)), float(stat[j] / limit)
 
 
-def check_cell(a, b, x, res, weights, limits: CellLimits) -> CellCheck:
+def check_cell(a, b, x, res, weights, limits: CellLimits, slack: float = 1.0) -> CellCheck:
     """Ranges, noise level and time order of a fit ``x`` of canonical poses ``a``, ``b`` with
-    per-pose residuals ``res`` (N, 6); the failures as sentences (none: it passed)."""
+    per-pose residuals ``res`` (N, 6); the failures as sentences (none: it passed). ``slack``
+    multiplies the noise limits (a closed-form start is checked with some, so that only a gross
+    failure stops the calibration before its refinement)."""
     cam, rob, fails = range_failures(a, b, limits)
     scale = pose_scale(b)
     keep = np.asarray(weights) > 0
     s_rot, s_trans, ratio = noise_ratio(res[keep], scale, limits)
-    if ratio > 1.0:
+    if ratio > slack:
         fails.append(
             f"the residuals imply a pose noise of {s_rot:.3g} deg and {s_trans:.3g} mm per "
             f"axis, beyond any instrument (limits {limits.max_sigma_rot_deg:g} deg and "

@@ -177,12 +177,16 @@ def diagnose(
     cands.update(readings(a, b))
     scores = [(name, reading_score(ra, rb, limits)) for name, (ra, rb) in cands.items()]
     if break_after >= 0:
-        scores.append(
+        # the step is located on a fit that the move itself spoils: try the rows around it
+        moved = [
             (
-                f"the target moved between rows {break_after} and {break_after + 1}",
-                reading_score(a, b, limits, z_split=break_after + 1),
+                f"the target moved between rows {k - 1} and {k}",
+                reading_score(a, b, limits, z_split=k),
             )
-        )
+            for k in range(max(break_after - 2, 3), min(break_after + 5, len(a) - 2))
+        ]
+        if moved:
+            scores.append(min(moved, key=lambda m: m[1]))
     scores.sort(key=lambda s: s[1])
     declared = dict(scores)["as declared"]
     fits = [
@@ -198,7 +202,7 @@ def diagnose(
             "the columns or the pairing) to what the data are: nothing was corrected"
         )
     dis = motion_angle_disagreement(a, b)
-    tried = ", ".join(n for n, _ in scores[1:4])
+    tried = ", ".join([n for n, _ in scores if n != "as declared"][:3])
     where = (
         "the rotations disagree: robot and camera rows are mis-paired (shuffled) or a "
         "rotation format is wrong"

@@ -246,11 +246,18 @@ def _check_options(opt: _Options) -> None:
         raise CalibrationError(f"misfit must be one of {MISFIT_POLICIES}; got {opt.misfit!r}")
 
 
-def _check_cell(prep: PreparedPoses, x, res, w, opt: _Options, notes: list) -> CellCheck:
+#: the closed-form start is checked with noise limits this much wider (a gross failure stops
+#: the calibration before the refinement, which on misread data takes many iterations)
+START_SLACK = 3.0
+
+
+def _check_cell(
+    prep: PreparedPoses, x, res, w, opt: _Options, notes: list, slack: float = 1.0
+) -> CellCheck:
     """The plausibility check of the fit; after a failure the diagnosis, then a refusal (or a
     warning) naming the failures and the likely causes, best first."""
     limits = opt.limits if opt.limits is not None else CellLimits()
-    check = check_cell(prep.a, prep.b, x, res, w, limits)
+    check = check_cell(prep.a, prep.b, x, res, w, limits, slack)
     if not check.failures or opt.check_convention == "off":
         return check
     from calstudy.estimators.handeye_diagnose import diagnose
@@ -450,6 +457,8 @@ def _calibrate(
     notes: list[str] = []
     start = _choose(forms, method)
     fit = _start(a, b, start, opt, notes)
+    if opt.check_convention == "raise":
+        _check_cell(prep, fit.x, pose_residuals(a, b, fit.x, fit.z), fit.w, opt, [], START_SLACK)
     if not opt.refine:
         _closed_form_only(a, b, fit)
     else:

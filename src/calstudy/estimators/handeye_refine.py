@@ -18,7 +18,7 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.estimation import Estimate, covariance_from_jacobian
-from calstudy.estimators.handeye import opencv_handeye
+from calstudy.estimators.handeye import opencv_handeye, quiet_opencv
 
 #: OpenCV's AX = ZB (robot-world-hand-eye) solvers
 OPENCV_RWHE_METHODS = {
@@ -89,7 +89,7 @@ def pose_residuals(a, b, x, z) -> np.ndarray:
     """Per-pose residuals ``(N, 6)``: ``[t_B - t_pred (mm, camera frame), log(R_pred^T R_B) (rad)]``
     of the measured ``B_i`` against the prediction ``inv(X) inv(A_i) Z``."""
     pred = geo.invert(x) @ geo.invert(a) @ z
-    rot = log_so3(np.einsum("nji,njk->nik", pred[:, :3, :3], b[:, :3, :3]))
+    rot = log_so3(np.swapaxes(pred[:, :3, :3], 1, 2) @ b[:, :3, :3])
     return np.concatenate([b[:, :3, 3] - pred[:, :3, 3], rot], axis=1)
 
 
@@ -185,13 +185,14 @@ def _opencv_rwhe(a: np.ndarray, b: np.ndarray, method: str) -> tuple[np.ndarray,
     """``(X, Z)`` by ``cv2.calibrateRobotWorldHandEye``: it solves ``B = inv(X) inv(A) Z`` and
     returns ``inv(Z)`` ("base2world") and ``inv(X)`` ("gripper2cam")."""
     ainv = geo.invert(a)
-    r_w, t_w, r_g, t_g = cv2.calibrateRobotWorldHandEye(
-        list(b[:, :3, :3]),
-        list(b[:, :3, 3:]),
-        list(ainv[:, :3, :3]),
-        list(ainv[:, :3, 3:]),
-        method=OPENCV_RWHE_METHODS[method],
-    )
+    with quiet_opencv():
+        r_w, t_w, r_g, t_g = cv2.calibrateRobotWorldHandEye(
+            list(b[:, :3, :3]),
+            list(b[:, :3, 3:]),
+            list(ainv[:, :3, :3]),
+            list(ainv[:, :3, 3:]),
+            method=OPENCV_RWHE_METHODS[method],
+        )
     x = geo.invert(geo.make_transform(r_g, t_g.ravel()))
     z = geo.invert(geo.make_transform(r_w, t_w.ravel()))
     return x, z
@@ -304,13 +305,13 @@ class PoseProblem:
         ry = _exp_so3(p[0:3])[0] @ self.ry0
         rz = self.rz0 @ _exp_so3(p[6:9])[0]
         rc, tc = self.c[:, :3, :3], self.c[:, :3, 3]
-        r_hat = np.einsum("ij,njk,kl->nil", ry, rc, rz)
-        u = np.einsum("ij,nj->ni", ry, np.einsum("nij,j->ni", rc, p[9:12]) + tc)
+        r_hat = ry @ rc @ rz
+        u = (rc @ p[9:12] + tc) @ ry.T
         return ry, r_hat, u, u + p[3:6]
 
     def residuals(self, p) -> np.ndarray:
         _, r_hat, _, t_hat = self._predict(p)
-        e = log_so3(np.einsum("nji,njk->nik", r_hat, self.b[:, :3, :3]))
+        e = log_so3(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
         r = np.concatenate(
             [(self.b[:, :3, 3] - t_hat) * self.w_trans[:, None], e * self.w_rot[:, None]], 1
         )
@@ -319,14 +320,14 @@ class PoseProblem:
     def jacobian(self, p) -> np.ndarray:
         ry, r_hat, u, _ = self._predict(p)
         n = r_hat.shape[0]
-        e = log_so3(np.einsum("nji,njk->nik", r_hat, self.b[:, :3, :3]))
+        e = log_so3(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
         jl_y = _so3_jr(p[0:3])[0].T
         jr_z = _so3_jr(p[6:9])[0]
         jl_inv_e = np.swapaxes(geo.so3_right_jacobian_inverse(e), 1, 2)
         jac = np.zeros((n, 6, 12))
         jac[:, :3, 0:3] = geo.skew(u) @ jl_y
         jac[:, :3, 3:6] = -np.eye(3)
-        jac[:, :3, 9:12] = -np.einsum("ij,njk->nik", ry, self.c[:, :3, :3])
+        jac[:, :3, 9:12] = -(ry @ self.c[:, :3, :3])
         jac[:, 3:, 0:3] = -jl_inv_e @ np.swapaxes(r_hat, 1, 2) @ jl_y
         jac[:, 3:, 6:9] = -jl_inv_e @ jr_z
         jac[:, :3] *= self.w_trans[:, None, None]
