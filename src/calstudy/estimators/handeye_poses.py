@@ -79,10 +79,13 @@ from calstudy.estimators.handeye_refine import (
     pose_residuals,
     refine_ml,
     refine_reprojection,
+    robot_error_map,
     target_in_world,
     whitened_at,
 )
 from calstudy.estimators.handeye_robust import (
+    MIN_CAMERA_SHARE,
+    eiv_sigmas,
     outlier_limit,
     outlier_scores,
     ransac_inliers,
@@ -90,6 +93,9 @@ from calstudy.estimators.handeye_robust import (
     robust_weights,
 )
 
+#: pose counts below this are flagged: the covariance cannot be trusted (too few residuals to
+#: estimate the noise and the robot's error)
+MIN_TRUSTED_POSES = 6
 #: condition number of the whitened Jacobian above which the refinement is refused
 MAX_JACOBIAN_CONDITION = 1e10
 ROBUST = (None, "huber", "cauchy", "ransac")
@@ -130,7 +136,12 @@ class HandEyeResult:
     weights : (N,) array
         Final per-pose weights (user weights times robust weights).
     sigma_rot, sigma_trans : float
-        Noise level used (given, or estimated robustly from the residuals), rad and mm.
+        Camera noise used (given, or estimated robustly from the residuals), rad and mm.
+    robot_sigma_rot : float
+        Robot rotation error used (errors in variables; stated, or estimated from how the
+        residuals' rotation and translation parts co-vary), rad per axis.
+    dof : float
+        Residual degrees of freedom behind the covariance's scale (inf: the noise was given).
     conditioning : Conditioning
     closed_forms : list of ClosedForm
     check : CellCheck
@@ -159,6 +170,33 @@ class HandEyeResult:
     check: CellCheck
     prepared: PreparedPoses
     notes: list = field(default_factory=list)
+    robot_sigma_rot: float = 0.0
+    dof: float = float("inf")
+
+    @property
+    def covariance_trusted(self) -> bool:
+        """False below :data:`MIN_TRUSTED_POSES` poses (the coverage of the 95 % region is then
+        well below 90 %; a note says so)."""
+        return self.prepared.a.shape[0] >= MIN_TRUSTED_POSES
+
+    def region_limit(self, level: float = 0.95, k: int = 6) -> float:
+        """Limit of the squared Mahalanobis distance of a ``k``-parameter block at ``level``:
+        ``chi2_k`` with a given noise level, ``k F(k, dof)`` with an estimated one (the scale of
+        the covariance is then estimated from ``dof`` residual degrees of freedom)."""
+        from scipy.special import chdtri, fdtri
+
+        if np.isinf(self.dof):
+            return float(chdtri(k, 1.0 - level))
+        return float(k * fdtri(k, self.dof, level))
+
+    def x_distance(self, x_true) -> float:
+        """Squared Mahalanobis distance of the ``X`` estimate from ``x_true`` (4, 4) under the
+        covariance of ``[theta_X, t_X]``: inside the 95 % region when at most
+        ``region_limit(0.95)``."""
+        xt = np.asarray(x_true, dtype=float)
+        theta = geo.matrix_to_rotvec(self.x[:3, :3].T @ xt[:3, :3])
+        e = np.concatenate([theta, xt[:3, 3] - self.x[:3, 3]])
+        return float(e @ np.linalg.solve(self.covariance[:6, :6], e))
 
     @property
     def std(self) -> np.ndarray:
@@ -200,6 +238,7 @@ class _Options:
     sigma_rot: float | None
     sigma_trans: float | None
     weights: object
+    robot_sigma_rot: float | None
     robust: str | None
     outlier_alpha: float
     check_convention: str
@@ -226,6 +265,8 @@ class _Fit:
     label: str
     s_rot: float = float("nan")
     s_trans: float = float("nan")
+    rho: float = 0.0  # robot rotation error, rad per axis
+    given_robot: bool = False
     est: Estimate | None = None
     cov: np.ndarray | None = None
     jc: float = float("nan")
@@ -328,13 +369,43 @@ def _start(a, b, start: ClosedForm, opt: _Options, notes: list) -> _Fit:
             )
     else:
         fit.s_rot, fit.s_trans = robust_sigmas(pose_residuals(a, b, x, z)[w > 0])
+    if opt.robot_sigma_rot is not None:
+        fit.rho, fit.given_robot = float(opt.robot_sigma_rot), True
+        if not 0 <= fit.rho < np.inf:
+            raise CalibrationError(f"robot_sigma_rot must be >= 0 and finite; got {fit.rho:g}")
+        if not fit.given:
+            fit.s_rot, fit.s_trans = _camera_share(a, b, x, z, w, fit.rho)
     return fit
+
+
+def _camera_share(a, b, x, z, w, rho: float) -> tuple[float, float]:
+    """The camera's noise at a stated robot rotation error ``rho``: the rest of the robust
+    total, at least :data:`MIN_CAMERA_SHARE` of it."""
+    res = pose_residuals(a, b, x, z)[w > 0]
+    s_r, s_t = robust_sigmas(res)
+    g_t = robot_error_map(a[w > 0], x, z)[0]
+    kappa = float(np.mean(np.einsum("nij,nij->n", g_t, g_t))) / 3.0
+    return (
+        float(np.sqrt(max(s_r**2 - rho**2, MIN_CAMERA_SHARE * s_r**2))),
+        float(np.sqrt(max(s_t**2 - rho**2 * kappa, MIN_CAMERA_SHARE * s_t**2))),
+    )
+
+
+def _noise(a, b, x, z, w, fit: _Fit) -> tuple[float, float, float]:
+    """The noise level of a fit ``(sigma_rot, sigma_trans, robot_sigma_rot)``: as given, or
+    estimated (errors in variables, :func:`eiv_sigmas`) from the residuals."""
+    if fit.given:
+        return fit.s_rot, fit.s_trans, fit.rho
+    if fit.given_robot:
+        return (*_camera_share(a, b, x, z, w, fit.rho), fit.rho)
+    g_t, g_r = robot_error_map(a[w > 0], x, z)
+    return eiv_sigmas(pose_residuals(a, b, x, z)[w > 0], g_t, g_r)
 
 
 def _closed_form_only(a, b, fit: _Fit) -> None:
     """No refinement: the closed form's residuals and covariance at the noise level."""
     x, z = fit.x, fit.z
-    r, jac = whitened_at(a, b, x, z, fit.s_rot, fit.s_trans, fit.w)
+    r, jac = whitened_at(a, b, x, z, fit.s_rot, fit.s_trans, fit.w, fit.rho)
     fit.est = Estimate(
         value=(x, z), params=np.zeros(12), residuals=r, method=fit.label, names=list(PARAM_NAMES)
     )
@@ -344,25 +415,35 @@ def _closed_form_only(a, b, fit: _Fit) -> None:
 def _refine_poses(a, b, fit: _Fit, robust: str | None) -> None:
     """Maximum likelihood on the target poses, iterated with the estimated noise level and the
     robust weights to a fixed point."""
-    x, z, s_rot, s_trans, w, w_user = fit.x, fit.z, fit.s_rot, fit.s_trans, fit.w, fit.w_user
+    x, z, w, w_user = fit.x, fit.z, fit.w, fit.w_user
+    s_rot, s_trans, rho = fit.s_rot, fit.s_trans, fit.rho
     given = fit.given
     reweight = robust in ("huber", "cauchy")
     # the noise level (if estimated) and robust weights depend on the fit: iterate to a fixed
     # point (a few rounds suffice; the refinement itself is warm-started)
     for _ in range(30 if reweight else (3 if not given else 0)):
-        est = refine_ml(a, b, x, z, s_rot, s_trans, w)
+        est = refine_ml(a, b, x, z, s_rot, s_trans, w, rho)
         x, z = est.value
         res = pose_residuals(a, b, x, z)
         old = (s_rot, s_trans, w)
-        if not given:
-            s_rot, s_trans = robust_sigmas(res[w_user > 0])
+        s_rot, s_trans, rho = _noise(a, b, x, z, w_user, fit)
         if reweight:
-            w = w_user * robust_weights(outlier_scores(res, s_rot, s_trans), robust)
+            tot = _total(s_rot, s_trans, rho, a, x, z)
+            w = w_user * robust_weights(outlier_scores(res, *tot), robust)
         if np.max(np.abs(w - old[2])) < 1e-6 and abs(s_rot / old[0] - 1) < 1e-6:
             break
-    est = refine_ml(a, b, x, z, s_rot, s_trans, w)
+    est = refine_ml(a, b, x, z, s_rot, s_trans, w, rho)
     fit.x, fit.z = est.value
-    fit.est, fit.s_rot, fit.s_trans, fit.w = est, s_rot, s_trans, w
+    fit.est, fit.s_rot, fit.s_trans, fit.rho, fit.w = est, s_rot, s_trans, rho, w
+
+
+def _total(s_rot, s_trans, rho, a, x, z) -> tuple[float, float]:
+    """Per-axis rotation and translation noise of a residual, camera and robot together."""
+    if rho == 0:
+        return s_rot, s_trans
+    g_t = robot_error_map(a, x, z)[0]
+    kappa = float(np.mean(np.einsum("nij,nij->n", g_t, g_t))) / 3.0
+    return float(np.hypot(s_rot, rho)), float(np.sqrt(s_trans**2 + rho**2 * kappa))
 
 
 def _refine(a, b, fit: _Fit, opt: _Options, start_method: str) -> None:
@@ -467,7 +548,13 @@ def _calibrate(
     x, z = fit.x, fit.z
     res = pose_residuals(a, b, x, z)
     check = _check_cell(prep, x, res, fit.w, opt, notes)
-    score = outlier_scores(res, fit.s_rot, fit.s_trans)
+    score = outlier_scores(res, *_total(fit.s_rot, fit.s_trans, fit.rho, a, x, z))
+    dof = np.inf if fit.given else 6.0 * np.count_nonzero(fit.w) - 12.0
+    if prep.a.shape[0] < MIN_TRUSTED_POSES:
+        notes.append(
+            f"with {prep.a.shape[0]} poses (fewer than {MIN_TRUSTED_POSES}) the covariance "
+            "cannot be trusted: its 95 % region covers the truth in well under 90 % of cells"
+        )
     cov, basis = _covariance(fit, opt)
     _check_fit(prep.ids, fit, opt, notes)
     flagged = _flag(prep.ids, score, opt.outlier_alpha, x, z, notes)
@@ -487,6 +574,8 @@ def _calibrate(
         weights=fit.w,
         sigma_rot=fit.s_rot,
         sigma_trans=fit.s_trans,
+        robot_sigma_rot=fit.rho,
+        dof=float(dof),
         conditioning=cond,
         closed_forms=forms,
         check=check,
@@ -517,7 +606,14 @@ _COMMON_DOC = """
         Run the maximum-likelihood refinement (default) or return the closed form.
     sigma_rot, sigma_trans : float, optional
         Noise of a measured target pose (rad, mm per axis). When omitted they are estimated
-        robustly from the residuals and the covariance is scaled by the residual chi-square.
+        robustly from the residuals with the robot's rotation error (errors in variables,
+        :func:`~calstudy.estimators.handeye_robust.eiv_sigmas`), the covariance is scaled by the
+        residual chi-square and its regions use the F distribution
+        (:meth:`HandEyeResult.region_limit`).
+    robot_sigma_rot : float, optional
+        The robot's rotation error, rad per axis, if known (its translation error adds to
+        ``sigma_trans``); otherwise estimated with the camera's noise, or 0 (robot exact) when
+        ``sigma_rot`` and ``sigma_trans`` are given.
     weights : (N,) array, optional
         Per-pose weights (0 drops a pose).
     robust : {None, "huber", "cauchy", "ransac"}
@@ -582,6 +678,7 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
         sigma_rot: float | None = None,
         sigma_trans: float | None = None,
         weights=None,
+        robot_sigma_rot: float | None = None,
         robust: str | None = None,
         outlier_alpha: float = 1e-3,
         check_convention: str = "raise",
@@ -617,6 +714,7 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             sigma_rot=sigma_rot,
             sigma_trans=sigma_trans,
             weights=weights,
+            robot_sigma_rot=robot_sigma_rot,
             robust=robust,
             outlier_alpha=outlier_alpha,
             check_convention=check_convention,

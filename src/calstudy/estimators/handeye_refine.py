@@ -285,12 +285,18 @@ class PoseProblem:
     rz0: np.ndarray
     w_rot: np.ndarray  # (N,) sqrt(weight) / sigma_rot
     w_trans: np.ndarray
+    wmat: np.ndarray | None = None  # (N, 6, 6) whitening with the robot's error, or None
 
     @classmethod
-    def build(cls, a, b, x, z, sigma_rot, sigma_trans, weights):
+    def build(cls, a, b, x, z, sigma_rot, sigma_trans, weights, robot_sigma_rot: float = 0.0):
         sw = np.sqrt(weights)
         y = geo.invert(x)
-        return cls(geo.invert(a), b, y[:3, :3], z[:3, :3], sw / sigma_rot, sw / sigma_trans)
+        if robot_sigma_rot <= 0:
+            return cls(geo.invert(a), b, y[:3, :3], z[:3, :3], sw / sigma_rot, sw / sigma_trans)
+        cov = pose_covariances(a, x, z, sigma_rot, sigma_trans, robot_sigma_rot)
+        wmat = np.linalg.inv(np.linalg.cholesky(cov)) * sw[:, None, None]
+        one = np.ones(len(sw))
+        return cls(geo.invert(a), b, y[:3, :3], z[:3, :3], one, one, wmat)
 
     def x0(self, x, z) -> np.ndarray:
         return np.concatenate([np.zeros(3), geo.invert(x)[:3, 3], np.zeros(3), z[:3, 3]])
@@ -315,6 +321,8 @@ class PoseProblem:
         r = np.concatenate(
             [(self.b[:, :3, 3] - t_hat) * self.w_trans[:, None], e * self.w_rot[:, None]], 1
         )
+        if self.wmat is not None:
+            r = np.einsum("nij,nj->ni", self.wmat, r)
         return r.ravel()
 
     def jacobian(self, p) -> np.ndarray:
@@ -332,6 +340,8 @@ class PoseProblem:
         jac[:, 3:, 6:9] = -jl_inv_e @ jr_z
         jac[:, :3] *= self.w_trans[:, None, None]
         jac[:, 3:] *= self.w_rot[:, None, None]
+        if self.wmat is not None:
+            jac = self.wmat @ jac
         return jac.reshape(n * 6, 12)
 
     def to_public(self, x: np.ndarray) -> np.ndarray:
@@ -367,9 +377,38 @@ def _solve(problem: PoseProblem, x, z) -> tuple[np.ndarray, np.ndarray, int]:
     return x1, z1, int(sol.nfev)
 
 
-def whitened_at(a, b, x, z, sigma_rot, sigma_trans, weights):
+def robot_error_map(a, x, z) -> tuple[np.ndarray, np.ndarray]:
+    """How a robot's rotation error moves the residuals: ``(N, 3, 3)`` maps of the rotation error
+    ``delta`` (rad, flange frame; ``A_true = A exp(delta)``) to the translation residual (mm) and
+    to the rotation residual (rad) of each pose, to first order.
+
+    With ``P_i = inv(X) inv(A_i) Z`` the predicted target pose and ``q_i = t_P + R_X^T t_X`` the
+    target seen from the flange origin in camera axes: translation ``[q_i]x R_X^T delta``,
+    rotation ``-R_P^T R_X^T delta``.
+    """
+    pred = geo.invert(x) @ geo.invert(a) @ z
+    rxt = x[:3, :3].T
+    q = pred[:, :3, 3] + rxt @ x[:3, 3]
+    g_t = geo.skew(q) @ rxt
+    g_r = -np.swapaxes(pred[:, :3, :3], 1, 2) @ rxt
+    return g_t, g_r
+
+
+def pose_covariances(a, x, z, sigma_rot, sigma_trans, robot_sigma_rot) -> np.ndarray:
+    """Covariance ``(N, 6, 6)`` of each pose's residual ``[t (mm), rot (rad)]``: the camera's
+    noise (``sigma_trans``, ``sigma_rot`` per axis) plus a robot rotation error of
+    ``robot_sigma_rot`` rad per axis through :func:`robot_error_map`."""
+    g_t, g_r = robot_error_map(a, x, z)
+    g = np.concatenate([g_t, g_r], axis=1)
+    cov = robot_sigma_rot**2 * (g @ np.swapaxes(g, 1, 2))
+    cov[:, :3, :3] += sigma_trans**2 * np.eye(3)
+    cov[:, 3:, 3:] += sigma_rot**2 * np.eye(3)
+    return cov
+
+
+def whitened_at(a, b, x, z, sigma_rot, sigma_trans, weights, robot_sigma_rot: float = 0.0):
     """Whitened residuals ``(6N,)`` and Jacobian ``(6N, 12)`` in public coordinates at (x, z)."""
-    prob = PoseProblem.build(a, b, x, z, sigma_rot, sigma_trans, weights)
+    prob = PoseProblem.build(a, b, x, z, sigma_rot, sigma_trans, weights, robot_sigma_rot)
     p0 = prob.x0(x, z)
     jac = prob.jacobian(p0) @ np.linalg.inv(prob.to_public(x))
     return prob.residuals(p0), jac
@@ -383,6 +422,7 @@ def refine_ml(
     sigma_rot: float,
     sigma_trans: float,
     weights=None,
+    robot_sigma_rot: float = 0.0,
 ) -> Estimate:
     """Maximum-likelihood ``(X, Z)`` from canonical poses: whitened SE(3) residuals, LM.
 
@@ -400,6 +440,11 @@ def refine_ml(
         Noise of a measured target pose: rad per axis and mm per axis.
     weights : (N,) array, optional
         Per-pose weights (1 by default; 0 removes a pose).
+    robot_sigma_rot : float
+        Rotation error of a robot pose, rad per axis (errors in variables: each pose's residual
+        then has the covariance of :func:`pose_covariances`, taken at the start and whitened by
+        its Cholesky factor). A robot's translation error adds to ``sigma_trans`` (it enters
+        the residual as camera translation noise does).
 
     Returns
     -------
@@ -420,9 +465,9 @@ def refine_ml(
         raise CalibrationError(
             f"sigma_rot and sigma_trans must be positive; got {sigma_rot:g}, {sigma_trans:g}"
         )
-    prob = PoseProblem.build(a, b, x0, z0, sigma_rot, sigma_trans, w)
+    prob = PoseProblem.build(a, b, x0, z0, sigma_rot, sigma_trans, w, robot_sigma_rot)
     x1, z1, nfev = _solve(prob, x0, z0)
-    r, jac = whitened_at(a, b, x1, z1, sigma_rot, sigma_trans, w)
+    r, jac = whitened_at(a, b, x1, z1, sigma_rot, sigma_trans, w, robot_sigma_rot)
     cov, cond = covariance_from_jacobian(jac, r, sigma=1.0)
     return Estimate(
         value=(x1, z1),

@@ -53,6 +53,38 @@ def robust_sigmas(res: np.ndarray, alpha: float = 1e-3) -> tuple[float, float]:
     return float(s_r), float(s_t)
 
 
+#: the camera's share of a residual variance is kept at least this fraction of the total
+MIN_CAMERA_SHARE = 0.1
+
+
+def eiv_sigmas(res: np.ndarray, g_t: np.ndarray, g_r: np.ndarray, alpha: float = 1e-3):
+    """Camera noise and robot rotation error ``(sigma_rot, sigma_trans, robot_sigma_rot)`` (rad,
+    mm, rad per axis) from per-pose residuals ``(N, 6)`` (errors in variables).
+
+    A robot rotation error ``delta`` moves the translation residual by ``g_t delta`` and the
+    rotation residual by ``g_r delta`` (:func:`~calstudy.estimators.handeye_refine.\
+robot_error_map`); the camera's noise moves them independently. So the covariance of the
+    translation and rotation residuals is ``robot_sigma_rot^2 g_t g_r^T`` alone, and its moment
+    estimate over the inlier poses (:func:`robust_sigmas`' inliers) gives ``robot_sigma_rot``
+    (0 if negative); the camera's share is the rest of the robust total, at least
+    :data:`MIN_CAMERA_SHARE` of it. (A robot's translation error is indistinguishable from the
+    camera's translation noise and stays in ``sigma_trans``.)
+    """
+    s_r, s_t = robust_sigmas(res, alpha)
+    score = np.sum(res[:, 3:] ** 2, 1) / s_r**2 + np.sum(res[:, :3] ** 2, 1) / s_t**2
+    inl = score <= outlier_limit(alpha)
+    cross = g_t[inl] @ np.swapaxes(g_r[inl], 1, 2)  # (M, 3, 3): cov(t, rot) / rho^2
+    num = float(np.einsum("ni,nij,nj->", res[inl, :3], cross, res[inl, 3:]))
+    rho2 = max(num / max(float(np.sum(cross**2)), 1e-300), 0.0)
+    kappa = float(np.mean(np.einsum("nij,nij->n", g_t[inl], g_t[inl]))) / 3.0
+    rho2 = min(rho2, (1 - MIN_CAMERA_SHARE) * s_r**2, (1 - MIN_CAMERA_SHARE) * s_t**2 / kappa)
+    return (
+        float(np.sqrt(s_r**2 - rho2)),
+        float(np.sqrt(s_t**2 - rho2 * kappa)),
+        float(np.sqrt(rho2)),
+    )
+
+
 def outlier_scores(res, sigma_rot, sigma_trans):
     """Whitened squared residual of each pose ``(N,)``: chi-square with 6 degrees of freedom for
     an inlier."""
