@@ -86,3 +86,36 @@ def test_inconsistent_closed_form_is_refused(monkeypatch):
     assert not res.method.startswith("Daniilidis")
     with pytest.raises(CalibrationError, match="OpenCV Daniilidis result refused"):
         hp.calibrate_handeye(cell.flange2base, cell.target2camera, method="Daniilidis")
+
+
+# ----------------------------------------------------------------------------------------------
+# errors in variables: the robot's rotation error
+
+
+def test_robot_error_map_is_the_first_order_change_of_the_residuals():
+    from calstudy.estimators.handeye_refine import pose_residuals, robot_error_map
+
+    cell = _cell(31, n=8, noise=False)
+    a, b, x, z = cell.flange2base, cell.target2camera_true, cell.camera2flange, cell.target2base
+    delta = np.array([2e-6, -1e-6, 3e-6])
+    moved = a @ geo.make_transform(geo.rotvec_to_matrix(np.tile(delta, (8, 1))), np.zeros(3))
+    # the camera saw the moved flange; the residual against the reported one
+    b_seen = geo.invert(moved @ x) @ z
+    change = pose_residuals(a, b_seen, x, z)
+    g_t, g_r = robot_error_map(a, x, z)
+    np.testing.assert_allclose(change[:, :3], g_t @ delta, rtol=0, atol=1e-8)  # of 1e-3
+    np.testing.assert_allclose(change[:, 3:], g_r @ delta, rtol=0, atol=1e-11)  # of 4e-6
+
+
+def test_eiv_sigmas_separate_the_robot_from_the_camera():
+    from calstudy.estimators import handeye_poses as hp
+
+    rng = np.random.default_rng(5)
+    cell = _cell(32, n=300)
+    rho = np.deg2rad(0.05)
+    a = geo.perturb(cell.flange2base, rho, 0.0, rng)
+    res = hp.calibrate_handeye(a, cell.target2camera)
+    assert 0.8 < res.robot_sigma_rot / rho < 1.2
+    assert 0.8 < res.sigma_rot / 1e-3 < 1.2 and 0.8 < res.sigma_trans / 0.2 < 1.25
+    clean = hp.calibrate_handeye(cell.flange2base, cell.target2camera)
+    assert clean.robot_sigma_rot < 0.3 * rho
