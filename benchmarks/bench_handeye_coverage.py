@@ -29,7 +29,7 @@ from calstudy.estimators import handeye_poses as hp
 from calstudy.estimators import handeye_sim as hs
 
 CELLS = 200
-POSE_COUNTS = (4, 5, 6, 8, 10, 15, 20, 40)
+POSE_COUNTS = (5, 6, 8, 10, 15, 30)
 ROBOT_ROT_DEG, ROBOT_TRANS_MM = 0.02, 0.1
 
 

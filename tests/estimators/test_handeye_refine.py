@@ -96,7 +96,7 @@ def test_robot_error_map_is_the_first_order_change_of_the_residuals():
     from calstudy.estimators.handeye_refine import pose_residuals, robot_error_map
 
     cell = _cell(31, n=8, noise=False)
-    a, b, x, z = cell.flange2base, cell.target2camera_true, cell.camera2flange, cell.target2base
+    a, x, z = cell.flange2base, cell.camera2flange, cell.target2base
     delta = np.array([2e-6, -1e-6, 3e-6])
     moved = a @ geo.make_transform(geo.rotvec_to_matrix(np.tile(delta, (8, 1))), np.zeros(3))
     # the camera saw the moved flange; the residual against the reported one

@@ -141,7 +141,9 @@ class HandEyeResult:
         Robot rotation error used (errors in variables; stated, or estimated from how the
         residuals' rotation and translation parts co-vary), rad per axis.
     dof : float
-        Residual degrees of freedom behind the covariance's scale (inf: the noise was given).
+        Degrees of freedom behind the covariance's scale (inf: the noise was given): ``3 N - 6``,
+        those of the rotation or of the translation residuals alone, from which each part of
+        the noise level is estimated.
     conditioning : Conditioning
     closed_forms : list of ClosedForm
     check : CellCheck
@@ -549,7 +551,9 @@ def _calibrate(
     res = pose_residuals(a, b, x, z)
     check = _check_cell(prep, x, res, fit.w, opt, notes)
     score = outlier_scores(res, *_total(fit.s_rot, fit.s_trans, fit.rho, a, x, z))
-    dof = np.inf if fit.given else 6.0 * np.count_nonzero(fit.w) - 12.0
+    # the rotation and the translation noise are each estimated from about half the residual
+    # degrees of freedom (3 N - 6 of 6 N - 12): the scale of the covariance is known no better
+    dof = np.inf if fit.given else 3.0 * np.count_nonzero(fit.w) - 6.0
     if prep.a.shape[0] < MIN_TRUSTED_POSES:
         notes.append(
             f"with {prep.a.shape[0]} poses (fewer than {MIN_TRUSTED_POSES}) the covariance "
