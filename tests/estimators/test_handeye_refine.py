@@ -119,3 +119,16 @@ def test_eiv_sigmas_separate_the_robot_from_the_camera():
     assert 0.8 < res.sigma_rot / 1e-3 < 1.2 and 0.8 < res.sigma_trans / 0.2 < 1.25
     clean = hp.calibrate_handeye(cell.flange2base, cell.target2camera)
     assert clean.robot_sigma_rot < 0.3 * rho
+
+
+def test_closed_forms_start_from_a_fixed_number_of_well_spread_poses():
+    from calstudy.estimators.handeye_refine import START_POSES, spread_subset
+
+    cell = _cell(33, n=300)
+    sub = spread_subset(cell.flange2base)
+    assert len(sub) == START_POSES == 12 and len(np.unique(sub)) == 12
+    rot = cell.flange2base[:, :3, :3]
+    angles = geo.rotation_angle(np.swapaxes(rot[:, None], -1, -2) @ rot[None])
+    # the chosen poses span nearly the largest rotation between any two of the 300
+    assert angles[np.ix_(sub, sub)].max() > 0.9 * angles.max()
+    np.testing.assert_array_equal(spread_subset(cell.flange2base[:10]), np.arange(10))

@@ -14,7 +14,7 @@ cheap (linear in the pose count):
    middle of the series (a target that moved, a mid-series re-mount): the largest two-sample
    statistic over every split point against its Bonferroni limit, and a step of at least
    :data:`MIN_STEP` times the per-pose scatter (taken from successive differences, which a
-   single step does not inflate).
+   single step does not inflate); series of :data:`BREAK_MIN_POSES` poses or more.
 
 A failed check is diagnosed by :mod:`calstudy.estimators.handeye_diagnose` (only then).
 """
@@ -33,6 +33,9 @@ from calstudy.estimators.handeye_robust import robust_sigmas
 BREAK_ALPHA = 1e-4
 #: median of chi-square with 6 degrees of freedom (``scipy.stats.chi2.median(6)``)
 CHI2_6_MEDIAN = 5.348120627447118
+#: shorter series are not tested for a break (the scatter of a few successive differences, and
+#: the estimate's own error seen through widely spread poses, would raise false alarms)
+BREAK_MIN_POSES = 10
 #: a break must also step by this many per-pose standard deviations
 MIN_STEP = 5.0
 
@@ -160,7 +163,7 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     keep = np.ones(len(a), bool) if weights is None else np.asarray(weights) > 0
     idx = np.flatnonzero(keep)
     n = len(idx)
-    if n < 6:
+    if n < BREAK_MIN_POSES:
         return -1, 0.0, 0.0, 0.0
     zs = a[idx] @ x @ b[idx]
     rot = log_so3(np.einsum("ji,njk->nik", zs[0, :3, :3], zs[:, :3, :3])) * scale_mm
@@ -177,7 +180,7 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     inl = np.minimum(prev, nxt) <= lim
     idx, v = idx[inl], v[inl]
     n = len(idx)
-    if n < 6:
+    if n < BREAK_MIN_POSES - 2:
         return -1, 0.0, float(np.sqrt(s2)), 0.0
     c = np.cumsum(v, axis=0)
     k = np.arange(1, n)
