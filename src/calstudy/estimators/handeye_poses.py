@@ -424,7 +424,7 @@ def _refine_poses(a, b, fit: _Fit, robust: str | None) -> None:
     # the noise level (if estimated) and robust weights depend on the fit: iterate to a fixed
     # point (a few rounds suffice; the refinement itself is warm-started)
     for _ in range(30 if reweight else (3 if not given else 0)):
-        est = refine_ml(a, b, x, z, s_rot, s_trans, w, rho)
+        est = refine_ml(a, b, x, z, s_rot, s_trans, w, rho, covariance=False)
         x, z = est.value
         res = pose_residuals(a, b, x, z)
         old = (s_rot, s_trans, w)
@@ -432,7 +432,7 @@ def _refine_poses(a, b, fit: _Fit, robust: str | None) -> None:
         if reweight:
             tot = _total(s_rot, s_trans, rho, a, x, z)
             w = w_user * robust_weights(outlier_scores(res, *tot), robust)
-        if np.max(np.abs(w - old[2])) < 1e-6 and abs(s_rot / old[0] - 1) < 1e-6:
+        if np.max(np.abs(w - old[2])) < 1e-6 and abs(s_rot / old[0] - 1) < 1e-4:
             break
     est = refine_ml(a, b, x, z, s_rot, s_trans, w, rho)
     fit.x, fit.z = est.value
@@ -532,10 +532,9 @@ def _flag(ids, score, outlier_alpha: float, x, z, notes: list) -> list[int]:
 
 
 def _calibrate(
-    prep: PreparedPoses, forms: list[ClosedForm], method: str, opt: _Options
+    prep: PreparedPoses, forms: list[ClosedForm], method: str, opt: _Options, cond: Conditioning
 ) -> HandEyeResult:
     a, b = prep.a, prep.b
-    cond = motion_conditioning(a)
     _check_options(opt)
     notes: list[str] = []
     start = _choose(forms, method)
@@ -711,7 +710,7 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             raise CalibrationError(
                 f"unknown {form} method {method!r}; use 'best' or one of {list(methods)}"
             )
-        motion_conditioning(prep.a)
+        cond = motion_conditioning(prep.a)
         forms = closed_forms(prep.a, prep.b, list(methods))
         options = _Options(
             refine=refine,
@@ -732,7 +731,7 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             limits=limits,
             rereadings=rereadings,
         )
-        return _calibrate(prep, forms, method, options)
+        return _calibrate(prep, forms, method, options, cond)
 
     calibrate.__name__ = calibrate.__qualname__ = name
     calibrate.__doc__ = summary + _COMMON_DOC

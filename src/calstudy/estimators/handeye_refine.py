@@ -72,7 +72,18 @@ def log_so3(rot: np.ndarray) -> np.ndarray:
 
 
 def _exp_so3(rotvec: np.ndarray) -> np.ndarray:
-    return geo.rotvec_to_matrix(np.atleast_2d(rotvec))
+    """Rotation matrices ``(1, 3, 3)`` of one rotation vector (Rodrigues' formula, series below
+    1e-4 rad): the refinement calls it at every evaluation, where scipy's conversion of a
+    single vector costs more than the formula."""
+    v = np.asarray(rotvec, dtype=float).reshape(3)
+    th2 = float(v @ v)
+    k = geo.skew(v)
+    if th2 < 1e-8:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = np.sqrt(th2)
+        a, b = np.sin(th) / th, (1.0 - np.cos(th)) / th2
+    return (np.eye(3) + a * k + b * (k @ k))[None]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -423,6 +434,7 @@ def refine_ml(
     sigma_trans: float,
     weights=None,
     robot_sigma_rot: float = 0.0,
+    covariance: bool = True,
 ) -> Estimate:
     """Maximum-likelihood ``(X, Z)`` from canonical poses: whitened SE(3) residuals, LM.
 
@@ -445,6 +457,9 @@ def refine_ml(
         then has the covariance of :func:`pose_covariances`, taken at the start and whitened by
         its Cholesky factor). A robot's translation error adds to ``sigma_trans`` (it enters
         the residual as camera translation noise does).
+    covariance : bool
+        Compute the covariance and the whitened residuals at the solution (False: ``covariance``
+        and ``residuals`` are left empty, for the inner rounds of an iteration).
 
     Returns
     -------
@@ -467,6 +482,8 @@ def refine_ml(
         )
     prob = PoseProblem.build(a, b, x0, z0, sigma_rot, sigma_trans, w, robot_sigma_rot)
     x1, z1, nfev = _solve(prob, x0, z0)
+    if not covariance:
+        return Estimate(value=(x1, z1), params=np.zeros(12), iterations=nfev, names=[])
     r, jac = whitened_at(a, b, x1, z1, sigma_rot, sigma_trans, w, robot_sigma_rot)
     cov, cond = covariance_from_jacobian(jac, r, sigma=1.0)
     return Estimate(
