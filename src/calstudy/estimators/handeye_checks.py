@@ -196,10 +196,28 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
 
 
 def check_cell(a, b, x, res, weights, limits: CellLimits, slack: float = 1.0) -> CellCheck:
-    """Ranges, noise level and time order of a fit ``x`` of canonical poses ``a``, ``b`` with
-    per-pose residuals ``res`` (N, 6); the failures as sentences (none: it passed). ``slack``
-    multiplies the noise limits (a closed-form start is checked with some, so that only a gross
-    failure stops the calibration before its refinement)."""
+    """Ranges, noise level and time order of a hand-eye fit.
+
+    Parameters
+    ----------
+    a, b : (N, 4, 4) arrays
+        Canonical robot and camera poses (mm).
+    x : (4, 4) array
+        The fitted ``X``.
+    res : (N, 6) array
+        Per-pose residuals ``[t (mm), rot (rad)]`` of the fit.
+    weights : (N,) array
+        Per-pose weights; poses of weight 0 are left out.
+    limits : CellLimits
+    slack : float
+        Multiplies the noise limits (a closed-form start is checked with some, so that only a
+        gross failure stops the calibration before its refinement).
+
+    Returns
+    -------
+    CellCheck
+        With ``failures`` as sentences (empty: the fit passed).
+    """
     cam, rob, fails = range_failures(a, b, limits)
     scale = pose_scale(b)
     keep = np.asarray(weights) > 0

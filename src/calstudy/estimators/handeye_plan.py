@@ -57,8 +57,25 @@ def point_jacobian(x: np.ndarray, point_camera: np.ndarray) -> np.ndarray:
 
 
 def pose_information(a, x, z, sigma_rot, sigma_trans, robot_sigma_rot=0.0) -> np.ndarray:
-    """Fisher information ``(N, 12, 12)`` each candidate flange pose ``a`` (N, 4, 4) adds, at the
-    nominal ``x``, ``z`` and noise-free camera poses."""
+    """Fisher information each candidate flange pose adds to the hand-eye fit.
+
+    Parameters
+    ----------
+    a : (N, 4, 4) array
+        Candidate flange poses (canonical, mm).
+    x, z : (4, 4) arrays
+        Nominal ``X`` and ``Z`` (mm); the camera poses are predicted from them, noise-free.
+    sigma_rot, sigma_trans : float
+        Camera noise per axis, rad and mm.
+    robot_sigma_rot : float
+        Robot rotation error per axis, rad.
+
+    Returns
+    -------
+    (N, 12, 12) array
+        ``J_i^T J_i`` of the whitened residuals, in the public coordinates
+        ``[theta_X, t_X, theta_Z, t_Z]`` (rad, mm).
+    """
     a = np.asarray(a, dtype=float)
     b = geo.invert(x) @ geo.invert(a) @ z
     _, jac = whitened_at(a, b, x, z, sigma_rot, sigma_trans, np.ones(len(a)), robot_sigma_rot)

@@ -69,6 +69,21 @@ robot_error_map`); the camera's noise moves them independently. So the covarianc
     (0 if negative); the camera's share is the rest of the robust total, at least
     :data:`MIN_CAMERA_SHARE` of it. (A robot's translation error is indistinguishable from the
     camera's translation noise and stays in ``sigma_trans``.)
+
+    Parameters
+    ----------
+    res : (N, 6) array
+        Per-pose residuals ``[t (mm), rot (rad)]``.
+    g_t, g_r : (N, 3, 3) arrays
+        The maps of :func:`~calstudy.estimators.handeye_refine.robot_error_map` at the fit.
+    alpha : float
+        False-alarm probability of the inlier test.
+
+    Returns
+    -------
+    (float, float, float)
+        ``sigma_rot`` (rad), ``sigma_trans`` (mm) of the camera and ``robot_sigma_rot`` (rad),
+        per axis.
     """
     s_r, s_t = robust_sigmas(res, alpha)
     score = np.sum(res[:, 3:] ** 2, 1) / s_r**2 + np.sum(res[:, :3] ** 2, 1) / s_t**2
