@@ -496,7 +496,10 @@ def _covariance(fit: _Fit, opt: _Options) -> tuple[np.ndarray, str]:
         chi = float(np.sum(fit.est.residuals**2))
         s2 = chi / max(m - 12, 1)
         cov = cov * s2
-        basis = f"scaled by residual chi2 (s^2 = {s2:.3g})"
+        basis = (
+            f"scaled by residual chi2 (s^2 = {s2:.3g}); robot rotation error "
+            f"{np.rad2deg(fit.rho):.3g} deg per axis"
+        )
     return cov, basis
 
 
