@@ -97,6 +97,17 @@ def test_one_parameters_cell(path):
 
 
 @pytest.mark.parametrize("path", ALL)
+def test_papermill_infers_every_parameter(path):
+    """papermill reads the parameters cell with a regular expression that a ``=`` in a comment
+    derails; a parameter it does not see is refused with "Passed unknown parameter"."""
+    import papermill
+
+    cell = parameter_cells(read(path))[0]
+    missed = parameter_names(cell) - set(papermill.inspect_notebook(str(path)))
+    assert not missed, f"{path.name}: papermill does not see the parameters {sorted(missed)}"
+
+
+@pytest.mark.parametrize("path", ALL)
 def test_title_cell(path):
     nb = read(path)
     first = nb.cells[0] if nb.cells else None

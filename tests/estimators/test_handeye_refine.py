@@ -86,3 +86,49 @@ def test_inconsistent_closed_form_is_refused(monkeypatch):
     assert not res.method.startswith("Daniilidis")
     with pytest.raises(CalibrationError, match="OpenCV Daniilidis result refused"):
         hp.calibrate_handeye(cell.flange2base, cell.target2camera, method="Daniilidis")
+
+
+# ----------------------------------------------------------------------------------------------
+# errors in variables: the robot's rotation error
+
+
+def test_robot_error_map_is_the_first_order_change_of_the_residuals():
+    from calstudy.estimators.handeye_refine import pose_residuals, robot_error_map
+
+    cell = _cell(31, n=8, noise=False)
+    a, x, z = cell.flange2base, cell.camera2flange, cell.target2base
+    delta = np.array([2e-6, -1e-6, 3e-6])
+    moved = a @ geo.make_transform(geo.rotvec_to_matrix(np.tile(delta, (8, 1))), np.zeros(3))
+    # the camera saw the moved flange; the residual against the reported one
+    b_seen = geo.invert(moved @ x) @ z
+    change = pose_residuals(a, b_seen, x, z)
+    g_t, g_r = robot_error_map(a, x, z)
+    np.testing.assert_allclose(change[:, :3], g_t @ delta, rtol=0, atol=1e-8)  # of 1e-3
+    np.testing.assert_allclose(change[:, 3:], g_r @ delta, rtol=0, atol=1e-11)  # of 4e-6
+
+
+def test_eiv_sigmas_separate_the_robot_from_the_camera():
+    from calstudy.estimators import handeye_poses as hp
+
+    rng = np.random.default_rng(5)
+    cell = _cell(32, n=300)
+    rho = np.deg2rad(0.05)
+    a = geo.perturb(cell.flange2base, rho, 0.0, rng)
+    res = hp.calibrate_handeye(a, cell.target2camera)
+    assert 0.8 < res.robot_sigma_rot / rho < 1.2
+    assert 0.8 < res.sigma_rot / 1e-3 < 1.2 and 0.8 < res.sigma_trans / 0.2 < 1.25
+    clean = hp.calibrate_handeye(cell.flange2base, cell.target2camera)
+    assert clean.robot_sigma_rot < 0.3 * rho
+
+
+def test_closed_forms_start_from_a_fixed_number_of_well_spread_poses():
+    from calstudy.estimators.handeye_refine import START_POSES, spread_subset
+
+    cell = _cell(33, n=300)
+    sub = spread_subset(cell.flange2base)
+    assert len(sub) == START_POSES == 12 and len(np.unique(sub)) == 12
+    rot = cell.flange2base[:, :3, :3]
+    angles = geo.rotation_angle(np.swapaxes(rot[:, None], -1, -2) @ rot[None])
+    # the chosen poses span nearly the largest rotation between any two of the 300
+    assert angles[np.ix_(sub, sub)].max() > 0.9 * angles.max()
+    np.testing.assert_array_equal(spread_subset(cell.flange2base[:10]), np.arange(10))

@@ -14,8 +14,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import OptimizeResult, least_squares, leastsq
-from scipy.stats import chi2 as _chi2
 
 from calstudy.core.errors import CalibrationError, CalibrationWarning
 
@@ -153,6 +151,8 @@ def goodness_of_fit(
     chi2 = float(r @ r)
     if dof <= 0:
         return FitCheck(chi2, max(dof, 0), float("nan"), float("nan"))
+    from scipy.stats import chi2 as _chi2  # lazy: scipy.stats takes about 1 s to import
+
     low = float(_chi2.ppf(alpha / 2, dof) / dof)
     high = float(_chi2.isf(alpha / 2, dof) / dof)
     ratio = chi2 / dof
@@ -298,6 +298,8 @@ def _leastsq(fun, x0: np.ndarray, jac, args: tuple, xtol, ftol, gtol, max_nfev) 
     ``least_squares(method="lm")``: ``x_scale="jac"`` (no ``diag``), step bound factor 100, at
     most ``100 n`` evaluations; ``full_output`` also keeps it from warning on a stop at the
     tolerances, as least_squares does. Returns leastsq's ``(x, cov_x, info, message, ier)``."""
+    from scipy.optimize import leastsq
+
     return leastsq(
         fun,
         x0.copy(),
@@ -320,7 +322,7 @@ _FD_STEP = np.finfo(np.float64).eps ** 0.5
 _MINPACK_STATUS = {0: -1, 1: 2, 2: 3, 3: 4, 4: 1, 5: 0}
 
 
-def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev, f0=None) -> OptimizeResult:
+def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev, f0=None):
     """What ``least_squares(fun, x0, jac=jac, method="lm", ...)`` returns (the fields
     :func:`levenberg_marquardt` reads: x, fun, jac, cost, nfev, status, message), computed by the
     same MINPACK call through :func:`scipy.optimize.leastsq`'s thinner wrapper. As in
@@ -377,6 +379,8 @@ def _lmder(fun, x0, jac, *, xtol, ftol, gtol, max_nfev, f0=None) -> OptimizeResu
             return j
 
         jac = remembered_jac
+    from scipy.optimize import OptimizeResult
+
     x, _, info, message, ier = _leastsq(remembered, x0, jac, (), xtol, ftol, gtol, max_nfev)
     x = np.asarray(x, dtype=float)
     f = np.asarray(info["fvec"], dtype=float)
@@ -465,6 +469,8 @@ def levenberg_marquardt(
     elif method == "lm" and jac == "2-point":
         res = _lmder(wrapped, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
     else:
+        from scipy.optimize import least_squares
+
         res = least_squares(
             wrapped, x0, jac=jac, method=method, xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev
         )

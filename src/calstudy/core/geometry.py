@@ -20,8 +20,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pinocchio as pin
-from scipy.spatial.transform import Rotation
 
 from calstudy.core.errors import CalibrationError
 
@@ -30,6 +28,20 @@ ORTHONORMAL_TOL = 1e-6
 
 # ----------------------------------------------------------------------------------------------
 # checks
+
+
+def _rotation():
+    """scipy's ``Rotation``, imported on first use (scipy.spatial takes most of a second)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
+
+
+def _pin():
+    """Pinocchio, imported on first use."""
+    import pinocchio
+
+    return pinocchio
 
 
 def _as_float(name: str, array) -> np.ndarray:
@@ -218,13 +230,13 @@ def apply(transform, points) -> np.ndarray:
 def rotvec_to_matrix(rotvec) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (axis x angle, rad)."""
     rv = np.asarray(rotvec, dtype=float)
-    return Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(rv.shape[:-1] + (3, 3))
+    return _rotation().from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(rv.shape[:-1] + (3, 3))
 
 
 def matrix_to_rotvec(rotation) -> np.ndarray:
     """Rotation vectors ``(..., 3)`` of rotation matrices ``(..., 3, 3)``."""
     r = np.asarray(rotation, dtype=float)
-    return Rotation.from_matrix(r.reshape(-1, 3, 3)).as_rotvec().reshape(r.shape[:-2] + (3,))
+    return _rotation().from_matrix(r.reshape(-1, 3, 3)).as_rotvec().reshape(r.shape[:-2] + (3,))
 
 
 def pose_from_vector(vec) -> np.ndarray:
@@ -241,19 +253,19 @@ def pose_to_vector(transform) -> np.ndarray:
 
 def exp6(twist) -> np.ndarray:
     """SE(3) exponential of a twist ``[v, w]`` (Pinocchio's ``exp6``), as a 4 x 4 array."""
-    return pin.exp6(np.asarray(twist, dtype=float)).homogeneous
+    return _pin().exp6(np.asarray(twist, dtype=float)).homogeneous
 
 
 def log6(transform) -> np.ndarray:
     """SE(3) logarithm ``[v, w]`` of a 4 x 4 transform (Pinocchio's ``log6``)."""
     t = np.asarray(transform, dtype=float)
-    return np.asarray(pin.log6(pin.SE3(t[:3, :3], t[:3, 3])).vector)
+    return np.asarray(_pin().log6(_pin().SE3(t[:3, :3], t[:3, 3])).vector)
 
 
-def to_se3(transform) -> pin.SE3:
+def to_se3(transform):
     """A 4 x 4 array as a ``pinocchio.SE3``."""
     t = np.asarray(transform, dtype=float)
-    return pin.SE3(t[:3, :3].copy(), t[:3, 3].copy())
+    return _pin().SE3(t[:3, :3].copy(), t[:3, 3].copy())
 
 
 def euler_zyx_to_matrix(a, b, c) -> np.ndarray:
@@ -282,7 +294,7 @@ def euler_zyx_to_matrix(a, b, c) -> np.ndarray:
     if not np.isfinite(angles).all():
         check_finite("Euler angles (A, B, C) in deg", angles)
     flat = angles.reshape(-1, 3)
-    mats = Rotation.from_euler("ZYX", flat, degrees=True).as_matrix()
+    mats = _rotation().from_euler("ZYX", flat, degrees=True).as_matrix()
     return mats.reshape(angles.shape[:-1] + (3, 3))
 
 
@@ -297,7 +309,7 @@ def matrix_to_euler_zyx(rotation) -> np.ndarray:
     r = check_finite("rotation", rotation)
     if r.shape[-2:] != (3, 3):
         raise CalibrationError(f"rotation has shape {r.shape}; expected (..., 3, 3)")
-    out = Rotation.from_matrix(r.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True)
+    out = _rotation().from_matrix(r.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True)
     return out.reshape(r.shape[:-2] + (3,))
 
 
@@ -338,7 +350,7 @@ def rotation_angle(rotation) -> np.ndarray:
     ``atan2(|v|, tr R - 1)`` with ``v = (R32 - R23, R13 - R31, R21 - R12)``: ``|v| = 2 sin a``
     and ``tr R - 1 = 2 cos a``, each known to a few ulps, so the angle is accurate to about
     1e-16 rad at every angle (an arccos of the trace alone loses half the digits near 0). It
-    agrees with scipy's ``Rotation.from_matrix(R).magnitude()`` to 1e-14 rad (a test checks it)
+    agrees with scipy's ``_rotation().from_matrix(R).magnitude()`` to 1e-14 rad (a test checks it)
     at a sixth of the cost, which matters for the hundreds of errors a Monte Carlo trial scores.
     """
     r = np.asarray(rotation, dtype=float)
@@ -376,7 +388,7 @@ def random_rotation(rng: np.random.Generator, size: int | None = None) -> np.nda
     """
     if size is not None and not (isinstance(size, int | np.integer) and size >= 0):
         raise CalibrationError(f"random_rotation: size = {size!r} must be None or an integer >= 0")
-    return Rotation.random(size, random_state=rng).as_matrix()
+    return _rotation().random(size, random_state=rng).as_matrix()
 
 
 def perturb(transform, sigma_rot: float, sigma_trans: float, rng: np.random.Generator):

@@ -20,11 +20,11 @@ from one robot pose and two images of a two-sided target.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-import pinocchio as pin
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
@@ -300,6 +300,8 @@ class _SphereProblem:
         # R_F = base exp(delta); exp(delta + e) = exp(delta) exp(Jr(delta) e), so
         # d(R_F^T q)/d(delta) = [R_F^T q]_x Jr(delta), Jr the right Jacobian of SO(3)
         pred = q @ r_f
+        import pinocchio as pin
+
         jac[:, :, 3:6] = geo.skew(pred) @ pin.Jexp3(np.asarray(x[3:6], dtype=float))
         jac[:, :, 6:9] = np.einsum("ji,njk->nik", r_f, r0.transpose(0, 2, 1))
         return (self.whiten @ jac).reshape(n * 3, 9)
@@ -479,6 +481,18 @@ def _check_diversity(r: np.ndarray, min_rotation: float) -> None:
         )
 
 
+@contextmanager
+def quiet_opencv():
+    """OpenCV's log silenced within the block (its hand-eye solvers log failures on stderr,
+    which the callers report as :class:`CalibrationError` instead), the level restored after."""
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+
+
 def opencv_handeye(
     flange2base,
     target2sensor,
@@ -541,13 +555,14 @@ def opencv_handeye(
     # before OpenCV: on degenerate motions it prints to stderr and returns a wrong answer
     _check_diversity(g2b[:, :3, :3], max(float(min_pair_rotation), DEGENERATE_ROTATION))
     try:
-        rot, trans = cv2.calibrateHandEye(
-            list(g2b[:, :3, :3]),
-            list(g2b[:, :3, 3:]),
-            list(t2c[:, :3, :3]),
-            list(t2c[:, :3, 3:]),
-            method=OPENCV_METHODS[method],
-        )
+        with quiet_opencv():
+            rot, trans = cv2.calibrateHandEye(
+                list(g2b[:, :3, :3]),
+                list(g2b[:, :3, 3:]),
+                list(t2c[:, :3, :3]),
+                list(t2c[:, :3, 3:]),
+                method=OPENCV_METHODS[method],
+            )
     except cv2.error as exc:
         raise CalibrationError(
             f"OpenCV {method} hand-eye failed on {g2b.shape[0]} poses: {exc.err or exc}"
@@ -555,6 +570,12 @@ def opencv_handeye(
     if rot is None or trans is None:
         raise CalibrationError(f"OpenCV {method} hand-eye returned no result")
     out = geo.make_transform(rot, trans.ravel())
+    if np.array_equal(out, np.eye(4)):
+        # what OpenCV's Tsai returns (logging an error) when no motion rotates enough
+        raise CalibrationError(
+            f"OpenCV {method} hand-eye failed on {g2b.shape[0]} poses: not enough informative "
+            "motions (include larger rotations)"
+        )
     if not np.all(np.isfinite(out)):
         raise CalibrationError(f"OpenCV {method} hand-eye returned a non-finite result")
     return out

@@ -315,3 +315,36 @@ def tool_point_experiment(
     )["robust"]
     cell = tool_point_cell(fit, tool_point_mm, bool(sigmas))
     return Experiment("tool_point", tool_point_trial, cell, n_trials)
+
+
+def plan_table(
+    result: hp.HandEyeResult, point_camera, pose_counts=(6, 10, 15), seed: int = 0
+) -> pd.DataFrame:
+    """The plan of :func:`calstudy.estimators.handeye_plan.plan_poses` among the poses of a
+    calibration (flagged ones left out), with its estimate as the nominal ``X``, ``Z`` and its
+    noise level: per pose count, the predicted RMS error at the tool point (mm) of the planned
+    poses, the median over 200 random choices of as many, and of all the poses kept."""
+    from calstudy.estimators import handeye_plan as hplan
+
+    keep = ~np.isin(result.prepared.ids, result.flagged)
+    a = result.prepared.a[keep]
+    point = np.asarray(point_camera, dtype=float)
+    noise = (result.sigma_rot, result.sigma_trans, result.robot_sigma_rot)
+    infos = hplan.pose_information(a, result.x, result.z, *noise)
+    pj = hplan.point_jacobian(result.x, point)
+    rng = np.random.default_rng(seed)
+    rows = []
+    for n in (c for c in pose_counts if c <= len(a)):
+        plan = hplan.plan_poses(a, result.x, result.z, n, noise[0], noise[1], point, noise[2])
+        picks = np.array([rng.choice(len(a), n, replace=False) for _ in range(200)])
+        random = hplan.point_rms(infos[picks].sum(axis=1), pj)
+        rows.append(
+            {
+                "n_poses": n,
+                "planned_rms_mm": plan.predicted_rms_mm,
+                "random_median_rms_mm": float(np.median(random)),
+                "all_poses_rms_mm": float(hplan.point_rms(infos.sum(axis=0), pj)),
+                "planned_ids": " ".join(str(i) for i in result.prepared.ids[keep][plan.chosen]),
+            }
+        )
+    return pd.DataFrame(rows)

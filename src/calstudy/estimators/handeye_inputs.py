@@ -1,8 +1,9 @@
 """Input handling of hand-eye calibration: pose lists into the canonical form ``A_i X B_i = Z``.
 
-Storage conventions, units and near-orthonormal rotations (:func:`prepare_poses`), the spread of
-the robot motions (:func:`motion_conditioning`) and the check that the declared convention and
-units fit the data better than the alternatives (:func:`convention_check`).
+Storage conventions, units and near-orthonormal rotations (:func:`prepare_poses`) and the spread
+of the robot motions (:func:`motion_conditioning`, on a linear number of pose pairs). Whether the
+declared conventions and units fit is judged after the fit
+(:mod:`~calstudy.estimators.handeye_checks`).
 """
 
 from __future__ import annotations
@@ -10,28 +11,20 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye import opencv_handeye
 from calstudy.estimators.handeye_refine import (
-    check_proper,
     log_so3,
-    pose_residuals,
-    pose_scale,
-    target_in_world,
+    spread_subset,
 )
 
-#: largest ``max |R^T R - I|`` re-projected to SO(3) silently (rounded or single-precision data)
-ORTHO_TOL = 1e-4
-#: another convention (or unit factor) must fit this much better to be reported
-CONVENTION_FACTOR = 5.0
+#: largest ``max |R^T R - I|`` re-projected to SO(3) silently: rotation entries rounded to 4
+#: decimals are off by up to about 1.7e-4, single-precision ones by 1e-7
+ORTHO_TOL = 1e-3
 #: largest rotation between two poses below which the motions count as pure translations
 MIN_ROTATION = np.deg2rad(2.0)
-#: declared readings fitting better than this (rad, or mm per mm of distance) are never questioned
-CONVENTION_FLOOR = 1e-6
 #: smallest ratio of the 2nd to the 1st singular value of the relative rotation vectors
 MIN_AXIS_SPREAD = 0.05
 #: translation units accepted, in mm
@@ -148,6 +141,8 @@ def check_pose_array(name: str, poses) -> np.ndarray:
     p = geo.check_finite(name, poses)
     if p.ndim != 3 or p.shape[1:] != (4, 4):
         raise CalibrationError(f"{name} has shape {p.shape}; expected (N, 4, 4)")
+    if p.shape[0] == 0:
+        raise CalibrationError(f"{name}: no poses (shape {p.shape}); hand-eye needs at least 3")
     bottom = np.abs(p[:, 3, :] - np.array([0.0, 0.0, 0.0, 1.0])).max(axis=1)
     if bottom.max() > 1e-9:
         bad = int(np.argmax(bottom))
@@ -278,11 +273,27 @@ class Conditioning:
     jacobian_condition: float = float("nan")
 
 
+#: pose counts up to which :func:`motion_pairs` takes every pair
+ALL_PAIRS_UP_TO = 30
+
+
+def motion_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A linear number of pose pairs ``(i, j)`` for ``n`` poses: every pair up to
+    :data:`ALL_PAIRS_UP_TO` poses, else each pose with the poses a third, a half and two thirds
+    of the series later (``3 n`` pairs; neighbours in time, which rotate least, are left out)."""
+    if n <= ALL_PAIRS_UP_TO:
+        return np.triu_indices(n, 1)
+    i = np.tile(np.arange(n), 3)
+    j = (i + np.repeat([n // 3, n // 2, (2 * n) // 3], n)) % n
+    return i, j
+
+
 def motion_conditioning(a: np.ndarray) -> Conditioning:
     """Measure, and refuse when degenerate, the spread of the robot motions ``a`` (N, 4, 4).
 
-    Relative motions ``inv(A_i) A_j`` of all pairs are formed; their rotation vectors (in the
-    flange frame) give the largest rotation and the axis spread.
+    Relative motions ``inv(A_i) A_j`` of the pairs of :func:`motion_pairs` (linear in N) and of
+    every pair of the well-spread poses of :func:`spread_subset` are formed; their rotation
+    vectors (in the flange frame) give the largest rotation and the axis spread.
 
     Raises
     ------
@@ -301,7 +312,10 @@ def motion_conditioning(a: np.ndarray) -> Conditioning:
             f"the {n} poses are duplicates of only {n_distinct} distinct robot pose(s); "
             "hand-eye calibration needs at least 3 distinct poses rotating about 2 axes"
         )
-    i, j = np.triu_indices(n, 1)
+    i, j = motion_pairs(n)
+    sub = spread_subset(a)
+    si, sj = np.triu_indices(len(sub), 1)
+    i, j = np.concatenate([i, sub[si]]), np.concatenate([j, sub[sj]])
     rel = np.einsum("nji,njk->nik", a[i, :3, :3], a[j, :3, :3])
     rv = log_so3(rel)
     ang = np.linalg.norm(rv, axis=1)
@@ -322,81 +336,3 @@ def motion_conditioning(a: np.ndarray) -> Conditioning:
             "translation along that axis is undetermined; add poses rotating about another axis"
         )
     return Conditioning(n, n_distinct, float(np.rad2deg(ang.max())), spread, spread3)
-
-
-# ----------------------------------------------------------------------------------------------
-# convention and unit check
-
-
-@dataclass
-class ConventionCheck:
-    """Residual scores of the declared storage convention and of the alternatives.
-
-    Attributes
-    ----------
-    scores : dict
-        ``{(robot_inverted, camera_inverted, camera_factor): score}``; ``(False, False, 1.0)`` is
-        the declared reading.
-    message : str
-        What fits better, or "" if the declared reading fits best.
-    """
-
-    scores: dict
-    message: str = ""
-
-
-def convention_check(a: np.ndarray, b: np.ndarray) -> ConventionCheck:
-    """Compare the declared reading of the canonical poses with the other storage conventions.
-
-    Each alternative (robot poses inverted, camera poses inverted, both; camera translations
-    times 1000 or 1/1000) is solved by OpenCV's Park method and scored by
-    :func:`residual_score` over the median per-pose residual (robust to an outlier pose). If an
-    alternative beats the declared reading by :data:`CONVENTION_FACTOR`, ``message`` says which.
-
-    Inverting *both* lists is not tried: it fits exactly as well (``A_i^-1 Z B_i^-1 = X``, the
-    roles of ``X`` and ``Z`` swap), so the data cannot tell it apart; :func:`calibrate_handeye`
-    notes instead when the camera offset comes out larger than the target distance.
-    """
-    # OpenCV's solvers use all pose pairs; 20 poses tell conventions apart as well as 100
-    pick = np.unique(np.linspace(0, len(a) - 1, min(len(a), 20)).astype(int))
-    a, b = a[pick], b[pick]
-    scores = {}
-    for r_inv, c_inv in ((False, False), (True, False), (False, True)):
-        for factor in (1.0, 1000.0, 0.001):
-            if True:
-                aa = geo.invert(a) if r_inv else a
-                bb = geo.invert(b) if c_inv else b.copy()
-                bb[:, :3, 3] *= factor
-                try:
-                    x = check_proper("Park", opencv_handeye(aa, bb, "Park"))
-                    res = pose_residuals(aa, bb, x, target_in_world(aa, bb, x))
-                    per = np.sqrt(
-                        np.sum(res[:, 3:] ** 2, 1)
-                        + np.sum(res[:, :3] ** 2, 1) / pose_scale(bb) ** 2
-                    )
-                    scores[(r_inv, c_inv, factor)] = float(np.median(per))
-                except (CalibrationError, cv2.error):
-                    scores[(r_inv, c_inv, factor)] = np.inf
-    declared = scores[(False, False, 1.0)]
-    best_key = min(scores, key=scores.get)
-    fine = declared < CONVENTION_FLOOR or scores[best_key] * CONVENTION_FACTOR >= declared
-    if fine or not np.isfinite(scores[best_key]):
-        return ConventionCheck(scores)
-    r_inv, c_inv, factor = best_key
-    what = []
-    if r_inv:
-        what.append("the robot poses inverted (base-to-gripper instead of gripper-to-base?)")
-    if c_inv:
-        what.append("the camera poses inverted (camera-to-target instead of target-to-camera?)")
-    if factor != 1.0:
-        what.append(
-            f"the camera translations times {factor:g} (robot and camera in different units, "
-            "mm and m?)"
-        )
-    msg = (
-        f"the poses fit {declared / scores[best_key]:.3g} times better with "
-        + " and ".join(what)
-        + f" (residual score {scores[best_key]:.3g} against {declared:.3g} as declared); "
-        "set convention=, robot_unit= or camera_unit= to what the data are"
-    )
-    return ConventionCheck(scores, msg)

@@ -16,20 +16,25 @@ flange (``setup="eye_to_hand"``) the robot poses are inverted, ``A_i = base2flan
 unknowns become ``X = camera2base`` and ``Z = target2flange``.
 
 Steps of :func:`calibrate_handeye` and :func:`calibrate_robot_world_handeye`, in the modules
-:mod:`~calstudy.estimators.handeye_inputs` (1, 2, 4), :mod:`~calstudy.estimators.handeye_refine`
-(3, 5) and :mod:`~calstudy.estimators.handeye_robust` (noise level, outliers):
+:mod:`~calstudy.estimators.handeye_inputs` (1, 2), :mod:`~calstudy.estimators.handeye_refine`
+(3, 4) and :mod:`~calstudy.estimators.handeye_robust` (noise level, outliers):
 
 1. ``prepare_poses``: storage convention, units, near-orthonormal rotations re-projected to
    SO(3) (largest correction reported), beyond ``ortho_tol`` a :class:`CalibrationError`.
 2. ``motion_conditioning``: refuses too few or duplicate poses, pure translations and rotations
    about a single axis, naming the cause.
-3. Closed forms (OpenCV's Tsai, Park, Horaud, Andreff, Daniilidis; or Shah, Li), each scored by
-   its per-pose residual; a result far above the best (factor ``REFUSE_FACTOR``) is refused.
-4. ``convention_check``: the other storage conventions and a factor-1000 unit mix are tried;
-   if one fits far better, the call refuses (or warns) and says which.
-5. ``refine_ml``: maximum likelihood on SE(3) residuals of the target pose (per-pose weights,
+3. Closed forms (OpenCV's Tsai, Park, Horaud, Andreff, Daniilidis; or Shah, Li) on a fixed
+   number of well-spread poses (OpenCV forms every pair of the poses it is given), each scored by
+   its per-pose residual on all poses; a result far above the best (factor ``REFUSE_FACTOR``) is
+   refused. The whole fit is linear in the pose count.
+4. ``refine_ml``: maximum likelihood on SE(3) residuals of the target pose (per-pose weights,
    analytic Jacobian), optionally robust (Huber or Cauchy by iterative reweighting, or RANSAC over
    pose triplets), or on the reprojection error when target points and pixels are given.
+5. ``check_cell`` (:mod:`~calstudy.estimators.handeye_checks`), on every path: the camera's and
+   the robot's ranges, a noise level estimated robustly and compared with what any instrument
+   gives, a step of the target in time order. After a failure only,
+   :mod:`~calstudy.estimators.handeye_diagnose` tries the common reading mistakes and the
+   calibration refuses naming the ones that fit (``check_convention="warn"``: warns and goes on).
 
 Pose-list files are read and written by :mod:`~calstudy.estimators.posefile`; a simulated cell
 is drawn by :mod:`~calstudy.estimators.handeye_sim`.
@@ -43,13 +48,13 @@ poses are exact. The residuals are whitened with these, so the covariance at the
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from calstudy.core import geometry as geo
-from calstudy.core.errors import CalibrationError
+from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.estimation import (
     MISFIT_POLICIES,
     Estimate,
@@ -58,12 +63,11 @@ from calstudy.core.estimation import (
     goodness_of_fit,
 )
 from calstudy.estimators.handeye import OPENCV_METHODS
+from calstudy.estimators.handeye_checks import CellCheck, CellLimits, check_cell
 from calstudy.estimators.handeye_inputs import (
     ORTHO_TOL,
     Conditioning,
-    ConventionCheck,
     PreparedPoses,
-    convention_check,
     motion_conditioning,
     prepare_poses,
 )
@@ -76,10 +80,13 @@ from calstudy.estimators.handeye_refine import (
     pose_residuals,
     refine_ml,
     refine_reprojection,
+    robot_error_map,
     target_in_world,
     whitened_at,
 )
 from calstudy.estimators.handeye_robust import (
+    MIN_CAMERA_SHARE,
+    eiv_sigmas,
     outlier_limit,
     outlier_scores,
     ransac_inliers,
@@ -87,6 +94,9 @@ from calstudy.estimators.handeye_robust import (
     robust_weights,
 )
 
+#: pose counts below this are flagged: the covariance cannot be trusted (too few residuals to
+#: estimate the noise and the robot's error)
+MIN_TRUSTED_POSES = 6
 #: condition number of the whitened Jacobian above which the refinement is refused
 MAX_JACOBIAN_CONDITION = 1e10
 ROBUST = (None, "huber", "cauchy", "ransac")
@@ -127,10 +137,19 @@ class HandEyeResult:
     weights : (N,) array
         Final per-pose weights (user weights times robust weights).
     sigma_rot, sigma_trans : float
-        Noise level used (given, or estimated robustly from the residuals), rad and mm.
+        Camera noise used (given, or estimated robustly from the residuals), rad and mm.
+    robot_sigma_rot : float
+        Robot rotation error used (errors in variables; stated, or estimated from how the
+        residuals' rotation and translation parts co-vary), rad per axis.
+    dof : float
+        Degrees of freedom behind the covariance's scale (inf: the noise was given): ``3 N - 6``,
+        those of the rotation or of the translation residuals alone, from which each part of
+        the noise level is estimated.
     conditioning : Conditioning
     closed_forms : list of ClosedForm
-    convention : ConventionCheck
+    check : CellCheck
+        The plausibility check of the fit (ranges, noise level, time order) and, after a
+        failure with ``check_convention="warn"``, its diagnosis.
     prepared : PreparedPoses
         The canonical input, with the largest re-orthonormalisation correction.
     """
@@ -151,9 +170,36 @@ class HandEyeResult:
     sigma_trans: float
     conditioning: Conditioning
     closed_forms: list
-    convention: ConventionCheck
+    check: CellCheck
     prepared: PreparedPoses
     notes: list = field(default_factory=list)
+    robot_sigma_rot: float = 0.0
+    dof: float = float("inf")
+
+    @property
+    def covariance_trusted(self) -> bool:
+        """False below :data:`MIN_TRUSTED_POSES` poses (the coverage of the 95 % region is then
+        well below 90 %; a note says so)."""
+        return self.prepared.a.shape[0] >= MIN_TRUSTED_POSES
+
+    def region_limit(self, level: float = 0.95, k: int = 6) -> float:
+        """Limit of the squared Mahalanobis distance of a ``k``-parameter block at ``level``:
+        ``chi2_k`` with a given noise level, ``k F(k, dof)`` with an estimated one (the scale of
+        the covariance is then estimated from ``dof`` residual degrees of freedom)."""
+        from scipy.special import chdtri, fdtri
+
+        if np.isinf(self.dof):
+            return float(chdtri(k, 1.0 - level))
+        return float(k * fdtri(k, self.dof, level))
+
+    def x_distance(self, x_true) -> float:
+        """Squared Mahalanobis distance of the ``X`` estimate from ``x_true`` (4, 4) under the
+        covariance of ``[theta_X, t_X]``: inside the 95 % region when at most
+        ``region_limit(0.95)``."""
+        xt = np.asarray(x_true, dtype=float)
+        theta = geo.matrix_to_rotvec(self.x[:3, :3].T @ xt[:3, :3])
+        e = np.concatenate([theta, xt[:3, 3] - self.x[:3, 3]])
+        return float(e @ np.linalg.solve(self.covariance[:6, :6], e))
 
     @property
     def std(self) -> np.ndarray:
@@ -195,6 +241,7 @@ class _Options:
     sigma_rot: float | None
     sigma_trans: float | None
     weights: object
+    robot_sigma_rot: float | None
     robust: str | None
     outlier_alpha: float
     check_convention: str
@@ -205,6 +252,8 @@ class _Options:
     camera_matrix: object
     pixel_sigma: float | None
     misfit: str = "flag"
+    limits: CellLimits | None = None
+    rereadings: Callable[[], dict] | None = None
 
 
 @dataclass
@@ -219,6 +268,8 @@ class _Fit:
     label: str
     s_rot: float = float("nan")
     s_trans: float = float("nan")
+    rho: float = 0.0  # robot rotation error, rad per axis
+    given_robot: bool = False
     est: Estimate | None = None
     cov: np.ndarray | None = None
     jc: float = float("nan")
@@ -239,17 +290,59 @@ def _check_options(opt: _Options) -> None:
         raise CalibrationError(f"misfit must be one of {MISFIT_POLICIES}; got {opt.misfit!r}")
 
 
-def _check_convention(a, b, check: str, notes: list) -> ConventionCheck:
-    conv = ConventionCheck({})
-    if check != "off":
-        conv = convention_check(a, b)
-        if conv.message and check == "raise":
-            raise CalibrationError(conv.message)
-        if conv.message:
-            # the caller of calibrate_handeye: _check_convention, _calibrate, the entry point
-            warnings.warn(conv.message, stacklevel=4)
-            notes.append(conv.message)
-    return conv
+#: the closed-form start is checked with noise limits this much wider (a gross failure stops
+#: the calibration before the refinement, which on misread data takes many iterations)
+START_SLACK = 3.0
+
+
+def _check_cell(
+    prep: PreparedPoses, x, res, w, opt: _Options, notes: list, slack: float = 1.0
+) -> CellCheck:
+    """The plausibility check of the fit; after a failure the diagnosis, then a refusal (or a
+    warning) naming the failures and the likely causes, best first."""
+    limits = opt.limits if opt.limits is not None else CellLimits()
+    check = check_cell(prep.a, prep.b, x, res, w, limits, slack)
+    if not check.failures or opt.check_convention == "off":
+        return check
+    from calstudy.estimators.handeye_diagnose import diagnose
+
+    reread = None
+    if opt.rereadings is not None:
+
+        def reread():
+            out = {}
+            for cause, (robot, camera) in opt.rereadings().items():
+                try:
+                    p = _reprepare(prep, robot, camera)
+                except CalibrationError:
+                    continue
+                out[cause] = (p.a, p.b)
+            return out
+
+    check.diagnosis, cause = diagnose(prep.a, prep.b, limits, reread, check.break_after)
+    check.message = (
+        "implausible hand-eye fit: " + "; ".join(check.failures) + ". Likely causes: " + cause
+    )
+    if opt.check_convention == "raise":
+        raise CalibrationError(check.message)
+    # the caller of calibrate_handeye: _check_cell, _calibrate, the entry point
+    warnings.warn(check.message, CalibrationWarning, stacklevel=4)
+    notes.append(check.message)
+    return check
+
+
+def _reprepare(prep: PreparedPoses, robot, camera) -> PreparedPoses:
+    """Other stored poses through the declared conventions, units and setup of ``prep``."""
+    return prepare_poses(
+        robot,
+        camera,
+        setup=prep.setup,
+        convention=(prep.robot_convention, prep.camera_convention),
+        robot_unit=prep.robot_unit,
+        camera_unit=prep.camera_unit,
+        ortho_tol=0.099,
+        ids=prep.ids,
+    )
 
 
 def _start(a, b, start: ClosedForm, opt: _Options, notes: list) -> _Fit:
@@ -277,13 +370,43 @@ def _start(a, b, start: ClosedForm, opt: _Options, notes: list) -> _Fit:
             )
     else:
         fit.s_rot, fit.s_trans = robust_sigmas(pose_residuals(a, b, x, z)[w > 0])
+    if opt.robot_sigma_rot is not None:
+        fit.rho, fit.given_robot = float(opt.robot_sigma_rot), True
+        if not 0 <= fit.rho < np.inf:
+            raise CalibrationError(f"robot_sigma_rot must be >= 0 and finite; got {fit.rho:g}")
+        if not fit.given:
+            fit.s_rot, fit.s_trans = _camera_share(a, b, x, z, w, fit.rho)
     return fit
+
+
+def _camera_share(a, b, x, z, w, rho: float) -> tuple[float, float]:
+    """The camera's noise at a stated robot rotation error ``rho``: the rest of the robust
+    total, at least :data:`MIN_CAMERA_SHARE` of it."""
+    res = pose_residuals(a, b, x, z)[w > 0]
+    s_r, s_t = robust_sigmas(res)
+    g_t = robot_error_map(a[w > 0], x, z)[0]
+    kappa = float(np.mean(np.einsum("nij,nij->n", g_t, g_t))) / 3.0
+    return (
+        float(np.sqrt(max(s_r**2 - rho**2, MIN_CAMERA_SHARE * s_r**2))),
+        float(np.sqrt(max(s_t**2 - rho**2 * kappa, MIN_CAMERA_SHARE * s_t**2))),
+    )
+
+
+def _noise(a, b, x, z, w, fit: _Fit) -> tuple[float, float, float]:
+    """The noise level of a fit ``(sigma_rot, sigma_trans, robot_sigma_rot)``: as given, or
+    estimated (errors in variables, :func:`eiv_sigmas`) from the residuals."""
+    if fit.given:
+        return fit.s_rot, fit.s_trans, fit.rho
+    if fit.given_robot:
+        return (*_camera_share(a, b, x, z, w, fit.rho), fit.rho)
+    g_t, g_r = robot_error_map(a[w > 0], x, z)
+    return eiv_sigmas(pose_residuals(a, b, x, z)[w > 0], g_t, g_r)
 
 
 def _closed_form_only(a, b, fit: _Fit) -> None:
     """No refinement: the closed form's residuals and covariance at the noise level."""
     x, z = fit.x, fit.z
-    r, jac = whitened_at(a, b, x, z, fit.s_rot, fit.s_trans, fit.w)
+    r, jac = whitened_at(a, b, x, z, fit.s_rot, fit.s_trans, fit.w, fit.rho)
     fit.est = Estimate(
         value=(x, z), params=np.zeros(12), residuals=r, method=fit.label, names=list(PARAM_NAMES)
     )
@@ -293,25 +416,35 @@ def _closed_form_only(a, b, fit: _Fit) -> None:
 def _refine_poses(a, b, fit: _Fit, robust: str | None) -> None:
     """Maximum likelihood on the target poses, iterated with the estimated noise level and the
     robust weights to a fixed point."""
-    x, z, s_rot, s_trans, w, w_user = fit.x, fit.z, fit.s_rot, fit.s_trans, fit.w, fit.w_user
+    x, z, w, w_user = fit.x, fit.z, fit.w, fit.w_user
+    s_rot, s_trans, rho = fit.s_rot, fit.s_trans, fit.rho
     given = fit.given
     reweight = robust in ("huber", "cauchy")
     # the noise level (if estimated) and robust weights depend on the fit: iterate to a fixed
     # point (a few rounds suffice; the refinement itself is warm-started)
     for _ in range(30 if reweight else (3 if not given else 0)):
-        est = refine_ml(a, b, x, z, s_rot, s_trans, w)
+        est = refine_ml(a, b, x, z, s_rot, s_trans, w, rho, covariance=False)
         x, z = est.value
         res = pose_residuals(a, b, x, z)
         old = (s_rot, s_trans, w)
-        if not given:
-            s_rot, s_trans = robust_sigmas(res[w_user > 0])
+        s_rot, s_trans, rho = _noise(a, b, x, z, w_user, fit)
         if reweight:
-            w = w_user * robust_weights(outlier_scores(res, s_rot, s_trans), robust)
-        if np.max(np.abs(w - old[2])) < 1e-6 and abs(s_rot / old[0] - 1) < 1e-6:
+            tot = _total(s_rot, s_trans, rho, a, x, z)
+            w = w_user * robust_weights(outlier_scores(res, *tot), robust)
+        if np.max(np.abs(w - old[2])) < 1e-6 and abs(s_rot / old[0] - 1) < 1e-4:
             break
-    est = refine_ml(a, b, x, z, s_rot, s_trans, w)
+    est = refine_ml(a, b, x, z, s_rot, s_trans, w, rho)
     fit.x, fit.z = est.value
-    fit.est, fit.s_rot, fit.s_trans, fit.w = est, s_rot, s_trans, w
+    fit.est, fit.s_rot, fit.s_trans, fit.rho, fit.w = est, s_rot, s_trans, rho, w
+
+
+def _total(s_rot, s_trans, rho, a, x, z) -> tuple[float, float]:
+    """Per-axis rotation and translation noise of a residual, camera and robot together."""
+    if rho == 0:
+        return s_rot, s_trans
+    g_t = robot_error_map(a, x, z)[0]
+    kappa = float(np.mean(np.einsum("nij,nij->n", g_t, g_t))) / 3.0
+    return float(np.hypot(s_rot, rho)), float(np.sqrt(s_trans**2 + rho**2 * kappa))
 
 
 def _refine(a, b, fit: _Fit, opt: _Options, start_method: str) -> None:
@@ -362,7 +495,10 @@ def _covariance(fit: _Fit, opt: _Options) -> tuple[np.ndarray, str]:
         chi = float(np.sum(fit.est.residuals**2))
         s2 = chi / max(m - 12, 1)
         cov = cov * s2
-        basis = f"scaled by residual chi2 (s^2 = {s2:.3g})"
+        basis = (
+            f"scaled by residual chi2 (s^2 = {s2:.3g}); robot rotation error "
+            f"{np.rad2deg(fit.rho):.3g} deg per axis"
+        )
     return cov, basis
 
 
@@ -398,15 +534,15 @@ def _flag(ids, score, outlier_alpha: float, x, z, notes: list) -> list[int]:
 
 
 def _calibrate(
-    prep: PreparedPoses, forms: list[ClosedForm], method: str, opt: _Options
+    prep: PreparedPoses, forms: list[ClosedForm], method: str, opt: _Options, cond: Conditioning
 ) -> HandEyeResult:
     a, b = prep.a, prep.b
-    cond = motion_conditioning(a)
     _check_options(opt)
     notes: list[str] = []
-    conv = _check_convention(a, b, opt.check_convention, notes)
     start = _choose(forms, method)
     fit = _start(a, b, start, opt, notes)
+    if opt.check_convention == "raise":
+        _check_cell(prep, fit.x, pose_residuals(a, b, fit.x, fit.z), fit.w, opt, [], START_SLACK)
     if not opt.refine:
         _closed_form_only(a, b, fit)
     else:
@@ -414,7 +550,16 @@ def _calibrate(
     _check_condition(fit.jc, cond)
     x, z = fit.x, fit.z
     res = pose_residuals(a, b, x, z)
-    score = outlier_scores(res, fit.s_rot, fit.s_trans)
+    check = _check_cell(prep, x, res, fit.w, opt, notes)
+    score = outlier_scores(res, *_total(fit.s_rot, fit.s_trans, fit.rho, a, x, z))
+    # the rotation and the translation noise are each estimated from about half the residual
+    # degrees of freedom (3 N - 6 of 6 N - 12): the scale of the covariance is known no better
+    dof = np.inf if fit.given else 3.0 * np.count_nonzero(fit.w) - 6.0
+    if prep.a.shape[0] < MIN_TRUSTED_POSES:
+        notes.append(
+            f"with {prep.a.shape[0]} poses (fewer than {MIN_TRUSTED_POSES}) the covariance "
+            "cannot be trusted: its 95 % region covers the truth in well under 90 % of cells"
+        )
     cov, basis = _covariance(fit, opt)
     _check_fit(prep.ids, fit, opt, notes)
     flagged = _flag(prep.ids, score, opt.outlier_alpha, x, z, notes)
@@ -434,9 +579,11 @@ def _calibrate(
         weights=fit.w,
         sigma_rot=fit.s_rot,
         sigma_trans=fit.s_trans,
+        robot_sigma_rot=fit.rho,
+        dof=float(dof),
         conditioning=cond,
         closed_forms=forms,
-        convention=conv,
+        check=check,
         prepared=prep,
         notes=notes,
     )
@@ -464,7 +611,14 @@ _COMMON_DOC = """
         Run the maximum-likelihood refinement (default) or return the closed form.
     sigma_rot, sigma_trans : float, optional
         Noise of a measured target pose (rad, mm per axis). When omitted they are estimated
-        robustly from the residuals and the covariance is scaled by the residual chi-square.
+        robustly from the residuals with the robot's rotation error (errors in variables,
+        :func:`~calstudy.estimators.handeye_robust.eiv_sigmas`), the covariance is scaled by the
+        residual chi-square and its regions use the F distribution
+        (:meth:`HandEyeResult.region_limit`).
+    robot_sigma_rot : float, optional
+        The robot's rotation error, rad per axis, if known (its translation error adds to
+        ``sigma_trans``); otherwise estimated with the camera's noise, or 0 (robot exact) when
+        ``sigma_rot`` and ``sigma_trans`` are given.
     weights : (N,) array, optional
         Per-pose weights (0 drops a pose).
     robust : {None, "huber", "cauchy", "ransac"}
@@ -473,7 +627,19 @@ _COMMON_DOC = """
     outlier_alpha : float
         False-alarm probability per pose of the outlier flag.
     check_convention : {"raise", "warn", "off"}
-        What to do when another storage convention or a unit factor 1000 fits far better.
+        What to do when the fit is implausible (:func:`~calstudy.estimators.handeye_checks.\
+check_cell`: translations outside the camera's range or the robot's reach, a pose noise no
+        instrument gives, a target that moved during the series): refuse with the likely causes
+        tried and ranked (:func:`~calstudy.estimators.handeye_diagnose.diagnose`: storage
+        convention, transposed rotations, unit factors 10, 25.4 and 1000, shifted rows, rotation
+        formats of the file), warn with them (a :class:`calstudy.CalibrationWarning`) and go on,
+        or skip the check.
+    limits : CellLimits, optional
+        The plausible ranges and noise of the check (default :class:`CellLimits()`).
+    rereadings : callable, optional
+        ``{cause: (flange2base, target2camera)}`` of other readings of the same file's columns
+        for the diagnosis (:meth:`calstudy.estimators.posefile.PoseList.rereadings`; passed by
+        :meth:`~calstudy.estimators.posefile.PoseList.arguments`).
     rng : numpy.random.Generator, optional
         Needed for ``robust="ransac"``.
     target_points, pixels, camera_matrix, pixel_sigma : optional
@@ -493,7 +659,8 @@ _COMMON_DOC = """
     ------
     CalibrationError
         Bad input (named pose and number), degenerate motions (duplicates, pure translations, one
-        rotation axis), a convention or unit mismatch (``check_convention="raise"``), a requested
+        rotation axis), an implausible fit with its likely causes (``check_convention="raise"``), a
+        requested
         closed form inconsistent with the data, or a refinement that does not converge.
 """
 
@@ -516,6 +683,7 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
         sigma_rot: float | None = None,
         sigma_trans: float | None = None,
         weights=None,
+        robot_sigma_rot: float | None = None,
         robust: str | None = None,
         outlier_alpha: float = 1e-3,
         check_convention: str = "raise",
@@ -527,6 +695,8 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
         camera_matrix=None,
         pixel_sigma: float | None = None,
         misfit: str = "flag",
+        limits: CellLimits | None = None,
+        rereadings: Callable[[], dict] | None = None,
     ) -> HandEyeResult:
         prep = prepare_poses(
             flange2base,
@@ -542,13 +712,14 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             raise CalibrationError(
                 f"unknown {form} method {method!r}; use 'best' or one of {list(methods)}"
             )
-        motion_conditioning(prep.a)
+        cond = motion_conditioning(prep.a)
         forms = closed_forms(prep.a, prep.b, list(methods))
         options = _Options(
             refine=refine,
             sigma_rot=sigma_rot,
             sigma_trans=sigma_trans,
             weights=weights,
+            robot_sigma_rot=robot_sigma_rot,
             robust=robust,
             outlier_alpha=outlier_alpha,
             check_convention=check_convention,
@@ -559,8 +730,10 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             camera_matrix=camera_matrix,
             pixel_sigma=pixel_sigma,
             misfit=misfit,
+            limits=limits,
+            rereadings=rereadings,
         )
-        return _calibrate(prep, forms, method, options)
+        return _calibrate(prep, forms, method, options, cond)
 
     calibrate.__name__ = calibrate.__qualname__ = name
     calibrate.__doc__ = summary + _COMMON_DOC

@@ -14,8 +14,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
@@ -24,6 +22,7 @@ from calstudy.estimators.handeye import (
     DEGENERATE_ROTATION,
     check_rotation_diversity,
     opencv_handeye,
+    quiet_opencv,
 )
 
 #: OpenCV's AX = ZB (robot-world-hand-eye) solvers
@@ -52,13 +51,44 @@ def _so3_jr(phi: np.ndarray) -> np.ndarray:
     return geo.so3_left_jacobian(-np.atleast_2d(phi))
 
 
+#: above this angle (rad) the axis is taken from scipy (the skew part vanishes near pi)
+_LOG_NEAR_PI = np.pi - 1e-2
+
+
 def log_so3(rot: np.ndarray) -> np.ndarray:
-    """Rotation vectors ``(N, 3)`` of rotation matrices ``(..., 3, 3)``."""
-    return Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_rotvec()
+    """Rotation vectors ``(N, 3)`` of rotation matrices ``(..., 3, 3)`` (proper rotations).
+
+    ``v * a / |v|`` with ``v`` the skew part and ``a`` the angle of
+    :func:`calstudy.core.geometry.rotation_angle` (accurate at every angle; a fifth of the cost
+    of scipy's conversion, which the refinement calls at every evaluation); within 0.01 rad of
+    pi, where the skew part loses the axis, scipy's conversion.
+    """
+    r = rot.reshape(-1, 3, 3)
+    v = np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], 1)
+    s = np.sqrt(np.sum(v * v, axis=1))
+    ang = np.arctan2(s, r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2] - 1.0)
+    out = v * np.where(s > 1e-300, ang / np.maximum(s, 1e-300), 0.5)[:, None]
+    far = ang > _LOG_NEAR_PI
+    if np.any(far):
+        from scipy.spatial.transform import Rotation
+
+        out[far] = Rotation.from_matrix(r[far]).as_rotvec()
+    return out
 
 
 def _exp_so3(rotvec: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(np.atleast_2d(rotvec)).as_matrix()
+    """Rotation matrices ``(1, 3, 3)`` of one rotation vector (Rodrigues' formula, series below
+    1e-4 rad): the refinement calls it at every evaluation, where scipy's conversion of a
+    single vector costs more than the formula."""
+    v = np.asarray(rotvec, dtype=float).reshape(3)
+    th2 = float(v @ v)
+    k = geo.skew(v)
+    if th2 < 1e-8:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = np.sqrt(th2)
+        a, b = np.sin(th) / th, (1.0 - np.cos(th)) / th2
+    return (np.eye(3) + a * k + b * (k @ k))[None]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -75,7 +105,7 @@ def pose_residuals(a, b, x, z) -> np.ndarray:
     """Per-pose residuals ``(N, 6)``: ``[t_B - t_pred (mm, camera frame), log(R_pred^T R_B) (rad)]``
     of the measured ``B_i`` against the prediction ``inv(X) inv(A_i) Z``."""
     pred = geo.invert(x) @ geo.invert(a) @ z
-    rot = log_so3(np.einsum("nji,njk->nik", pred[:, :3, :3], b[:, :3, :3]))
+    rot = log_so3(np.swapaxes(pred[:, :3, :3], 1, 2) @ b[:, :3, :3])
     return np.concatenate([b[:, :3, 3] - pred[:, :3, 3], rot], axis=1)
 
 
@@ -95,6 +125,33 @@ def pose_scale(b: np.ndarray) -> float:
     """Median camera-target distance of the poses ``b`` (mm, at least 1e-9): the scale of
     :func:`residual_score`."""
     return max(float(np.median(np.linalg.norm(b[:, :3, 3], axis=1))), 1e-9)
+
+
+#: poses the closed forms start from: OpenCV's solvers form every pair of their poses, so a
+#: fixed number of well-spread poses keeps the start's cost constant and the whole fit linear
+START_POSES = 12
+
+
+def spread_subset(a: np.ndarray, k: int = START_POSES) -> np.ndarray:
+    """Indices (sorted) of ``k`` well-spread robot poses of ``a`` (N, 4, 4), all if ``N <= k``.
+
+    Greedy farthest-point selection on the orientations (chordal distance ``|R_i - R_j|``, the
+    relative rotations the closed forms need) and, in a tenth of the weight, the positions
+    relative to their spread: ``O(N k)``, deterministic (starts at the first pose).
+    """
+    n = a.shape[0]
+    if n <= k:
+        return np.arange(n)
+    t = a[:, :3, 3]
+    scale = max(float(np.sqrt(np.mean(np.sum((t - t.mean(0)) ** 2, 1)))), 1e-12)
+    feat = np.concatenate([a[:, :3, :3].reshape(n, 9), 0.1 * t / scale], 1)
+    picked = [0]
+    dist = np.sum((feat - feat[0]) ** 2, 1)
+    for _ in range(k - 1):
+        j = int(np.argmax(dist))
+        picked.append(j)
+        dist = np.minimum(dist, np.sum((feat - feat[j]) ** 2, 1))
+    return np.unique(picked)
 
 
 @dataclass
@@ -147,13 +204,14 @@ def _opencv_rwhe(a: np.ndarray, b: np.ndarray, method: str) -> tuple[np.ndarray,
     :func:`calstudy.estimators.handeye.opencv_handeye`: OpenCV would return a wrong answer."""
     check_rotation_diversity(a, DEGENERATE_ROTATION)
     ainv = geo.invert(a)
-    r_w, t_w, r_g, t_g = cv2.calibrateRobotWorldHandEye(
-        list(b[:, :3, :3]),
-        list(b[:, :3, 3:]),
-        list(ainv[:, :3, :3]),
-        list(ainv[:, :3, 3:]),
-        method=OPENCV_RWHE_METHODS[method],
-    )
+    with quiet_opencv():
+        r_w, t_w, r_g, t_g = cv2.calibrateRobotWorldHandEye(
+            list(b[:, :3, :3]),
+            list(b[:, :3, 3:]),
+            list(ainv[:, :3, :3]),
+            list(ainv[:, :3, 3:]),
+            method=OPENCV_RWHE_METHODS[method],
+        )
     x = geo.invert(geo.make_transform(r_g, t_g.ravel()))
     z = geo.invert(geo.make_transform(r_w, t_w.ravel()))
     return x, z
@@ -161,6 +219,10 @@ def _opencv_rwhe(a: np.ndarray, b: np.ndarray, method: str) -> tuple[np.ndarray,
 
 def closed_forms(a: np.ndarray, b: np.ndarray, methods: Sequence[str]) -> list[ClosedForm]:
     """Run OpenCV closed forms on canonical poses and score them; refuse the inconsistent ones.
+
+    The solvers see the :data:`START_POSES` well-spread poses of :func:`spread_subset` (all poses
+    up to that many; OpenCV forms every pair of the poses it is given, a cost quadratic in their
+    number); every result is scored on all poses.
 
     Parameters
     ----------
@@ -179,16 +241,18 @@ def closed_forms(a: np.ndarray, b: np.ndarray, methods: Sequence[str]) -> list[C
     import time
 
     scale = pose_scale(b)
+    sub = spread_subset(a)
+    a_s, b_s = a[sub], b[sub]
     out = []
     for m in methods:
         start = time.perf_counter()
         reason = ""
         try:
             if m in OPENCV_RWHE_METHODS:
-                x, z = _opencv_rwhe(a, b, m)
+                x, z = _opencv_rwhe(a_s, b_s, m)
                 check_proper(m, z)
             else:
-                x = opencv_handeye(a, b, m)
+                x = opencv_handeye(a_s, b_s, m)
             x = check_proper(m, x)
             if m not in OPENCV_RWHE_METHODS:
                 z = target_in_world(a, b, x)
@@ -240,12 +304,18 @@ class PoseProblem:
     rz0: np.ndarray
     w_rot: np.ndarray  # (N,) sqrt(weight) / sigma_rot
     w_trans: np.ndarray
+    wmat: np.ndarray | None = None  # (N, 6, 6) whitening with the robot's error, or None
 
     @classmethod
-    def build(cls, a, b, x, z, sigma_rot, sigma_trans, weights):
+    def build(cls, a, b, x, z, sigma_rot, sigma_trans, weights, robot_sigma_rot: float = 0.0):
         sw = np.sqrt(weights)
         y = geo.invert(x)
-        return cls(geo.invert(a), b, y[:3, :3], z[:3, :3], sw / sigma_rot, sw / sigma_trans)
+        if robot_sigma_rot <= 0:
+            return cls(geo.invert(a), b, y[:3, :3], z[:3, :3], sw / sigma_rot, sw / sigma_trans)
+        cov = pose_covariances(a, x, z, sigma_rot, sigma_trans, robot_sigma_rot)
+        wmat = np.linalg.inv(np.linalg.cholesky(cov)) * sw[:, None, None]
+        one = np.ones(len(sw))
+        return cls(geo.invert(a), b, y[:3, :3], z[:3, :3], one, one, wmat)
 
     def x0(self, x, z) -> np.ndarray:
         return np.concatenate([np.zeros(3), geo.invert(x)[:3, 3], np.zeros(3), z[:3, 3]])
@@ -260,33 +330,37 @@ class PoseProblem:
         ry = _exp_so3(p[0:3])[0] @ self.ry0
         rz = self.rz0 @ _exp_so3(p[6:9])[0]
         rc, tc = self.c[:, :3, :3], self.c[:, :3, 3]
-        r_hat = np.einsum("ij,njk,kl->nil", ry, rc, rz)
-        u = np.einsum("ij,nj->ni", ry, np.einsum("nij,j->ni", rc, p[9:12]) + tc)
+        r_hat = ry @ rc @ rz
+        u = (rc @ p[9:12] + tc) @ ry.T
         return ry, r_hat, u, u + p[3:6]
 
     def residuals(self, p) -> np.ndarray:
         _, r_hat, _, t_hat = self._predict(p)
-        e = log_so3(np.einsum("nji,njk->nik", r_hat, self.b[:, :3, :3]))
+        e = log_so3(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
         r = np.concatenate(
             [(self.b[:, :3, 3] - t_hat) * self.w_trans[:, None], e * self.w_rot[:, None]], 1
         )
+        if self.wmat is not None:
+            r = np.einsum("nij,nj->ni", self.wmat, r)
         return r.ravel()
 
     def jacobian(self, p) -> np.ndarray:
         ry, r_hat, u, _ = self._predict(p)
         n = r_hat.shape[0]
-        e = log_so3(np.einsum("nji,njk->nik", r_hat, self.b[:, :3, :3]))
+        e = log_so3(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
         jl_y = _so3_jr(p[0:3])[0].T
         jr_z = _so3_jr(p[6:9])[0]
         jl_inv_e = np.swapaxes(geo.so3_right_jacobian_inverse(e), 1, 2)
         jac = np.zeros((n, 6, 12))
         jac[:, :3, 0:3] = geo.skew(u) @ jl_y
         jac[:, :3, 3:6] = -np.eye(3)
-        jac[:, :3, 9:12] = -np.einsum("ij,njk->nik", ry, self.c[:, :3, :3])
+        jac[:, :3, 9:12] = -(ry @ self.c[:, :3, :3])
         jac[:, 3:, 0:3] = -jl_inv_e @ np.swapaxes(r_hat, 1, 2) @ jl_y
         jac[:, 3:, 6:9] = -jl_inv_e @ jr_z
         jac[:, :3] *= self.w_trans[:, None, None]
         jac[:, 3:] *= self.w_rot[:, None, None]
+        if self.wmat is not None:
+            jac = self.wmat @ jac
         return jac.reshape(n * 6, 12)
 
     def to_public(self, x: np.ndarray) -> np.ndarray:
@@ -302,6 +376,8 @@ class PoseProblem:
 
 
 def _solve(problem: PoseProblem, x, z) -> tuple[np.ndarray, np.ndarray, int]:
+    from scipy.optimize import least_squares  # lazy: the tool imports in well under a second
+
     sol = least_squares(
         problem.residuals,
         problem.x0(x, z),
@@ -348,9 +424,38 @@ def check_pose_weights(weights, n: int) -> np.ndarray:
     return w
 
 
-def whitened_at(a, b, x, z, sigma_rot, sigma_trans, weights):
+def robot_error_map(a, x, z) -> tuple[np.ndarray, np.ndarray]:
+    """How a robot's rotation error moves the residuals: ``(N, 3, 3)`` maps of the rotation error
+    ``delta`` (rad, flange frame; ``A_true = A exp(delta)``) to the translation residual (mm) and
+    to the rotation residual (rad) of each pose, to first order.
+
+    With ``P_i = inv(X) inv(A_i) Z`` the predicted target pose and ``q_i = t_P + R_X^T t_X`` the
+    target seen from the flange origin in camera axes: translation ``[q_i]x R_X^T delta``,
+    rotation ``-R_P^T R_X^T delta``.
+    """
+    pred = geo.invert(x) @ geo.invert(a) @ z
+    rxt = x[:3, :3].T
+    q = pred[:, :3, 3] + rxt @ x[:3, 3]
+    g_t = geo.skew(q) @ rxt
+    g_r = -np.swapaxes(pred[:, :3, :3], 1, 2) @ rxt
+    return g_t, g_r
+
+
+def pose_covariances(a, x, z, sigma_rot, sigma_trans, robot_sigma_rot) -> np.ndarray:
+    """Covariance ``(N, 6, 6)`` of each pose's residual ``[t (mm), rot (rad)]``: the camera's
+    noise (``sigma_trans``, ``sigma_rot`` per axis) plus a robot rotation error of
+    ``robot_sigma_rot`` rad per axis through :func:`robot_error_map`."""
+    g_t, g_r = robot_error_map(a, x, z)
+    g = np.concatenate([g_t, g_r], axis=1)
+    cov = robot_sigma_rot**2 * (g @ np.swapaxes(g, 1, 2))
+    cov[:, :3, :3] += sigma_trans**2 * np.eye(3)
+    cov[:, 3:, 3:] += sigma_rot**2 * np.eye(3)
+    return cov
+
+
+def whitened_at(a, b, x, z, sigma_rot, sigma_trans, weights, robot_sigma_rot: float = 0.0):
     """Whitened residuals ``(6N,)`` and Jacobian ``(6N, 12)`` in public coordinates at (x, z)."""
-    prob = PoseProblem.build(a, b, x, z, sigma_rot, sigma_trans, weights)
+    prob = PoseProblem.build(a, b, x, z, sigma_rot, sigma_trans, weights, robot_sigma_rot)
     p0 = prob.x0(x, z)
     jac = prob.jacobian(p0) @ np.linalg.inv(prob.to_public(x))
     return prob.residuals(p0), jac
@@ -364,6 +469,8 @@ def refine_ml(
     sigma_rot: float,
     sigma_trans: float,
     weights=None,
+    robot_sigma_rot: float = 0.0,
+    covariance: bool = True,
 ) -> Estimate:
     """Maximum-likelihood ``(X, Z)`` from canonical poses: whitened SE(3) residuals, LM.
 
@@ -381,6 +488,14 @@ def refine_ml(
         Noise of a measured target pose: rad per axis and mm per axis.
     weights : (N,) array, optional
         Per-pose weights (1 by default; 0 removes a pose).
+    robot_sigma_rot : float
+        Rotation error of a robot pose, rad per axis (errors in variables: each pose's residual
+        then has the covariance of :func:`pose_covariances`, taken at the start and whitened by
+        its Cholesky factor). A robot's translation error adds to ``sigma_trans`` (it enters
+        the residual as camera translation noise does).
+    covariance : bool
+        Compute the covariance and the whitened residuals at the solution (False: ``covariance``
+        and ``residuals`` are left empty, for the inner rounds of an iteration).
 
     Returns
     -------
@@ -397,9 +512,11 @@ def refine_ml(
         raise CalibrationError(
             f"sigma_rot and sigma_trans must be positive; got {sigma_rot:g}, {sigma_trans:g}"
         )
-    prob = PoseProblem.build(a, b, x0, z0, sigma_rot, sigma_trans, w)
+    prob = PoseProblem.build(a, b, x0, z0, sigma_rot, sigma_trans, w, robot_sigma_rot)
     x1, z1, nfev = _solve(prob, x0, z0)
-    r, jac = whitened_at(a, b, x1, z1, sigma_rot, sigma_trans, w)
+    if not covariance:
+        return Estimate(value=(x1, z1), params=np.zeros(12), iterations=nfev, names=[])
+    r, jac = whitened_at(a, b, x1, z1, sigma_rot, sigma_trans, w, robot_sigma_rot)
     cov, cond = covariance_from_jacobian(jac, r, sigma=1.0)
     return Estimate(
         value=(x1, z1),
@@ -532,6 +649,8 @@ def refine_reprojection(
     prob = PoseProblem.build(a, b0, x0, z0, 1.0, 1.0, w)
     rep = _Reprojection(prob, pts, k, sw, pxf)
     fun, jac = rep.residuals, rep.jacobian
+    from scipy.optimize import least_squares
+
     sol = least_squares(fun, prob.x0(x0, z0), jac=jac, method="lm", xtol=1e-12, ftol=1e-12)
     if sol.status <= 0:
         raise CalibrationError(

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.stats import chi2
 
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.handeye import opencv_handeye
@@ -21,13 +20,16 @@ from calstudy.estimators.handeye_refine import (
     target_in_world,
 )
 
-#: median of the chi-square distribution with 3 degrees of freedom (robust noise estimate)
-_CHI2_3_MEDIAN = float(chi2.median(3))
+#: median of the chi-square distribution with 3 degrees of freedom (robust noise estimate;
+#: ``scipy.stats.chi2.median(3)``, which a test checks: scipy.stats is imported only when needed)
+CHI2_3_MEDIAN = 2.3659738843753377
 
 
 def outlier_limit(alpha: float = 1e-3) -> float:
     """Outlier flag limit: the ``1 - alpha`` quantile of chi-square with 6 degrees of freedom."""
-    return float(chi2.ppf(1.0 - alpha, 6))
+    from scipy.special import chdtri  # chi2.isf without importing scipy.stats
+
+    return float(chdtri(6, alpha))
 
 
 def robust_sigmas(res: np.ndarray, alpha: float = 1e-3) -> tuple[float, float]:
@@ -41,14 +43,61 @@ def robust_sigmas(res: np.ndarray, alpha: float = 1e-3) -> tuple[float, float]:
     rr = np.sum(res[:, 3:] ** 2, 1)
     tt = np.sum(res[:, :3] ** 2, 1)
     keep = (n - 2.0) / n  # 12 parameters take 2 of the 6 N degrees of freedom per pose
-    s_r = np.sqrt(max(np.median(rr) / (_CHI2_3_MEDIAN * keep), 1e-30))
-    s_t = np.sqrt(max(np.median(tt) / (_CHI2_3_MEDIAN * keep), 1e-30))
-    inl = rr / s_r**2 + tt / s_t**2 <= chi2.ppf(1.0 - alpha, 6)
+    s_r = np.sqrt(max(np.median(rr) / (CHI2_3_MEDIAN * keep), 1e-30))
+    s_t = np.sqrt(max(np.median(tt) / (CHI2_3_MEDIAN * keep), 1e-30))
+    inl = rr / s_r**2 + tt / s_t**2 <= outlier_limit(alpha)
     m = int(inl.sum())
     if m > 2:
         s_r = np.sqrt(max(rr[inl].sum() / (3.0 * (m - 2)), 1e-30))
         s_t = np.sqrt(max(tt[inl].sum() / (3.0 * (m - 2)), 1e-30))
     return float(s_r), float(s_t)
+
+
+#: the camera's share of a residual variance is kept at least this fraction of the total
+MIN_CAMERA_SHARE = 0.1
+
+
+def eiv_sigmas(res: np.ndarray, g_t: np.ndarray, g_r: np.ndarray, alpha: float = 1e-3):
+    """Camera noise and robot rotation error ``(sigma_rot, sigma_trans, robot_sigma_rot)`` (rad,
+    mm, rad per axis) from per-pose residuals ``(N, 6)`` (errors in variables).
+
+    A robot rotation error ``delta`` moves the translation residual by ``g_t delta`` and the
+    rotation residual by ``g_r delta`` (:func:`~calstudy.estimators.handeye_refine.\
+robot_error_map`); the camera's noise moves them independently. So the covariance of the
+    translation and rotation residuals is ``robot_sigma_rot^2 g_t g_r^T`` alone, and its moment
+    estimate over the inlier poses (:func:`robust_sigmas`' inliers) gives ``robot_sigma_rot``
+    (0 if negative); the camera's share is the rest of the robust total, at least
+    :data:`MIN_CAMERA_SHARE` of it. (A robot's translation error is indistinguishable from the
+    camera's translation noise and stays in ``sigma_trans``.)
+
+    Parameters
+    ----------
+    res : (N, 6) array
+        Per-pose residuals ``[t (mm), rot (rad)]``.
+    g_t, g_r : (N, 3, 3) arrays
+        The maps of :func:`~calstudy.estimators.handeye_refine.robot_error_map` at the fit.
+    alpha : float
+        False-alarm probability of the inlier test.
+
+    Returns
+    -------
+    (float, float, float)
+        ``sigma_rot`` (rad), ``sigma_trans`` (mm) of the camera and ``robot_sigma_rot`` (rad),
+        per axis.
+    """
+    s_r, s_t = robust_sigmas(res, alpha)
+    score = np.sum(res[:, 3:] ** 2, 1) / s_r**2 + np.sum(res[:, :3] ** 2, 1) / s_t**2
+    inl = score <= outlier_limit(alpha)
+    cross = g_t[inl] @ np.swapaxes(g_r[inl], 1, 2)  # (M, 3, 3): cov(t, rot) / rho^2
+    num = float(np.einsum("ni,nij,nj->", res[inl, :3], cross, res[inl, 3:]))
+    rho2 = max(num / max(float(np.sum(cross**2)), 1e-300), 0.0)
+    kappa = float(np.mean(np.einsum("nij,nij->n", g_t[inl], g_t[inl]))) / 3.0
+    rho2 = min(rho2, (1 - MIN_CAMERA_SHARE) * s_r**2, (1 - MIN_CAMERA_SHARE) * s_t**2 / kappa)
+    return (
+        float(np.sqrt(s_r**2 - rho2)),
+        float(np.sqrt(s_t**2 - rho2 * kappa)),
+        float(np.sqrt(rho2)),
+    )
 
 
 def outlier_scores(res, sigma_rot, sigma_trans):

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from calstudy.core import geometry as geo
 from calstudy.core import schema
@@ -58,6 +57,36 @@ class PoseList:
     camera_convention: str
     robot_unit: str
     camera_unit: str
+    robot_form: str = "matrix"
+    camera_form: str = "matrix"
+    robot_rotation_columns: np.ndarray | None = None
+    camera_rotation_columns: np.ndarray | None = None
+
+    def rereadings(self) -> dict:
+        """Other readings of the rotation columns, ``{cause: (robot, camera)}`` (N, 4, 4) each,
+        as stored: quaternions in x, y, z, w order, rotation vectors in degrees, Euler angles of
+        another order or in radians (:func:`alternative_rotations`); tried by the diagnosis of a
+        failed fit check, never applied silently."""
+        out = {}
+        sides = (
+            ("robot", self.robot, self.robot_form, self.robot_rotation_columns),
+            ("camera", self.camera, self.camera_form, self.camera_rotation_columns),
+        )
+        alts = {}
+        for side, poses, form, cols in sides:
+            if cols is None:
+                continue
+            for cause, rot in alternative_rotations(form, cols).items():
+                alt = poses.copy()
+                alt[:, :3, :3] = rot
+                alts.setdefault(cause, {})[side] = alt
+        for cause, found in alts.items():
+            for side, alt in found.items():
+                pair = (alt, self.camera) if side == "robot" else (self.robot, alt)
+                out[f"the {side} {cause}"] = pair
+            if len(found) == 2:
+                out[f"both lists' {cause}"] = (found["robot"], found["camera"])
+        return out
 
     def arguments(self) -> dict:
         """Keyword arguments for :func:`calibrate_handeye` and
@@ -69,6 +98,7 @@ class PoseList:
             "robot_unit": self.robot_unit,
             "camera_unit": self.camera_unit,
             "ids": self.ids,
+            "rereadings": self.rereadings,
         }
 
     def __len__(self) -> int:
@@ -129,6 +159,65 @@ def _rotations(form: str, v: np.ndarray) -> np.ndarray:
     if form == "zyx_deg":
         return geo.euler_zyx_to_matrix(v[:, 0], v[:, 1], v[:, 2])
     return v.reshape(-1, 3, 3)
+
+
+#: Euler sequences tried against the declared ``Rz(a) Ry(b) Rx(c)`` (scipy's intrinsic names;
+#: each also with the angles reversed, which is the fixed-axis reading of the same letters)
+EULER_SEQUENCES = (
+    "ZYX",
+    "XYZ",
+    "ZYZ",
+    "ZXZ",
+    "XZY",
+    "YXZ",
+    "YZX",
+    "ZXY",
+    "XYX",
+    "XZX",
+    "YXY",
+    "YZY",
+)
+
+
+def _from_euler(seq: str, angles: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_euler(seq, angles, degrees=True).as_matrix()
+
+
+def _euler_name(seq: str, angles: str) -> str:
+    return "R = " + " ".join(
+        f"R{axis.lower()}({ang})" for axis, ang in zip(seq, angles, strict=True)
+    )
+
+
+def alternative_rotations(form: str, columns: np.ndarray) -> dict:
+    """Rotations ``{cause: (N, 3, 3)}`` of the rotation columns ``(N, k)`` of one side read in
+    the common wrong ways of ``form``: quaternions stored x, y, z, w; rotation vectors in degrees;
+    Euler angles in another order (or reversed, the fixed-axis reading: Fanuc W, P, R and ABB's
+    Euler angles give ``R = Rz(c) Ry(b) Rx(a)``) or in radians. Matrices: none here (a
+    transpose shows in the matrices themselves)."""
+    v = np.asarray(columns, dtype=float)
+    if form == "quaternion":
+        q = v[:, [3, 0, 1, 2]]
+        return {
+            "quaternions stored x, y, z, w (scalar last) under qw, qx, qy, qz": _quat_matrix(
+                q / np.linalg.norm(q, axis=1, keepdims=True)
+            )
+        }
+    if form == "rotvec_rad":
+        return {"rotation vectors in degrees under _rad": geo.rotvec_to_matrix(np.deg2rad(v))}
+    if form != "zyx_deg":
+        return {}
+    out = {"Euler angles in radians under _deg": geo.euler_zyx_to_matrix(*np.rad2deg(v).T)}
+    for seq in EULER_SEQUENCES:
+        for angles, vv in (("abc", v), ("cba", v[:, ::-1])):
+            if seq == "ZYX" and angles == "abc":
+                continue
+            out[f"Euler angles as {_euler_name(seq, angles)} instead of Rz(a) Ry(b) Rx(c)"] = (
+                _from_euler(seq, vv)
+            )
+    return out
 
 
 #: largest deviation of a stored quaternion's norm from 1 accepted (rounded files)
@@ -204,13 +293,27 @@ def read_pose_list(path) -> PoseList:
     robot = geo.make_transform(_rotations(rform, values[:, 4 : 4 + nr]), values[:, 1:4])
     c0 = 4 + nr
     camera = geo.make_transform(_rotations(cform, values[:, c0 + 3 :]), values[:, c0 : c0 + 3])
-    return PoseList(ids.astype(int), robot, camera, rprefix, cprefix, runit, cunit)
+    return PoseList(
+        ids.astype(int),
+        robot,
+        camera,
+        rprefix,
+        cprefix,
+        runit,
+        cunit,
+        rform,
+        cform,
+        values[:, 4 : 4 + nr].copy(),
+        values[:, c0 + 3 :].copy(),
+    )
 
 
 def _rotation_columns(rotation: str, rot: np.ndarray) -> np.ndarray:
     """Rotations ``(N, 3, 3)`` as the columns of the form ``rotation`` (:data:`ROTATION_FORMS`);
     quaternions scalar first with ``qw >= 0``."""
     if rotation == "quaternion":
+        from scipy.spatial.transform import Rotation
+
         q = Rotation.from_matrix(rot).as_quat()  # scalar last
         r = np.concatenate([q[:, 3:], q[:, :3]], 1)
         r *= np.where(r[:, :1] < 0, -1.0, 1.0)
