@@ -553,11 +553,17 @@ def write_claims(
         if not row.notebook:
             raise CalibrationError(f"claim {row.id!r} names no notebook")
         seen.add(row.id)
+    return write_table(claims_table(rows, register), Path(out_dir) / "claims.csv")
+
+
+def claims_table(rows: Iterable[ClaimRow], register: str | Path | None = None) -> pd.DataFrame:
+    """The rows of ``claims.csv`` (columns :data:`CLAIM_COLUMNS`) for claim rows, each with its
+    ``criterion`` from the claims register, where it is declared once (a register of one's own
+    may leave it out: the column is then empty)."""
     df = pd.DataFrame([dataclasses.asdict(r) for r in rows], columns=list(CLAIM_COLUMNS))
     reg = claim_register(register).set_index("id")
-    # declared once, in the register (a register of one's own may leave it out)
     df["criterion"] = df["id"].map(reg["criterion"]) if "criterion" in reg.columns else ""
-    return write_table(df, Path(out_dir) / "claims.csv")
+    return df
 
 
 def write_controls(out_dir: str | Path, rows: Iterable[Mapping]) -> Path:

@@ -3,14 +3,12 @@ rows with the report functions (no simulation)."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import pandas as pd
 import pytest
 from support import assert_same_table
 
 from calstudy.core.paths import RESULTS_DIR
-from calstudy.io.results import CLAIM_COLUMNS
+from calstudy.io.results import claims_table
 from calstudy.papers.dualarm import report
 from calstudy.papers.dualarm.scenario import load_published
 
@@ -55,6 +53,5 @@ def test_tables_recompute_from_the_trials():
 
 def test_claims_and_controls_recompute_from_the_trials():
     claims, controls = report.dualarm_claims(_trials("station"), load_published(), FOLDER.name)
-    rows = [dataclasses.asdict(c) for c in claims]
-    _compare(pd.DataFrame(rows, columns=list(CLAIM_COLUMNS)), "claims")
+    _compare(claims_table(claims), "claims")
     _compare(pd.DataFrame(controls), "controls")

@@ -6,14 +6,14 @@ The single-station tables of notebook 02 (the Lilliefors table, the measurements
 station's Table 1) come from the run of trial 0, simulated again from its generator, not from
 trial rows: ``tests/test_trials.py`` recomputes trials, this file only the reports."""
 
-from dataclasses import asdict
 
 import pandas as pd
 import pytest
 from support import assert_same_table
 
-from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS
+from calstudy.claims import CONTROL_COLUMNS
 from calstudy.core.paths import RESULTS_DIR
+from calstudy.io.results import claims_table
 from calstudy.papers.hybrid import report, report_sweeps
 from calstudy.papers.hybrid.scenario import load_scenario
 
@@ -29,7 +29,7 @@ def _compare(fresh: pd.DataFrame, path) -> None:
     assert_same_table(fresh, path)
 
 def _claims_frame(rows):
-    return pd.DataFrame([asdict(r) for r in rows])[list(CLAIM_COLUMNS)]
+    return claims_table(rows)
 
 
 @pytest.mark.skipif(not (NB01 / "trials_handeye.csv").is_file(), reason="no committed trials")

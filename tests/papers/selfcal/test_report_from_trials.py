@@ -6,14 +6,13 @@ must give the committed tables (numbers to rtol 2e-5, text exactly).
 
 from __future__ import annotations
 
-import dataclasses
-
 import pandas as pd
 import pytest
 from support import assert_same_table
 
-from calstudy.claims import CLAIM_COLUMNS, CONTROL_COLUMNS
+from calstudy.claims import CONTROL_COLUMNS
 from calstudy.core.paths import RESULTS_DIR
+from calstudy.io.results import claims_table
 from calstudy.papers.selfcal import report, report_sweeps
 from calstudy.papers.selfcal.scenario import load_scenario
 
@@ -87,7 +86,7 @@ def test_claims_and_controls(calib):
     sc = load_scenario()
     verdicts = report.selfcal_verdicts(calib, sc)
     rows = report.claim_rows(verdicts, sc, STEM)
-    claims = pd.DataFrame([dataclasses.asdict(r) for r in rows], columns=list(CLAIM_COLUMNS))
+    claims = claims_table(rows)
     _compare(claims, "claims")
     controls = pd.DataFrame(report.controls_rows(verdicts), columns=list(CONTROL_COLUMNS))
     _compare(controls, "controls")
