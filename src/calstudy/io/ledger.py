@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import html
+import re
 import sys
 from collections import Counter
 from collections.abc import Sequence
@@ -18,6 +19,7 @@ from pathlib import Path
 from calstudy.core.ledger import KINDS, ledger_rows
 from calstudy.core.paths import data_path
 from calstudy.core.schema import read_toml, validate
+from calstudy.io.claims_cells import typeset
 from calstudy.papers.binocular import schema as binocular
 from calstudy.papers.dualarm import schema as dualarm
 from calstudy.papers.hybrid import schema as hybrid
@@ -44,7 +46,7 @@ TITLES = {
 }
 
 #: the columns of a ledger table and their shares of the page's width (%)
-COLUMNS = (("input", 23), ("value", 11), ("provenance", 13), ("range", 14), ("source", 39))
+COLUMNS = (("input", 22), ("value", 15), ("provenance", 14), ("range", 14), ("source", 35))
 
 
 def ledger_tables() -> dict[str, list[dict[str, str]]]:
@@ -71,9 +73,38 @@ def _cell(text: str) -> str:
     return html.escape(" ".join(str(text).split()))
 
 
+#: a name of the code inside a sentence: snake_case, dotted (an input, a claim id, a module) or
+#: ``module:function``
+_IDENTIFIER = re.compile(r"\b[a-z][a-z0-9]*(?:[._:][a-z0-9]+)+\b")
+_NOT_CODE = {"e.g", "i.e"}
+
+
+def _prose(text: str) -> str:
+    """A sentence of the ledger as the book writes it: ± and µm typeset
+    (:func:`calstudy.io.claims_cells.typeset`), the names of the code it mentions as code."""
+    s = _cell(typeset(text))
+    return _IDENTIFIER.sub(
+        lambda m: m.group(0) if m.group(0) in _NOT_CODE else f"<code>{_name(m.group(0))}</code>",
+        s,
+    )
+
+
+def _name(text: str) -> str:
+    """A name of the code with a line-break opportunity after every ``.``, ``_`` and ``:``: a
+    long name wraps between its parts, never inside one."""
+    return re.sub(r"([._:])", r"\1<wbr>", text)
+
+
+def _value(text: str) -> str:
+    """A value with a line-break opportunity after every ``_`` and ``,`` (a list wraps between
+    its numbers, a file stem between its parts)."""
+    return re.sub(r"([_,])", r"\1<wbr>", _cell(text))
+
+
 def _table(paper: str, rows: list[dict[str, str]]) -> list[str]:
     """The HTML table of one paper's ledger (class ``ledger``: fixed column widths, long
-    names and values wrap within the column; book/_static/calstudy.css)."""
+    names and values wrap between their parts; on a phone each input a card whose cells carry
+    their column's label; book/_static/calstudy.css)."""
     several = len(SCENARIO_FILES[paper]) > 1
     out = ['<table class="ledger">', "<colgroup>"]
     out += [f'<col style="width: {width}%">' for _, width in COLUMNS]
@@ -82,9 +113,12 @@ def _table(paper: str, rows: list[dict[str, str]]) -> list[str]:
     out += ["</tr></thead>", "<tbody>"]
     for r in rows:
         name = f"{r['file']}: {r['input']}" if several else r["input"]
-        cells = (f"<code>{_cell(name)}</code>", _cell(r["value"]), r["kind"], _cell(r["range"]),
-                 _cell(r["source"]))
-        out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+        cells = (f"<code>{_name(_cell(name))}</code>", _value(r["value"]), r["kind"],
+                 _value(r["range"]), _prose(r["source"]))
+        out.append("<tr>" + "".join(
+            f'<td data-label="{label}">{c}</td>'
+            for (label, _), c in zip(COLUMNS, cells, strict=True)
+        ) + "</tr>")
     out += ["</tbody>", "</table>"]
     return out
 
