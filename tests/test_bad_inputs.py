@@ -9,6 +9,7 @@ the shared estimators, io and claims. The ids read as "<function>-<what is wrong
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import shutil
 import tempfile
 
@@ -21,22 +22,23 @@ from hypothesis.extra import numpy as hnp
 
 from calstudy import CalibrationError
 from calstudy.claims import claim_ids, claim_register
-from calstudy.core import estimation, schema
+from calstudy.core import estimation, schema, stats, verdicts
 from calstudy.core import geometry as geo
 from calstudy.core.circles import fit_circle_2d
 from calstudy.estimators import binocular as bino
-from calstudy.estimators import coc
+from calstudy.estimators import bundle, coc, icp, sfm
 from calstudy.estimators import fitting as ft
 from calstudy.estimators import handeye as he
 from calstudy.estimators import handeye_refine as hr
 from calstudy.estimators import sphere_csv as spc
+from calstudy.estimators import stereo_views as sv
 from calstudy.estimators import workpiece as wp
 from calstudy.estimators.handeye_poses import calibrate_handeye
 from calstudy.estimators.posefile import read_pose_list, write_pose_list
 from calstudy.io.params import check_parameters
 from calstudy.io.results import aggregate_claims, write_table
 from calstudy.io.runs import load_factory, rebuild
-from calstudy.models import exposure, optics
+from calstudy.models import exposure, optics, reach
 from calstudy.models.robots import load_robot
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig, stereo_rig
@@ -556,6 +558,14 @@ CASES = [
     ("claim_ids-no_id_column", lambda p: claim_ids(_register(p, "name,paper\nx,hybrid\n")), E, r"register\.csv lacks the column\(s\) \['id'\]"),
     ("claim_register-duplicate_id", lambda p: claim_register(_register(p, "id,paper\na.b,x\na.b,y\n")), E, r"id 'a\.b' appears more than once"),
     ("claim_register-empty_id", lambda p: claim_register(_register(p, "id,paper\na.b,x\n,y\n")), E, r"row 3 has an empty id"),
+    # shared estimators: degenerate geometry and shapes, now refused at the entry
+    ("rectify_coc-window_beyond_image", lambda p: coc.rectify_coc(DOT, 1e3), E, r"radius 1000\.0 px: its 3-delta window of radius 3000 px exceeds the 40 x 40 px image"),
+    ("image_gradients-empty", lambda p: coc.image_gradients(np.zeros((0, 5))), E, r"non-empty 2-D image, got \(0, 5\)"),
+    ("ray_gap-points_in_3d", lambda p: bino.ray_gap(CUBE, CUBE, np.eye(3), np.zeros(3)), E, r"x_left has shape \(6, 3\); expected \(N, 2\)"),
+    ("pnp_pose-markers_on_one_point", lambda p: sfm.pnp_pose(np.zeros((5, 3)), UV, RIG.left), E, r"cv2\.solvePnP failed on the 5 markers"),
+    ("weighted_icp-moving_cloud_on_a_line", lambda p: icp.weighted_icp(np.outer(np.arange(10.0), [1.0, 0, 0]), CUBE), E, r"the 10 points of the moving cloud are collinear \(singular values"),
+    ("bundle_adjust-start_behind_cameras", lambda p: bundle.bundle_adjust(RIG, _views(BA_POSES, BA_POINTS, np.zeros((2, 6, 2))), BA_POSES, -BA_POINTS, fixed_view=0, sigma_px=1.0, sigma_mm=1.0), E, r"the start of marker 0 lies at depth -8\d\d\.?\d* mm in view 0"),
+    ("refine_camera_pose-start_behind_cameras", lambda p: bundle.refine_camera_pose(RIG, _views(BA_POSES, BA_POINTS, np.zeros((2, 6, 2)))[1], -BA_POINTS, BA_POSES[1], sigma_px=1.0, sigma_mm=1.0), E, r"the start of marker 0 lies at depth -8"),
     # write paths
     ("write_table-inf", lambda p: write_table(__import__("pandas").DataFrame({"a": [1.0, np.inf]}), p / "t.csv"), E, r"t\.csv: column 'a' \(#1\) holds inf at row 2"),
     ("write_table-inf_in_object_column", lambda p: write_table(__import__("pandas").DataFrame({"a": ["x", -np.inf]}), p / "t.csv"), E, r"column 'a' \(#1\) holds -inf at row 2"),
@@ -625,15 +635,20 @@ def _arrays(shape):
 
 
 def _finite(out):
+    """Every number in ``out`` (arrays, numbers, tuples, lists, dataclass fields) is finite."""
     if hasattr(out, "covariance") and hasattr(out, "x"):  # HandEyeResult
         parts = [out.x, out.z, out.covariance]
     elif isinstance(out, estimation.Estimate):
         parts = [out.value, out.params] + ([out.covariance] if out.covariance is not None else [])
-    elif isinstance(out, tuple):
-        parts = [np.asarray(v, dtype=float) for v in out]
+    elif isinstance(out, tuple | list):
+        parts = list(out)
+    elif dataclasses.is_dataclass(out) or isinstance(out, reach.ReachBound):
+        parts = list(vars(out).values())
     else:
         parts = [out]
-    return all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in parts)
+    nested = [v for v in parts if isinstance(v, tuple | list) or dataclasses.is_dataclass(v)]
+    plain = [v for v in parts if not any(v is w for w in nested) and isinstance(v, float | int | np.ndarray | np.number)]
+    return all(_finite(v) for v in nested) and all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in plain)
 
 
 def _check(fn, *args, **kw):
@@ -787,6 +802,179 @@ def test_property_stereo_table(rotation, translation):
         return
     geo.check_transform("left2right", rig.left2right)
     geo.check_transform("right2left", rig.right2left)
+
+
+@PROFILE
+@given(st.integers(0, 8).flatmap(lambda n: st.tuples(_arrays((n,)), _arrays((n, 3)))), st.sampled_from([0.95, 0.5, 0.0, 1.0, -1.0, 2.0]), _ANY)
+def test_property_stats(data, level, x):
+    s, m = data
+    _check(stats.finite_samples, "x", s)
+    _check(stats.round_to_uncertainty, x, float(s[0]) if len(s) else 0.0)
+    _check(stats.rmse, s)
+    _check(stats.rmse, m, axis=0)
+    _check(stats.percentile_interval, s, level)
+    _check(stats.bootstrap_interval, s, lambda b: b.mean(axis=1), np.random.default_rng(0), n_boot=20, level=level)
+    _check(stats.median_and_spread, s, level)
+    _check(stats.lilliefors_test, s)
+    _check(stats.lilliefors_tests, m)
+    _check(stats.lilliefors_test, np.zeros(len(s)))  # no spread
+
+
+@PROFILE
+@given(
+    st.integers(0, 40).flatmap(lambda n: st.tuples(_arrays((n,)), _arrays((n,)), _arrays((n,)))),
+    st.sampled_from(verdicts.KINDS), st.sampled_from(verdicts.DIRECTIONS), _ANY, _ANY,
+    st.sampled_from([0.95, 0.0, 1.0, -1.0]),
+)
+def test_property_verdicts(data, kind, direction, published, null, level):
+    """A verdict's figures are finite (or NaN where the verdict says untestable), or refused."""
+    s, base, oracle = data
+    _check(verdicts.median_ranks, len(s), level)
+    _check(verdicts.median_interval, s, level)
+    _check(verdicts.replication_rate, s, null, direction)
+    rule = {"kind": kind, "direction": direction, "null": null, "bound": published, "min_trials": 1}
+    for fn, args in ((verdicts.judge, (s,)), (verdicts.judge_controls, (s, base, oracle))):
+        try:
+            v = fn(*args, published=published, **({"baseline": base} | rule if fn is verdicts.judge else rule))
+        except CalibrationError:
+            continue
+        v = v[0] if isinstance(v, tuple) else v
+        assert v.verdict in verdicts.VERDICTS, v
+        if v.verdict != "not testable":
+            assert np.isfinite([v.median, v.ci_low, v.ci_high, v.effect_median, v.replication_rate]).all(), v
+
+
+@PROFILE
+@given(st.integers(1, 6).flatmap(lambda n: st.tuples(_arrays((n, 2)), _arrays((n, 2)), _arrays((n, 3)), _arrays((n, 3)))))
+def test_property_stereo_triangulation(data):
+    ul, ur, p, q = data
+    for uv_l, uv_r in ((ul + 640.0, ur + 512.0), (ul, ul), (np.zeros_like(ul), np.zeros_like(ur))):
+        _check(bino.triangulate, RIG, uv_l, uv_r, 1e9)
+        _check(bino.triangulate_sets, RIG, uv_l[None], uv_r[None], 1e9)
+        _check(bino.ray_gap, uv_l * 1e-3, uv_r * 1e-3, RIG.rotation, RIG.translation)
+        _check(sv.triangulate, RIG, uv_l, uv_r)
+        _check(sv.make_view, np.arange(len(ul)), uv_l, uv_r)
+        _check(sfm.pnp_pose, p, uv_l, RIG.left)
+    _check(bino.ray_gap, p, q, RIG.rotation, RIG.translation)  # wrong shapes
+    _check(bino.calibrator_pose, p, q)
+
+
+@PROFILE
+@given(_arrays((6, 3)), _arrays((7,)), _arrays((6,)), st.integers(2, 4).flatmap(lambda n: st.tuples(_arrays((n, 6)), _arrays((n, 6)))))
+def test_property_binocular_calibrator(points, distances, start, poses):
+    _check(bino.with_virtual, points)
+    _check(bino.distances_to_p7, bino.with_virtual(points))
+    _check(bino.distances_to_p7, np.zeros((8, 3)))
+    assert isinstance(bino.layout_problem(distances), str)
+    _check(bino.solve_calibrator_layout, np.abs(distances), start)
+    pairs = bino.all_pairs(6)
+    _check(bino.modify_observed_error, points, pairs, np.abs(distances[0]) * np.ones(len(pairs)))
+    _check(bino.modify_observed_errors, points[None], pairs, distances[0] * np.ones(len(pairs)))
+    _check(bino.modify_observed_error, np.zeros((6, 3)), pairs, np.ones(len(pairs)))
+    robot, sensor = (np.stack([_pose(v) for v in x]) for x in poses)
+    _check(bino.motion_axes, robot)
+    _check(bino.preliminary_handeye, robot, sensor)
+    layout = bino.with_virtual(points)
+    seen = np.broadcast_to(layout, (len(robot), 8, 3))
+    _check(bino.correct_transformation, robot, S2F, seen, seen + points[0] * 1e-3)
+    try:
+        bino.check_rotation_axes(robot)
+    except CalibrationError:
+        pass
+
+
+@PROFILE
+@given(_arrays((3, 3)), _arrays((3, 3)), _arrays((6,)))
+def test_property_workpiece_equations(datums, rotation, pose):
+    _check(wp.check_datums, datums, DATUMS_WORK)
+    _check(wp.rps_equations, _pose(pose), datums, DATUMS_WORK)
+    _check(wp.orthogonality, rotation)
+
+
+@PROFILE
+@given(st.integers(0, 8).flatmap(lambda n: st.tuples(_arrays((n, 3)), _arrays((n, 3)))), st.sampled_from([20.0, 0.0, -1.0]), st.sampled_from([2.0, 0.0, -1.0]))
+def test_property_weighted_icp(data, z_weight, max_pair):
+    moving, reference = data
+    for a, b in ((moving * 1e-2, reference * 1e-2), (moving * 1e-2, moving * 1e-2 + 0.01), (np.zeros_like(moving), np.zeros_like(moving))):
+        try:
+            out = icp.weighted_icp(a, b, z_weight=z_weight, max_pair_mm=max_pair, max_iterations=20)
+        except CalibrationError:
+            continue
+        assert np.isfinite(out.transform).all() and np.isfinite(out.rms_mm)
+
+
+@PROFILE
+@given(
+    hnp.arrays(np.float64, st.tuples(st.integers(0, 24), st.integers(0, 24)), elements=st.floats(0.0, 1.0, width=64)),
+    st.sampled_from([0.0, 0.34, 1.0, 2.5, 1e3, 1e8, -1.0]),
+    st.sampled_from([(0.25, 0.5), (0.5, 0.25), (-1.0, 2.0), (0.0, 0.0)]),
+)
+def test_property_coc(image, delta, thresholds):
+    """Rectification and centre detection on any small image: a finite image or centre, or
+    refused (an oversized window is refused before its allocation)."""
+    _check(coc.rectify_coc, image, delta)
+    _check(coc.rectify_coc_reference, image, delta)
+    _check(coc.rectify_cocs, [image], [delta])
+    _check(coc.image_gradients, image)
+    for img in (image, DOT, np.zeros_like(DOT)):
+        _check(coc.detect_centre, img, (0, 0), *thresholds)
+        _check(coc.detect_centres, [img], [(0, 0)], *thresholds)
+
+
+KR16 = load_robot("kuka_kr16_2")
+
+
+@settings(PROFILE, max_examples=20)
+@given(_arrays((6,)), st.integers(0, 4).flatmap(lambda n: _arrays((n, 6))), _arrays((30,)), _arrays((6,)), st.sampled_from([0.1, 0.0, -1.0, 10.0]))
+def test_property_robot(q, many, dp, pose, margin):
+    q, many = q * 1e-2, many * 1e-2
+    _check(KR16.fk, q)
+    _check(KR16.fk_many, many)
+    _check(KR16.jacobian, q)
+    _check(KR16.ik, KR16.fk(q), q * 0.9)
+    _check(KR16.ik, _pose(pose), q, max_iter=20)
+    _check(KR16.with_parameters, KR16.parameters() + dp * 1e-2)
+    _check(KR16.random_configurations, np.random.default_rng(0), len(many), margin)
+    for vec in (KR16.parameters() + dp, KR16.parameters() * 0.0):
+        try:
+            robot = KR16.with_parameters(vec)
+        except CalibrationError:
+            continue
+        _check(reach.reach_bound, robot)
+        bound = reach.reach_bound(robot)
+        _check(bound.excess, _pose(pose))
+        _check(bound.margin_mm)
+
+
+BA_POINTS = CUBE[:, [0, 1, 2]] * 0.5 + [0.0, 0.0, 850.0]
+BA_POSES = np.stack([np.eye(4), geo.make_transform(geo.euler_zyx_to_matrix(1.0, 0.5, 0.0), [5.0, 0.0, 0.0])])
+
+
+def _views(world2cam, points, noise):
+    """Views of every marker from each left-camera pose, with pixel noise ``noise`` ``(2, M, 2)``."""
+    views = []
+    for w in world2cam:
+        uv_left, uv_right = RIG.project(geo.apply(w, points))
+        views.append(sv.make_view(np.arange(len(points)), uv_left + noise[0], uv_right + noise[1]))
+    return views
+
+
+@settings(PROFILE, max_examples=15)
+@given(_arrays((6, 3)), _arrays((2, 6)), _arrays((2, 6, 2)), st.sampled_from([1.0, 0.0, -1.0]))
+def test_property_bundle(points, poses, noise, sigma):
+    """Bundle adjustment and pose refinement of random markers in front of the rig: finite
+    poses, points and residuals, or refused."""
+    pts = points * [0.2, 0.2, 0.05] + [0.0, 0.0, 850.0]
+    w2c = np.stack([_pose(v * 1e-3) for v in poses])
+    try:
+        views = _views(w2c, pts, noise * 1e-3)
+    except CalibrationError:
+        return
+    kw = {"sigma_px": sigma, "sigma_mm": sigma}
+    _check(bundle.bundle_adjust, RIG, views, w2c, pts + noise[0, :, :1] * 1e-3, fixed_view=0, max_nfev=20, **kw)
+    _check(bundle.bundle_adjust, RIG, views, w2c, np.zeros_like(pts), fixed_view=0, max_nfev=20, **kw)
+    _check(bundle.refine_camera_pose, RIG, views[1], pts, w2c[1], **kw)
+    _check(sfm.cluster_images, sfm.image_graph(views), 3)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -104,7 +104,31 @@ def triangulate_sets(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> 
 
 
 def ray_gap(x_left, x_right, rotation, translation) -> np.ndarray:
-    """Closest distance (mm) between the rays of normalised points ``(N, 2)`` of both cameras."""
+    """Closest distance (mm) between the rays of normalised points ``(N, 2)`` of both cameras.
+
+    Parameters
+    ----------
+    x_left, x_right : array_like, shape (N, 2)
+        Normalised image points of the left and the right camera.
+    rotation : array_like, shape (3, 3)
+        Rotation of ``left2right``.
+    translation : array_like, shape (3,)
+        Translation of ``left2right``, mm.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N,)
+        Gap between the two rays of each point, mm.
+
+    Raises
+    ------
+    CalibrationError
+        Wrong shapes, NaN or inf, or a left and a right ray are parallel.
+    """
+    x_left = geo.check_shape("x_left", x_left, (None, 2))
+    x_right = geo.check_shape("x_right", x_right, (x_left.shape[0], 2))
+    rotation = geo.check_shape("rotation", rotation, (3, 3))
+    translation = geo.check_shape("translation", translation, (3,))
     d1 = np.column_stack([x_left, np.ones(len(x_left))])
     d2 = np.column_stack([x_right, np.ones(len(x_right))]) @ rotation  # R^T d, row-wise
     c2 = -rotation.T @ translation

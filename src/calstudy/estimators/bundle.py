@@ -77,6 +77,12 @@ def _euclid_sigma(p_cam: np.ndarray, sigma_mm: float, depth_ref_mm: float | None
         )
     if depth_ref_mm is None:
         return np.full(len(p_cam), float(sigma_mm))
+    behind = np.flatnonzero(~(p_cam[:, 2] > 0.0))
+    if behind.size:
+        k = int(behind[0])
+        raise CalibrationError(
+            f"observation {k} triangulates at depth {p_cam[k, 2]:.3g} mm, not in front of the rig"
+        )
     return sigma_mm * (p_cam[:, 2] / depth_ref_mm) ** 2
 
 
@@ -147,6 +153,24 @@ def _check_start(views: list[View], world2cam, points, fixed_view: int, sigma_px
     if not sigma_px > 0:
         raise CalibrationError(f"sigma_px ({sigma_px}) must be > 0")
     return poses, pts
+
+
+def _check_in_front(rig: StereoRig, poses: np.ndarray, pts: np.ndarray, obs) -> None:
+    """Raise unless the start of every observed marker lies in front of both cameras of each
+    view that sees it (else its projection divides by a depth of zero or flips)."""
+    view_idx, marker_idx = obs[0], obs[1]
+    p_left = (
+        np.einsum("nij,nj->ni", poses[view_idx, :3, :3], pts[marker_idx])
+        + poses[view_idx, :3, 3]
+    )
+    depth = np.minimum(p_left[:, 2], geo.apply(rig.left2right, p_left)[:, 2])
+    bad = np.flatnonzero(~(depth > 0.0))
+    if bad.size:
+        k = int(bad[0])
+        raise CalibrationError(
+            f"the start of marker {int(marker_idx[k])} lies at depth {depth[k]:.3g} mm in view "
+            f"{int(view_idx[k])}: every start point must lie in front of both cameras"
+        )
 
 
 def _observed_markers(marker_idx: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -279,6 +303,11 @@ def _normal_lm(fun, jac, x0: np.ndarray, max_nfev: int, tol: float = 1e-10) -> _
             except np.linalg.LinAlgError:
                 mu, nu = max(mu * nu, MU_REJECTED), 2.0 * nu
                 continue
+            except ValueError:  # cho_factor refuses NaN or inf: more damping cannot help
+                raise CalibrationError(
+                    f"the normal equations hold NaN or inf after {nfev} evaluations: the start "
+                    "is too far from a solution (a marker next to a camera?)"
+                ) from None
             f_new = fun(x + dx)
             nfev += 1
             cost_new = 0.5 * float(f_new @ f_new)
@@ -397,13 +426,14 @@ def bundle_adjust(
     Raises
     ------
     CalibrationError
-        On bad shapes, non-finite starts, or if the adjustment diverges: the budget runs out or the
-        RMS reprojection error stays above ``max_rms_px``.
+        On bad shapes, non-finite starts, a start point behind a camera, or if the adjustment
+        diverges: the budget runs out or the RMS reprojection error stays above ``max_rms_px``.
     """
     poses, pts = _check_start(views, world2cam, points, fixed_view, sigma_px)
     obs = _observations(rig, views)
     sigma_obs = _euclid_sigma(obs[4], sigma_mm, depth_ref_mm)[:, None]
     layout = _Layout.of(poses, pts, fixed_view, _observed_markers(obs[1], pts))
+    _check_in_front(rig, poses, pts, obs)
     fun, jac, pattern = _objective(rig, obs, layout, sigma_px, sigma_obs)
     res = _solve(fun, jac, layout.x0, pattern, jacobian, max_nfev)
     return _result(rig, obs, layout, res, max_rms_px)
@@ -427,6 +457,11 @@ def refine_camera_pose(
     view_idx, marker_idx, uv_l, uv_r, p_cam = _observations(rig, [view])
     if view.ids.size < 4:
         raise CalibrationError(f"PnP needs at least 4 markers; the view has {view.ids.size}")
+    if marker_idx.max() >= pts.shape[0]:
+        raise CalibrationError(
+            f"marker id {marker_idx.max()} has no row in points ({pts.shape[0]})"
+        )
+    _check_in_front(rig, init[None], pts, (view_idx, marker_idx))
     sigma_obs = _euclid_sigma(p_cam, sigma_mm, depth_ref_mm)[:, None]
 
     def fun(x):

@@ -53,6 +53,11 @@ def _check_rectify(image, delta_px: float) -> np.ndarray:
             f"circle-of-confusion radius {delta_px} px is below 1/3 px: the 3-delta window "
             "holds a single pixel and there is nothing to rectify"
         )
+    if 3.0 * delta_px > sum(img.shape):  # the window would dwarf the image (and the memory)
+        raise CalibrationError(
+            f"circle-of-confusion radius {delta_px} px: its 3-delta window of radius "
+            f"{3.0 * delta_px:.4g} px exceeds the {img.shape[1]} x {img.shape[0]} px image"
+        )
     return img
 
 
@@ -445,8 +450,20 @@ def detect_centres(
 
 def image_gradients(image) -> tuple[np.ndarray, np.ndarray]:
     """Sobel derivatives ``(gx, gy)`` of an image (3 x 3 aperture, replicated border, float32):
-    those of :func:`detect_centre` and :func:`rectify_coc`."""
+    those of :func:`detect_centre` and :func:`rectify_coc`.
+
+    Raises
+    ------
+    CalibrationError
+        The image is not 2-D, is empty, or holds NaN or inf pixels.
+    """
     img = np.asarray(image, dtype=np.float32)
+    if img.ndim != 2 or img.size == 0:
+        raise CalibrationError(f"image gradients need a non-empty 2-D image, got {img.shape}")
+    if not np.isfinite(img.sum()):
+        raise CalibrationError(
+            f"the {img.shape[1]} x {img.shape[0]} px image has NaN or inf pixels"
+        )
     gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
     return gx, gy

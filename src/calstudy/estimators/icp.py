@@ -285,11 +285,14 @@ def weighted_icp(
     Raises
     ------
     CalibrationError
-        On an empty or non-finite cloud, bad weights, or clouds that do not overlap (fewer than
-        ``MIN_PAIRS`` points within ``max_pair_mm`` of the reference).
+        On an empty or non-finite cloud, a moving cloud on one line (or pairs on one line), bad
+        weights, or clouds that do not overlap (fewer than ``MIN_PAIRS`` points within
+        ``max_pair_mm`` of the reference).
     """
     p0 = _check_cloud("moving cloud", moving)
     q = _check_cloud("reference cloud", reference)
+    # on one line the turn about that line is undetermined
+    geo.check_not_collinear("points of the moving cloud", p0)
     if not (z_weight > 0 and z_threshold_mm > 0 and max_pair_mm > 0 and max_iterations >= 1):
         raise CalibrationError(
             f"z_weight {z_weight}, z_threshold_mm {z_threshold_mm}, max_pair_mm {max_pair_mm} must "
@@ -327,7 +330,13 @@ def weighted_icp(
         pairs = (cur.take(rows, axis=0), q.take(idx.take(rows), axis=0))
         # the centroid of the moving points, shared by the step and its convergence test
         centroid = pairs[0].sum(axis=0) / n_pairs
-        step, size = _weighted_rigid_step(*pairs, w, centroid)
+        try:
+            step, size = _weighted_rigid_step(*pairs, w, centroid)
+        except np.linalg.LinAlgError:
+            raise CalibrationError(
+                f"the {n_pairs} paired points at iteration {it} lie on one line: the turn "
+                "about it is undetermined"
+            ) from None
         total = step @ total
         last = (step, pairs)
         if (stop_below_noise and size < NOISE_STEP) or _moves_less_than(

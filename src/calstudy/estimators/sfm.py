@@ -109,7 +109,7 @@ def pnp_pose(object_points, image_uv, camera: PinholeCamera) -> np.ndarray:
     Raises
     ------
     CalibrationError
-        With fewer than 4 points, on bad shapes or if OpenCV finds no pose.
+        With fewer than 4 points, on bad shapes or if OpenCV fails or finds no finite pose.
     """
     obj = geo.check_shape("object_points", object_points, (None, 3))
     uv = geo.check_shape("image_uv", image_uv, (obj.shape[0], 2))
@@ -117,11 +117,16 @@ def pnp_pose(object_points, image_uv, camera: PinholeCamera) -> np.ndarray:
         raise CalibrationError(f"PnP needs at least 4 markers; got {obj.shape[0]}")
     check_ideal(camera)
     k = camera.K
-    ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
-    if not ok:
-        raise CalibrationError(f"cv2.solvePnP found no pose for the {obj.shape[0]} markers")
+    n = obj.shape[0]
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-16)
-    rvec, tvec = cv2.solvePnPRefineLM(obj, uv, k, None, rvec, tvec, criteria=criteria)
+    try:  # OpenCV asserts on degenerate markers (all on one point or line)
+        ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
+        if ok:
+            rvec, tvec = cv2.solvePnPRefineLM(obj, uv, k, None, rvec, tvec, criteria=criteria)
+    except cv2.error as exc:
+        raise CalibrationError(f"cv2.solvePnP failed on the {n} markers: {exc.err}") from None
+    if not (ok and np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
+        raise CalibrationError(f"cv2.solvePnP found no pose for the {n} markers")
     return geo.make_transform(cv2.Rodrigues(rvec)[0], tvec.ravel())
 
 
