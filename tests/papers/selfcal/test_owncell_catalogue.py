@@ -23,7 +23,7 @@ from calstudy.models.kinematics import Link, Robot
 from calstudy.models.robots import load_robot
 from calstudy.models.urdf import robot_from_urdf
 from calstudy.papers.selfcal import design, measured
-from calstudy.papers.selfcal.experiments import suggest_poses
+from calstudy.papers.selfcal.experiments import simulate_cell_rows, suggest_poses
 from calstudy.papers.selfcal.identify import Measurements
 from calstudy.papers.selfcal.model import (
     IS_LENGTH,
@@ -412,6 +412,53 @@ def test_planning_uses_your_sensor_and_is_compared_with_your_poses(tmp_path):
         suggest_poses(scenario, own, 6, np.random.default_rng(1), n_poses=25)
     with pytest.raises(CalibrationError, match="standoff_mm = -1.0 must be a positive"):
         suggest_poses(scenario, own, 6, np.random.default_rng(1), standoff_mm=-1.0)
+
+
+def _example_fit():
+    from calstudy.core.paths import data_path
+
+    own = measured.read_cell(data_path("selfcal", "example_measurements"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", CalibrationWarning)
+        return own, measured.identify_cell(own.calibration, own.start, own.noise)
+
+
+def test_planned_poses_beat_random_ones_measured_on_your_cell():
+    scenario = load_scenario()
+    own, fit = _example_fit()
+
+    def measured_comparison(seed):
+        return suggest_poses(
+            scenario, own, 15, np.random.default_rng(seed), truth=fit, replications=50
+        )[2]
+
+    first = measured_comparison(1)
+    assert first["replications"] == 50 and first["noise_sigma_mm"] == fit.sigma_mm
+    assert first["failed_planned"] == first["failed_random"] == 0
+    # the identified model at the held-out rows: within a few noise sigmas of the truth
+    assert 0.0 < first["planned_rms_mm"] < 3 * fit.sigma_mm
+    assert first["planned_rms_mm"] < first["random_rms_mm"]
+    assert first["measured_ratio_ci_low"] > 1.0  # planned poses measure better than random
+    assert measured_comparison(1) == first  # deterministic for a seed
+    assert measured_comparison(2)["measured_ratio_median"] != first["measured_ratio_median"]
+    # the simulated rows put each centre where the truth puts it, plus the noise asked for
+    q, sphere = own.calibration.Q, own.calibration.sphere
+    rows = simulate_cell_rows(
+        fit.params, q, sphere, own.spheres, 0.5, True, np.random.default_rng(3)
+    )
+    model = default_model()
+    assert np.allclose(model.points(fit.params, q, rows.C_true), rows.P_ref, atol=1e-9)
+    assert 0.35 < np.std(rows.C - rows.C_true) < 0.65 and rows.cov.shape == (len(q), 3, 3)
+
+
+@pytest.mark.parametrize("replications", [1, 5])
+def test_measured_comparison_refuses_too_few_replications(replications):
+    own, fit = _example_fit()
+    with pytest.raises(CalibrationError, match=f"replications = {replications}: at least 6"):
+        suggest_poses(
+            load_scenario(), own, 15, np.random.default_rng(1), truth=fit,
+            replications=replications,
+        )
 
 
 # ---------------------------------------------------------------------------------------------

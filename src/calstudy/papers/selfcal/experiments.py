@@ -26,6 +26,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -33,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.core.config import read_toml, scenario_file
-from calstudy.core.errors import CalibrationError
+from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.montecarlo import Experiment, child_rng, streams, trial_rng
 from calstudy.core.verdicts import median_interval
 from calstudy.papers.selfcal.design import (
@@ -51,7 +52,7 @@ from calstudy.papers.selfcal.identify import (
     identify,
     scaled_jacobian,
 )
-from calstudy.papers.selfcal.measured import MeasuredCell, write_cell
+from calstudy.papers.selfcal.measured import CellFit, MeasuredCell, identify_cell, write_cell
 from calstudy.papers.selfcal.model import (
     IS_LENGTH,
     N_PARAMS,
@@ -428,6 +429,10 @@ def candidate_views(scenario: Scenario, spheres_base, per_sphere: int, rng) -> t
 
 #: random selections of the same size that the planned poses are compared with
 RANDOM_SELECTIONS = 200
+#: replications of the measured comparison of planned and random poses (the notebook's default)
+MEASURED_REPLICATIONS = 200
+#: fewest replications whose median has a 95 % order-statistic interval
+MIN_REPLICATIONS = 6
 
 
 def predicted_std(blocks) -> float:
@@ -452,6 +457,8 @@ def suggest_poses(
     field_mm: float | None = None,
     depth_mm: float | None = None,
     free=None,
+    truth: CellFit | None = None,
+    replications: int = MEASURED_REPLICATIONS,
 ) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
     """Poses to measure next time on a user's cell, planned for the user's sensor.
 
@@ -475,13 +482,29 @@ def suggest_poses(
         The selection against :data:`RANDOM_SELECTIONS` random choices of ``n_poses`` from the
         same candidates: median of the ratio random / planned of :func:`predicted_std` with its
         95 % order-statistic interval (``ratio_median``, ``ratio_ci_low``, ``ratio_ci_high``).
+        With ``truth``, also the measured comparison of :func:`measured_selection_errors`
+        (``replications``, ``noise_sigma_mm``, ``planned_rms_mm``, ``random_rms_mm``, the
+        paired ratio ``measured_ratio_median``, ``measured_ratio_ci_low``,
+        ``measured_ratio_ci_high`` and the failed identifications ``failed_planned``,
+        ``failed_random``).
+
+    Other Parameters
+    ----------------
+    truth : CellFit, optional
+        The cell's identification (:func:`~calstudy.papers.selfcal.measured.identify_cell`):
+        its parameters are taken as the truth of a Monte Carlo of measured errors.
+    replications : int
+        Replications of that Monte Carlo (default :data:`MEASURED_REPLICATIONS`; at least
+        :data:`MIN_REPLICATIONS`).
 
     Raises
     ------
     CalibrationError
-        Fewer candidates than poses asked for (plan more views per sphere), or a sensor
-        geometry that is not positive.
+        Fewer candidates than poses asked for (plan more views per sphere), a sensor
+        geometry that is not positive, or fewer than :data:`MIN_REPLICATIONS` replications.
     """
+    if truth is not None:
+        _check_replications(replications)
     given = {"standoff_mm": standoff_mm, "field_mm": field_mm, "depth_mm": depth_mm}
     own = cell.sensor_geometry or {}
     sensor = {
@@ -532,7 +555,159 @@ def suggest_poses(
         "ratio_ci_high": hi,
         **sensor,
     }
+    if truth is not None:
+        random |= measured_selection_errors(
+            cell, truth, cand_q, used[cand_s], chosen, replications, rng
+        )
     return suggested, compare, random
+
+
+def _check_replications(replications) -> None:
+    if int(replications) != replications or replications < MIN_REPLICATIONS:
+        raise CalibrationError(
+            f"replications = {replications}: at least {MIN_REPLICATIONS} are needed for a 95 % "
+            "interval of the median ratio"
+        )
+
+
+def simulate_cell_rows(truth, Q, sphere, spheres_part, sigma_mm: float, declared: bool, rng):
+    """A measured cell's rows simulated from its identified parameters.
+
+    Each row is the sphere centre in the sensor frame that the parameters ``truth`` put at the
+    joint angles, plus Gaussian noise of ``sigma_mm`` per axis (the whole per-axis noise of a
+    row: sensor, repeatability and tracker together); the tracker reading is the sphere's
+    reading.
+
+    Parameters
+    ----------
+    truth : array_like, shape (30,)
+        The parameters taken as the truth (mm, rad).
+    Q : array_like, shape (m, 6)
+        Joint angles, rad.
+    sphere : array_like, shape (m,)
+        Index of each row's sphere into ``spheres_part``.
+    spheres_part : array_like, shape (k, 3)
+        Sphere centres in the part frame, mm.
+    sigma_mm : float
+        Per-axis standard deviation of a row, mm.
+    declared : bool
+        Give the rows their covariance (``sigma_mm**2 I``), as a cell with declared noise.
+    rng : numpy.random.Generator
+        The noise stream.
+
+    Returns
+    -------
+    Measurements
+        ``C_true`` the noise-free centres.
+    """
+    Q = np.asarray(Q, float)
+    sphere = np.asarray(sphere, int)
+    p = np.asarray(spheres_part, float)[sphere]
+    poses = default_model().sensor2part(np.asarray(truth, float), Q)
+    local = np.einsum("mji,mj->mi", poses[:, :3, :3], p - poses[:, :3, 3])
+    cov = np.tile(sigma_mm**2 * np.eye(3), (len(Q), 1, 1)) if declared else None
+    return Measurements(Q, local + rng.normal(0.0, sigma_mm, local.shape), p, sphere, local, cov)
+
+
+def measured_selection_errors(
+    cell: MeasuredCell,
+    truth: CellFit,
+    cand_q,
+    cand_sphere,
+    chosen,
+    replications: int,
+    rng: np.random.Generator,
+) -> dict:
+    """Monte Carlo of the measured error of planned against random poses on a user's cell.
+
+    The cell's identified parameters are the truth; the noise is the declared one (the fit then
+    weights by it) or, without, the fit's per-axis residual scale. Per replication the planned
+    poses ``chosen`` and a random choice of as many from the same candidates are measured with
+    new noise (:func:`simulate_cell_rows`), each identified from the cell's start as the cell
+    was (:func:`~calstudy.papers.selfcal.measured.identify_cell`, outlier rule on; the column
+    check is skipped: the columns are right by construction), and scored by the RMS position
+    error at the cell's held-out validation rows (the calibration rows when it has none):
+    identified against true model, at their joint angles and sensor-frame centres, without noise.
+
+    Parameters
+    ----------
+    cell : MeasuredCell
+        The cell (start, spheres, noise, validation rows).
+    truth : CellFit
+        Its identification.
+    cand_q : array_like, shape (c, 6)
+        Candidate joint angles, rad.
+    cand_sphere : array_like, shape (c,)
+        Each candidate's sphere (index into ``cell.spheres``).
+    chosen : array_like of int, shape (n,)
+        The planned candidates.
+    replications : int
+        At least :data:`MIN_REPLICATIONS`.
+    rng : numpy.random.Generator
+        Replication ``r`` draws from ``child_rng(rng, "measured replication r")`` alone.
+
+    Returns
+    -------
+    dict
+        ``replications``, ``noise_sigma_mm``, medians ``planned_rms_mm`` and ``random_rms_mm``,
+        the paired ratio random / planned (``measured_ratio_median``, ``measured_ratio_ci_low``,
+        ``measured_ratio_ci_high``; order-statistic 95 % interval over the replications where
+        both identifications succeeded) and the failed identifications ``failed_planned``,
+        ``failed_random``.
+
+    Raises
+    ------
+    CalibrationError
+        Fewer than :data:`MIN_REPLICATIONS` replications, or fewer pairs that both succeeded.
+    """
+    _check_replications(replications)
+    model = default_model()
+    cand_q, cand_sphere = np.asarray(cand_q, float), np.asarray(cand_sphere, int)
+    chosen = np.asarray(chosen, int)
+    declared = cell.noise is not None
+    sigma = truth.sigma_mm
+    sites = cell.validation if len(cell.validation) else cell.calibration
+    true_points = model.points(truth.params, sites.Q, sites.C)
+
+    def error(picks, noise_rng) -> float:
+        meas = simulate_cell_rows(
+            truth.params, cand_q[picks], cand_sphere[picks], cell.spheres, sigma, declared,
+            noise_rng,
+        )
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", CalibrationWarning)
+                fit = identify_cell(meas, cell.start, cell.noise, check_columns=False)
+        except CalibrationError:
+            return math.nan
+        d = model.points(fit.params, sites.Q, sites.C) - true_points
+        return float(np.sqrt(np.mean(np.einsum("ij,ij->i", d, d))))
+
+    planned, random = [], []
+    for r in range(int(replications)):
+        rep = child_rng(rng, f"measured replication {r}")
+        picks = np.sort(child_rng(rep, "selection").choice(len(cand_q), len(chosen), replace=False))
+        planned.append(error(chosen, child_rng(rep, "planned measurements")))
+        random.append(error(picks, child_rng(rep, "random measurements")))
+    planned_a, random_a = np.array(planned), np.array(random)
+    both = np.isfinite(planned_a) & np.isfinite(random_a)
+    if both.sum() < MIN_REPLICATIONS:
+        raise CalibrationError(
+            f"only {int(both.sum())} of {replications} replications identified both selections "
+            f"(at least {MIN_REPLICATIONS} needed)"
+        )
+    med, lo, hi = median_interval(random_a[both] / planned_a[both])
+    return {
+        "replications": int(replications),
+        "noise_sigma_mm": float(sigma),
+        "planned_rms_mm": float(np.median(planned_a[both])),
+        "random_rms_mm": float(np.median(random_a[both])),
+        "measured_ratio_median": med,
+        "measured_ratio_ci_low": lo,
+        "measured_ratio_ci_high": hi,
+        "failed_planned": int((~np.isfinite(planned_a)).sum()),
+        "failed_random": int((~np.isfinite(random_a)).sum()),
+    }
 
 
 def _measure_selection(scenario, st, Q, sphere, chosen, rng) -> Measurements:
