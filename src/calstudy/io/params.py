@@ -26,6 +26,8 @@ from calstudy.core.schema import NonNegativeFinite, PositiveFinite, Schema, vali
 MAX_COUNT = 100_000
 
 Count = Annotated[int, Field(ge=1, le=MAX_COUNT)]
+#: replications whose median has a 95 % order-statistic interval (at least 6)
+Replications = Annotated[int, Field(ge=6, le=MAX_COUNT)]
 CountOrNone = Annotated[int, Field(ge=0, le=MAX_COUNT)]
 Products = Annotated[int, Field(ge=3, le=MAX_COUNT)]
 Positives = Annotated[list[PositiveFinite], Field(min_length=1, max_length=MAX_COUNT)]
@@ -114,6 +116,7 @@ class Notebook03(NotebookParameters):
     n_selection_trials: Count
     selection_sizes: Counts
     candidates_per_sphere: Count
+    n_pose_replications: Replications
 
 
 class Notebook04(NotebookParameters):

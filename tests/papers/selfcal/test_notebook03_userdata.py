@@ -33,5 +33,9 @@ def test_notebook03_runs_on_the_example_measurements(tmp_path, monkeypatch):
     assert bool(summary["meets_requirement"][0])
     base = pd.read_csv(out / "cell_base_parameters.csv")
     assert len(base) == 30
+    versus = pd.read_csv(out / "cell_planned_vs_random.csv")
+    assert versus["replications"][0] == params["n_pose_replications"]
+    assert versus["measured_ratio_ci_low"][0] <= versus["measured_ratio_median"][0]
+    assert "simulated re-measurements of your cell" in text
     for name in ("cell_suggested_poses.csv", "pose_selection.csv", "pose_selection.png"):
         assert (out / name).is_file(), name

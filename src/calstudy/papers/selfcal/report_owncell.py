@@ -155,3 +155,26 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str):
     ax.set_title(title)
     legend_outside(ax)
     return fig
+
+
+def measured_selection_sentence(random: dict) -> str:
+    """One sentence on the measured comparison of planned and random poses
+    (:func:`calstudy.papers.selfcal.experiments.measured_selection_errors`)."""
+    lo, hi = random["measured_ratio_ci_low"], random["measured_ratio_ci_high"]
+    verdict = (
+        "the planned poses measure better than random ones"
+        if lo > 1.0
+        else "random poses measure better than the planned ones"
+        if hi < 1.0
+        else "the replications cannot tell the planned poses from random ones"
+    )
+    failed = random["failed_planned"] + random["failed_random"]
+    return (
+        f"Over {random['replications']} simulated re-measurements of your cell (its identified "
+        f"parameters as the truth, {random['noise_sigma_mm']:.3g} mm noise per axis), the RMS "
+        f"error at the held-out placements was {random['planned_rms_mm']:.3g} mm with the "
+        f"planned poses and {random['random_rms_mm']:.3g} mm with random ones (medians); the "
+        f"ratio random / planned has median {random['measured_ratio_median']:.3g} with 95 % "
+        f"interval [{lo:.3g}, {hi:.3g}]: {verdict}"
+        + (f" ({failed} identifications failed and were left out)." if failed else ".")
+    )
