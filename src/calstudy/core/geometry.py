@@ -350,7 +350,7 @@ def rotation_angle(rotation) -> np.ndarray:
     ``atan2(|v|, tr R - 1)`` with ``v = (R32 - R23, R13 - R31, R21 - R12)``: ``|v| = 2 sin a``
     and ``tr R - 1 = 2 cos a``, each known to a few ulps, so the angle is accurate to about
     1e-16 rad at every angle (an arccos of the trace alone loses half the digits near 0). It
-    agrees with scipy's ``_rotation().from_matrix(R).magnitude()`` to 1e-14 rad (a test checks it)
+    agrees with scipy's ``Rotation.from_matrix(R).magnitude()`` to 1e-14 rad (a test checks it)
     at a sixth of the cost, which matters for the hundreds of errors a Monte Carlo trial scores.
     """
     r = np.asarray(rotation, dtype=float)

@@ -78,6 +78,12 @@ class _Off:
 #: marks a field (``Annotated[float, ..., OFF]``) as a noise level an oracle may set to 0
 OFF = _Off()
 
+
+def noise_level(bound: float):
+    """The type of a noise level: finite, >= 0 and <= ``bound`` (its physical bound), and 0
+    accepted outside its ledger range (:data:`OFF`)."""
+    return Annotated[float, Field(ge=0, le=bound, allow_inf_nan=False), OFF]
+
 Bound = Annotated[float, Field(allow_inf_nan=False)]
 Interval = Annotated[list[Bound], Field(min_length=2, max_length=2)]
 

@@ -245,7 +245,7 @@ def trial_rng(
         if not isinstance(point, Mapping):
             raise CalibrationError(f"point must be a mapping, got {type(point).__name__}")
         _point_json(point)
-    return _rng(seed, _spawn_prefix(experiment), _check_index(trial, "trial"))
+    return _rng(seed, _words(experiment), _check_index(trial, "trial"))
 
 
 def child_rng(rng: np.random.Generator, component: str) -> np.random.Generator:
@@ -287,16 +287,21 @@ def child_rng(rng: np.random.Generator, component: str) -> np.random.Generator:
     """
     if not isinstance(component, str) or not component:
         raise CalibrationError(f"component must be a non-empty str, got {component!r}")
-    seq = getattr(getattr(rng, "bit_generator", None), "seed_seq", None)
-    if not isinstance(seq, np.random.SeedSequence):
-        raise CalibrationError(
-            f"child_rng needs a generator built from a numpy SeedSequence (as the engine's and "
-            f"numpy.random.default_rng(seed) are), got {type(rng).__name__}"
-        )
+    seq = _seed_sequence(rng, "child_rng")
     sequence = np.random.SeedSequence(
         entropy=seq.entropy, spawn_key=(*seq.spawn_key, *_words("component:" + component))
     )
     return type(rng)(np.random.PCG64(sequence))
+
+
+def _seed_sequence(rng: object, who: str) -> np.random.SeedSequence:
+    seq = getattr(getattr(rng, "bit_generator", None), "seed_seq", None)
+    if not isinstance(seq, np.random.SeedSequence):
+        raise CalibrationError(
+            f"{who} needs a generator built from a numpy SeedSequence (as the engine's and "
+            f"numpy.random.default_rng(seed) are), got {type(rng).__name__}"
+        )
+    return seq
 
 
 def streams(rng: np.random.Generator, *components: str) -> tuple[np.random.Generator, ...]:
@@ -336,11 +341,7 @@ def streams(rng: np.random.Generator, *components: str) -> tuple[np.random.Gener
     """
     if not components or len(set(components)) != len(components):
         raise CalibrationError(f"streams needs distinct component names, got {components!r}")
-    seq = getattr(getattr(rng, "bit_generator", None), "seed_seq", None)
-    if not isinstance(seq, np.random.SeedSequence):
-        raise CalibrationError(
-            f"streams needs a generator built from a numpy SeedSequence, got {type(rng).__name__}"
-        )
+    _seed_sequence(rng, "streams")
     (base,) = rng.spawn(1)
     return tuple(child_rng(base, name) for name in components)
 
@@ -360,10 +361,6 @@ def _check_index(value: object, what: str) -> int:
 def _words(text: str) -> tuple[int, ...]:
     digest = hashlib.sha256(text.encode("utf-8")).digest()
     return tuple(int.from_bytes(digest[i : i + 4], "little") for i in range(0, 32, 4))
-
-
-def _spawn_prefix(experiment: str) -> tuple[int, ...]:
-    return _words(experiment)
 
 
 def _rng(
@@ -616,7 +613,7 @@ def run(
     exp = experiment
     point_jsons = [_point_json(point) for point in exp.points]
     jobs = [
-        _PointJob(exp.trial, exp.scenario, seed, _spawn_prefix(exp.name), point, i)
+        _PointJob(exp.trial, exp.scenario, seed, _words(exp.name), point, i)
         for i, (point, key) in enumerate(zip(exp.points, point_jsons, strict=True))
     ]
     cache = None if cache_dir is None else TrialCache(Path(cache_dir), exp, seed, point_jsons)
@@ -711,7 +708,7 @@ def trial_rows(
         experiment.trial,
         experiment.scenario,
         seed,
-        _spawn_prefix(experiment.name),
+        _words(experiment.name),
         pt,
         point,
     )

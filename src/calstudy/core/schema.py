@@ -67,6 +67,10 @@ Fraction = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
 PositiveInt = Annotated[int, Field(ge=1)]
 #: an integer >= 0
 NonNegativeInt = Annotated[int, Field(ge=0)]
+#: largest image side of any camera of the scenarios, px (today's sensors reach about 14,000)
+MAX_PIXELS = 20000
+#: an image side in pixels
+Pixels = Annotated[int, Field(ge=1, le=MAX_PIXELS)]
 
 
 class Schema(BaseModel):
@@ -458,10 +462,12 @@ __all__ = [
     "Documented",
     "Finite",
     "Fraction",
+    "MAX_PIXELS",
     "NonNegativeFinite",
     "NonNegativeInt",
     "PositiveFinite",
     "PositiveInt",
+    "Pixels",
     "Row",
     "Schema",
     "Vec2",

@@ -365,6 +365,12 @@ def _judge_bound(
     return Verdict(verdict, "bound", s.size, *figures, median_ok, worst_ok, rate, worst, note)
 
 
+#: Magnitude band of rule 4: the median within this factor of the published figure ...
+FACTOR = 1.5
+#: ... or within this many percentage points of a published percentage.
+BAND_PP = 10.0
+
+
 def judge(
     samples: object,
     *,
@@ -374,8 +380,8 @@ def judge(
     baseline: object = None,
     null: float | None = None,
     bound: float | None = None,
-    factor: float = 1.5,
-    band_pp: float = 10.0,
+    factor: float = FACTOR,
+    band_pp: float = BAND_PP,
     level: float = 0.95,
     min_trials: int = 200,
 ) -> Verdict:

@@ -470,8 +470,14 @@ def _check_diversity(r: np.ndarray, min_rotation: float) -> None:
             "orientations leave the hand-eye rotation undetermined; include rotating motions"
         )
     axes = rotvec[moving] / angles[moving, None]
-    cos = np.clip(np.abs(axes @ axes.T), 0.0, 1.0)
-    spread = float(np.arccos(cos.min()))
+    # the largest angle between two axes; an axis far enough from the first one settles it
+    # without the (M, M) matrix of every pair (M ~ N^2 / 2 motions)
+    spread = float(np.arccos(np.clip(np.abs(axes @ axes[0]), 0.0, 1.0).min()))
+    if spread < min_rotation:
+        spread = max(
+            float(np.arccos(np.clip(np.abs(axes[k : k + 512] @ axes.T), 0.0, 1.0).min()))
+            for k in range(0, len(axes), 512)
+        )
     if spread < min_rotation:
         raise CalibrationError(
             f"the {int(moving.sum())} rotating motions of the {len(r)} poses turn about one "

@@ -27,7 +27,7 @@ import numpy as np
 
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.handeye_refine import log_so3, pose_scale
-from calstudy.estimators.handeye_robust import robust_sigmas
+from calstudy.estimators.handeye_robust import outlier_limit, robust_sigmas
 
 #: false-alarm probability of the time-order break test over the whole series
 BREAK_ALPHA = 1e-4
@@ -158,7 +158,6 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
         Row after which the step is largest, the step (mm), the scatter ``s`` (mm) and the
         statistic's ratio to its Bonferroni limit at :data:`BREAK_ALPHA` (above 1: a break).
     """
-    from scipy.special import chdtri  # chi2.isf without importing scipy.stats
 
     keep = np.ones(len(a), bool) if weights is None else np.asarray(weights) > 0
     idx = np.flatnonzero(keep)
@@ -174,7 +173,7 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     # an outlier pose differs from both neighbours in time, a break from one only: leave the
     # outliers out (the outlier flag reports them); the end poses are compared with the two
     # poses next to them
-    lim = 2.0 * s2 * chdtri(6, 1e-3)
+    lim = 2.0 * s2 * outlier_limit(1e-3)
     prev = np.concatenate([[np.sum((v[0] - v[2]) ** 2)], d2])
     nxt = np.concatenate([d2, [np.sum((v[-1] - v[-3]) ** 2)]])
     inl = np.minimum(prev, nxt) <= lim
@@ -191,7 +190,7 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     # splits near the ends rest on few poses: leave the outer two out
     stat[:2] = stat[-2:] = 0.0
     j = int(np.argmax(stat))
-    limit = float(chdtri(6, BREAK_ALPHA / max(n - 5, 1)))
+    limit = outlier_limit(BREAK_ALPHA / max(n - 5, 1))
     return int(idx[j]), float(np.sqrt(step[j])), float(np.sqrt(s2)), float(stat[j] / limit)
 
 

@@ -27,9 +27,10 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from calstudy.claims import CLAIM_COLUMNS, VERDICTS
+from calstudy.claims import CLAIM_COLUMNS, VERDICTS, claim_register
 from calstudy.core.labels import claim_label
 from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
+from calstudy.core.verdicts import BAND_PP, FACTOR
 from calstudy.io.claims_cells import (
     Published,
     bound_value,
@@ -39,7 +40,7 @@ from calstudy.io.claims_cells import (
     published_value,
     typeset,
 )
-from calstudy.io.results import read_claims
+from calstudy.io.results import atomic_write, read_claims
 
 __all__ = [
     "COLUMNS",
@@ -257,11 +258,7 @@ class Target:
     band: tuple[float, float] = (0.0, 0.0)
 
 
-#: Widest band factor of the rule: a median within a factor 1.5 of the published figure.
-FACTOR = 1.5
-#: ... or within 10 percentage points of a published percentage.
-PERCENT_POINTS = 10.0
-_NOTE_BOUND = re.compile(r"\bbound\s*(?:<=|≤|>=|≥)\s*([0-9.]+)")
+_NOTE_BOUND = re.compile(r"\bbound\s*(?:<=|≤|>=|≥)\s*([0-9.]+(?:e[-+]?\d+)?)")
 
 
 def claim_target(claim, row: pd.Series | None) -> Target:
@@ -282,8 +279,8 @@ def claim_target(claim, row: pd.Series | None) -> Target:
     if pub is not None:
         value = float(np.mean(pub))
         if unit == "%":
-            return Target(value, "published", ((value - PERCENT_POINTS) / value,
-                                               (value + PERCENT_POINTS) / value))
+            return Target(value, "published", ((value - BAND_PP) / value,
+                                               (value + BAND_PP) / value))
         return Target(value, "published", (1 / FACTOR, FACTOR))
     if is_ratio(unit):
         return Target(1.0, "no effect", side)
@@ -493,7 +490,7 @@ def claims_figure(
     from calstudy.io.results import write_figure
 
     if register is None:
-        register = pd.read_csv(DATA_DIR / "claims.csv", dtype=str, keep_default_na=False)
+        register = claim_register()
     computed = {r["id"]: r for _, r in res.iterrows()}
     order = list(PAPERS) + sorted(set(register["paper"]) - set(PAPERS))
     order = [p for p in order if papers is None or p in papers]
@@ -669,9 +666,9 @@ KEY_FIGURES = {
 
 def chapter_fragment(paper: str, reg: pd.DataFrame, res: pd.DataFrame | None,
                      book_dir: Path, results_dir: Path) -> str:
-    """The MyST text a chapter includes at its top: the verdict box, the paper's rows of the
-    forest plot and its key figure, each with a numbered caption (``fig-<paper>-claims``,
-    ``fig-<paper>-key``)."""
+    """The MyST text a chapter includes at its top: the verdict box and the paper's key figure
+    with a numbered caption (``fig-<paper>-key``), copied beside the page as
+    ``key-<paper>.png``."""
     computed = {} if res is None else {r["id"]: r for _, r in res.iterrows()}
     lines = [verdict_box(paper, reg, computed), ""]
     key = KEY_FIGURES.get(paper)
@@ -697,8 +694,7 @@ def render_claims_page(
     Beside the page it writes the forest plot (:data:`FIGURE_NAME`), copies of the register
     and the results table (:data:`REGISTER_COPY`, :data:`RESULTS_COPY`), which the page offers
     for download, the intro's headline (:data:`HEADLINE_NAME`) and each paper chapter's
-    opening (``verdicts-<paper>.md``, its figures ``claims-<paper>.png`` and
-    ``key-<paper>.png``).
+    opening (``verdicts-<paper>.md`` and its key figure ``key-<paper>.png``).
 
     Parameters
     ----------
@@ -723,7 +719,7 @@ def render_claims_page(
     book_dir = out_path.parent
     book_dir.mkdir(parents=True, exist_ok=True)
     reg_path = DATA_DIR / "claims.csv" if register is None else Path(register)
-    reg = pd.read_csv(reg_path, dtype=str, keep_default_na=False)
+    reg = claim_register(reg_path)
     res_path = RESULTS_DIR / "claims.csv" if results is None else Path(results)
     res = read_results(res_path) if res_path.is_file() else None
     computed = {} if res is None else {r["id"]: r for _, r in res.iterrows()}
@@ -802,16 +798,12 @@ HEADLINE_NAME = "claims-headline.md"
 
 
 def _write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
 def _copy(src: Path, dest: Path) -> None:
     if src.resolve() != dest.resolve():
-        tmp = dest.with_name(f".{dest.name}.tmp")
-        shutil.copyfile(src, tmp)
-        tmp.replace(dest)
+        atomic_write(dest, lambda tmp: shutil.copyfile(src, tmp))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

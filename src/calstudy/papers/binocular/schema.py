@@ -27,12 +27,13 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
-from calstudy.core.ledger import OFF, Inputs, Ledgered
+from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
     Degrees,
     Documented,
     Finite,
     NonNegativeFinite,
+    Pixels,
     PositiveFinite,
     Schema,
     Vec3,
@@ -58,8 +59,6 @@ Pair = Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
 Name = Annotated[str, Field(min_length=1)]
 #: lengths of a station in mm that all lie below this look like metres
 METRES_SUSPECT_MM = 10.0
-#: most pixels along an image side (the largest industrial sensors have about 14,000)
-MAX_PIXELS = 20000
 #: most poses of a protocol and regions of a field (the paper uses 6, 10 and 3)
 MAX_POSES, MAX_REGIONS = 1000, 100
 
@@ -84,8 +83,8 @@ NOISE_BOUNDS = {
 
 
 def _noise(bound: str):
-    """A noise level: >= 0, <= ``NOISE_BOUNDS[bound]``, 0 accepted outside its ledger range."""
-    return Annotated[float, Field(ge=0, le=NOISE_BOUNDS[bound], allow_inf_nan=False), OFF]
+    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
+    return noise_level(NOISE_BOUNDS[bound])
 
 
 def _metres(values, what: str) -> None:
@@ -124,8 +123,8 @@ def _rotation(matrix: list, what: str) -> None:
 class Image(Inputs):
     """The ``[image]`` table of data/binocular/sensor.toml."""
 
-    width: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
-    height: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
+    width: Pixels
+    height: Pixels
     #: mm per pixel: 1-50 um (a value in um, 4.6, is refused)
     pixel_pitch_mm: Annotated[float, Field(gt=0, le=0.05, allow_inf_nan=False)]
 

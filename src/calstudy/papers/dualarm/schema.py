@@ -21,12 +21,13 @@ import numpy as np
 from pydantic import ConfigDict, Field, field_validator, model_validator
 from scipy.spatial.transform import Rotation
 
-from calstudy.core.ledger import OFF, Inputs, Ledgered
+from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
     Documented,
     Finite,
     Fraction,
     NonNegativeFinite,
+    Pixels,
     PositiveFinite,
     Row,
     Schema,
@@ -36,8 +37,6 @@ from calstudy.core.schema import (
 
 #: an angle from a direction (a tilt, an incidence, a viewing angle), degrees
 Tilt = Annotated[float, Field(ge=0, le=90, allow_inf_nan=False)]
-#: most pixels along an image side (the largest industrial sensors have about 14,000)
-MAX_PIXELS = 20000
 #: most points of a scan (ICP pairs them by a KD tree), poses, views, iterations, markers
 MAX_POINTS, MAX_POSES, MAX_ITERATIONS, MAX_MARKERS = 100_000, 100, 10_000, 1000
 #: the convergence angle of a stereo head (between the two optical axes at the convergence
@@ -69,8 +68,8 @@ NOISE_BOUNDS = {
 
 
 def _noise(bound: str):
-    """A noise level: >= 0, <= ``NOISE_BOUNDS[bound]``, 0 accepted outside its ledger range."""
-    return Annotated[float, Field(ge=0, le=NOISE_BOUNDS[bound], allow_inf_nan=False), OFF]
+    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
+    return noise_level(NOISE_BOUNDS[bound])
 
 
 #: a rotation vector (rad), at most half a turn beyond pi
@@ -83,8 +82,8 @@ RotVec = Annotated[
 class Camera(Inputs):
     """The ``[camera]`` table of data/dualarm/scenario.toml."""
 
-    width: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
-    height: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
+    width: Pixels
+    height: Pixels
     fx_px: PositiveFinite
     fy_px: PositiveFinite
     cx_px: Finite

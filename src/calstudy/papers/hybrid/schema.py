@@ -22,12 +22,13 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from calstudy.core.ledger import OFF, Inputs, Ledgered
+from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
     Degrees,
     Documented,
     Finite,
     NonNegativeFinite,
+    Pixels,
     PositiveFinite,
     Schema,
     Vec3,
@@ -40,8 +41,6 @@ from calstudy.core.schema import (
 MAX_PRODUCTS = 1000
 #: at least three products: a mean, a standard deviation and a correlation need them
 Products = Annotated[int, Field(ge=3, le=MAX_PRODUCTS)]
-#: most pixels along a camera image side (the largest industrial sensors have about 14,000)
-MAX_PIXELS = 20000
 #: most moves of a calibration, sensors on a fixture, flexible features
 MAX_MOVES, MAX_SENSORS, MAX_FEATURES = 100, 100, 1000
 
@@ -70,10 +69,10 @@ NOISE_BOUNDS = {
 
 
 def _noise(bound: str):
-    """A noise level: >= 0, <= ``NOISE_BOUNDS[bound]``, 0 accepted outside its ledger range."""
-    return Annotated[
-        float, Field(ge=0, le=NOISE_BOUNDS[bound], allow_inf_nan=False), OFF
-    ]
+    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
+    return noise_level(NOISE_BOUNDS[bound])
+
+
 Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
 
 
@@ -152,8 +151,8 @@ class Cameras(Inputs):
     fy: PositiveFinite
     cx: Finite
     cy: Finite
-    width: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
-    height: Annotated[int, Field(ge=1, le=MAX_PIXELS)]
+    width: Pixels
+    height: Pixels
     pixel_sigma: _noise("pixel")
     #: the values of the hole-centre noise swept by notebook 01
     pixel_sigmas: Annotated[list[NonNegativeFinite], Field(min_length=1)]

@@ -19,7 +19,7 @@ from typing import Annotated
 
 from pydantic import Field, model_validator
 
-from calstudy.core.ledger import OFF, Inputs, Ledgered
+from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
     Degrees,
     Documented,
@@ -53,8 +53,8 @@ MAX_SPHERES, MAX_VIEWS, MAX_PLACEMENTS, MAX_POINTS = 50, 100, 1000, 100_000
 
 
 def _noise(bound: str):
-    """A noise level: >= 0, <= ``NOISE_BOUNDS[bound]``, 0 accepted outside its ledger range."""
-    return Annotated[float, Field(ge=0, le=NOISE_BOUNDS[bound], allow_inf_nan=False), OFF]
+    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
+    return noise_level(NOISE_BOUNDS[bound])
 
 
 class Pose(Schema):
