@@ -248,8 +248,7 @@ def candidate_jacobians(params, Q, sphere_part, sphere, model: GlobalModel | Non
     model = default_model() if model is None else model
     Q = np.asarray(Q, float)
     target = np.asarray(sphere_part, float)[np.asarray(sphere, int)]
-    poses = model.sensor2part(params, Q)
-    C = np.einsum("mji,mj->mi", poses[:, :3, :3], target - poses[:, :3, 3])
+    C = model.sensor_centres(params, Q, target)
     _, jac = model.points_and_jacobian(params, Q, C)
     return scaled_jacobian(jac).reshape(len(Q), 3, -1), C
 

@@ -603,8 +603,7 @@ def simulate_cell_rows(truth, Q, sphere, spheres_part, sigma_mm: float, declared
     Q = np.asarray(Q, float)
     sphere = np.asarray(sphere, int)
     p = np.asarray(spheres_part, float)[sphere]
-    poses = default_model().sensor2part(np.asarray(truth, float), Q)
-    local = np.einsum("mji,mj->mi", poses[:, :3, :3], p - poses[:, :3, 3])
+    local = default_model().sensor_centres(np.asarray(truth, float), Q, p)
     cov = np.tile(sigma_mm**2 * np.eye(3), (len(Q), 1, 1)) if declared else None
     return Measurements(Q, local + rng.normal(0.0, sigma_mm, local.shape), p, sphere, local, cov)
 

@@ -660,7 +660,7 @@ def _not_identified_note(table: pd.DataFrame, base: BaseParameters, where: str) 
     )
 
 
-#: link twists of the model's DH links 3 to 5 (axes 3-4, 4-5, 5-6) by index in PARAM_NAMES
+#: link twists of the model's DH links 3 and 4 (axes 3-4 and 4-5) by index in PARAM_NAMES
 _DH_TWISTS = {(3, 4): PARAM_NAMES.index("alpha3"), (4, 5): PARAM_NAMES.index("alpha4")}
 #: sine of a nominal twist below which two axes count as parallel
 PARALLEL_SIN = 1e-6
@@ -852,7 +852,7 @@ def identify_cell(
         cov[np.ix_(free, free)] = fit.estimate.covariance
         basis = DECLARED
     else:
-        r = (model.points(params, kept.Q, kept.C) - kept.P_ref).ravel()
+        r = e[keep].ravel()  # the residuals of the kept rows at the fit
         cov[np.ix_(free, free)] = shared_error_covariance(jac[:, free], r, kept.sphere)
         basis = RESIDUAL
     return CellFit(
@@ -932,8 +932,7 @@ def check_sensor_columns(meas: Measurements, start, model: GlobalModel | None = 
         Naming the variant (e.g. ``cy as cx, cx as cy``) and both median residuals (mm).
     """
     model = default_model() if model is None else model
-    poses = model.sensor2part(start, meas.Q)
-    predicted = np.einsum("mji,mj->mi", poses[:, :3, :3], meas.P_ref - poses[:, :3, 3])
+    predicted = model.sensor_centres(start, meas.Q, meas.P_ref)
     best = None
     for perm in itertools.permutations(range(3)):
         for signs in itertools.product((1.0, -1.0), repeat=3):

@@ -173,6 +173,13 @@ class GlobalModel:
             out[k] = placements[last].homogeneous
         return out
 
+    def sensor_centres(self, params, Q, points_part) -> np.ndarray:
+        """Where part-frame points ``(m, 3)`` lie in the sensor frame at joint angles ``Q``
+        (m, 6), mm: the noise-free reading of a sphere centre, the inverse of :meth:`points`."""
+        poses = self.sensor2part(params, Q)
+        p = np.asarray(points_part, float)
+        return np.einsum("mji,mj->mi", poses[:, :3, :3], p - poses[:, :3, 3])
+
     def points(self, params, Q, C) -> np.ndarray:
         """Part-frame points ``P = sensor2part(q) C`` (Eq. 9), ``(m, 3)`` mm, for ``C`` (m, 3)."""
         poses = self.sensor2part(params, Q)

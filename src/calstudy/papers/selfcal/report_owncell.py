@@ -157,6 +157,26 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str):
     return fig
 
 
+def planned_vs_random_table(random: dict) -> pd.DataFrame:
+    """The planned poses against random ones for a user's cell, predicted and measured: one row
+    each with the median ratio random / planned and its 95 % interval, from the ``random`` dict
+    of :func:`calstudy.papers.selfcal.experiments.suggest_poses`."""
+    stats = ("median", "ci_low", "ci_high")
+    return pd.DataFrame(
+        [
+            {
+                "comparison": f"predicted parameter spread ({random['draws']} choices)",
+                **{k: random[f"ratio_{k}"] for k in stats},
+            },
+            {
+                "comparison": f"measured held-out RMS error ({random['replications']} "
+                "re-measurements)",
+                **{k: random[f"measured_ratio_{k}"] for k in stats},
+            },
+        ]
+    )
+
+
 def measured_selection_sentence(random: dict) -> str:
     """One sentence on the measured comparison of planned and random poses
     (:func:`calstudy.papers.selfcal.experiments.measured_selection_errors`)."""
