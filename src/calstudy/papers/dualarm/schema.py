@@ -19,8 +19,8 @@ from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import ConfigDict, Field, field_validator, model_validator
-from scipy.spatial.transform import Rotation
 
+from calstudy.core import geometry as geo
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
     Documented,
@@ -315,9 +315,10 @@ class ScenarioFile(Ledgered, Inputs):
                 f"{math.tan(math.radians(hi)):.3g})"
             )
         cal = self.calibration
-        world2base = [_transform(self.layout.world2base1_rotvec, self.layout.world2base1_mm)]
-        base2_to_base1 = _transform(cal.base2_to_base1_rotvec, cal.base2_to_base1_mm)
-        world2base.append(np.linalg.inv(base2_to_base1) @ world2base[0])
+        world2base = [geo.pose_from_vector([*self.layout.world2base1_mm,
+                                            *self.layout.world2base1_rotvec])]
+        base2_to_base1 = geo.pose_from_vector([*cal.base2_to_base1_mm, *cal.base2_to_base1_rotvec])
+        world2base.append(geo.invert(base2_to_base1) @ world2base[0])
         markers = np.array(self.markers.xyz_mm, dtype=float)
         groups = np.array([n.split("-")[0] for n in self.markers.names])
         centres = [markers[groups == g].mean(axis=0) for g in self.markers.groups]
@@ -445,14 +446,6 @@ class PublishedFile(Documented):
         if self.table2.overall is None:
             raise ValueError("table2.overall: missing (required)")
         return self
-
-
-def _transform(rotvec, xyz) -> np.ndarray:
-    """The 4 x 4 transform of a rotation vector (rad) and a translation (mm)."""
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
-    out[:3, 3] = xyz
-    return out
 
 
 __all__ = ["PublishedFile", "ScenarioFile"]
