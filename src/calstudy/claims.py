@@ -1,24 +1,30 @@
 """Verdicts of the claims register and the rows that carry them.
 
-Verdicts follow the v2 rule of the claims register (reproduced / direction only / not
-reproduced / not testable), computed from Monte Carlo trials by
-:func:`calstudy.core.verdicts.judge` and its controls; this module turns them into the rows of
-``claims.csv`` and ``controls.csv`` (:func:`claim_row`, :func:`control_rows`), checked against
-the register ``data/claims.csv``. Notebooks never type a verdict in. Writing the rows to files is
-:mod:`calstudy.io.results`.
+A claim is judged from its register row (``data/claims.csv``: kind and direction) and the
+columns of a table of trials that carry its figure, its paired baseline and its two controls
+(:class:`ClaimColumns`, one declaration per claim in its paper's report module):
+:func:`judge_claim` applies the v2 rule (:func:`calstudy.core.verdicts.judge`, the controls and
+the oracle gate), :func:`judge_along` the same rule at each point of a sweep, and
+:func:`verdict_runs` says where a verdict changes along one. :func:`claim_row` and
+:func:`control_rows` turn a verdict into the rows of ``claims.csv`` and ``controls.csv``.
+Notebooks never type a verdict in. Writing the rows to files is :mod:`calstudy.io.results`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
+from typing import NamedTuple
 
+import numpy as np
 import pandas as pd
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import DATA_DIR
 from calstudy.core.verdicts import Verdict as RuleVerdict
-from calstudy.core.verdicts import check_null_control
+from calstudy.core.verdicts import check_null_control, judge, judge_controls, oracle_gate
 
 #: The four verdicts of the claims register, in the order the book counts them.
 VERDICTS = ("reproduced", "direction only", "not reproduced", "not testable")
@@ -108,35 +114,255 @@ class ClaimRow:
     oracle_control: str = ""
 
 
+class Judged(NamedTuple):
+    """A claim's verdict after the oracle gate and its two controls (None where it has none)."""
+
+    claim: RuleVerdict
+    null: RuleVerdict | None = None
+    oracle: RuleVerdict | None = None
+
+
+@dataclass(frozen=True)
+class ClaimColumns:
+    """Which columns of a table of trials (one row per trial) carry one claim's figures.
+
+    Attributes
+    ----------
+    figure : str
+        The method's figure per trial (for a paired ratio: the numerator, after).
+    baseline : str, optional
+        The paired figure of the same trial without the method (before); ``""`` when the
+        effect is the figure itself (against no effect or the stated reference).
+    null, oracle : str, optional
+        The null and the oracle control of rule 8 on the same trials; both or neither.
+    mechanism : str, optional
+        The error source the method targets, named in the note when the oracle control is not
+        significant (required with the controls).
+    """
+
+    figure: str
+    baseline: str = ""
+    null: str = ""
+    oracle: str = ""
+    mechanism: str = ""
+
+    def __post_init__(self) -> None:
+        if bool(self.null) != bool(self.oracle) or bool(self.null) != bool(self.mechanism):
+            raise CalibrationError(
+                f"claim columns of {self.figure!r}: null {self.null!r}, oracle {self.oracle!r} "
+                f"and mechanism {self.mechanism!r} go together (all three or none)"
+            )
+
+
+@lru_cache(maxsize=1)
+def _rules() -> dict[str, tuple[str, str]]:
+    register = claim_register().set_index("id")
+    return {cid: (row["kind"], row["direction"]) for cid, row in register.iterrows()}
+
+
+def claim_rule(claim_id: str) -> tuple[str, str]:
+    """``(kind, direction)`` of a claim, from the register ``data/claims.csv``.
+
+    Raises
+    ------
+    CalibrationError
+        If the id is not in the register.
+    """
+    rules = _rules()
+    if claim_id not in rules:
+        raise CalibrationError(f"claim id {claim_id!r} is not in the claims register")
+    return rules[claim_id]
+
+
+def judge_claim(
+    claim_id: str,
+    trials: Mapping[str, object],
+    columns: ClaimColumns,
+    *,
+    published: float | None = None,
+    reference: float | None = None,
+    min_trials: int = 200,
+) -> Judged:
+    """One claim by the v2 rule: its register row, the trial columns of ``columns``.
+
+    The claim and its controls are judged on the same trials with the kind and direction of the
+    register (:func:`calstudy.core.verdicts.judge_controls`); the claim's verdict is then gated
+    by its oracle control (:func:`calstudy.core.verdicts.oracle_gate`).
+
+    Parameters
+    ----------
+    claim_id : str
+        Id in ``data/claims.csv``.
+    trials : mapping of str to array_like of shape (N,)
+        A table of trials (a DataFrame or a dict of columns), one value per trial in each
+        column that ``columns`` names.
+    columns : ClaimColumns
+        The claim's declaration.
+    published : float, optional
+        The paper's figure in the claim's unit (no size: significance alone decides).
+    reference : float, optional
+        The requirement of a ``bound`` claim, or the stated reference of a ``value`` or
+        ``percent`` claim without baseline.
+    min_trials : int, default 200
+        Rule 1 (30 at a sweep point): fewer trials are named in the note.
+
+    Returns
+    -------
+    Judged
+        The claim's verdict after the oracle gate, the null and the oracle control (None for a
+        claim without controls).
+
+    Raises
+    ------
+    CalibrationError
+        If the id is not in the register, a column is missing from ``trials``, or by the rule's
+        own checks (:func:`calstudy.core.verdicts.judge`).
+    """
+    kind, direction = claim_rule(claim_id)
+    rule: dict = {"kind": kind, "direction": direction, "min_trials": min_trials}
+    if reference is not None:
+        rule["bound" if kind == "bound" else "null"] = reference
+    if columns.baseline:
+        rule["baseline"] = _column(trials, columns.baseline, claim_id)
+    figure = _column(trials, columns.figure, claim_id)
+    if not columns.null:
+        return Judged(judge(figure, published=published, **rule))
+    claim, null, oracle = judge_controls(
+        figure,
+        _column(trials, columns.null, claim_id),
+        _column(trials, columns.oracle, claim_id),
+        published=published,
+        **rule,
+    )
+    return Judged(oracle_gate(claim, oracle, columns.mechanism), null, oracle)
+
+
+def _column(trials: Mapping[str, object], name: str, claim_id: str) -> np.ndarray:
+    if name not in trials:
+        raise CalibrationError(
+            f"{claim_id}: the trials have no column {name!r}; they have {sorted(map(str, trials))}"
+        )
+    return np.asarray(trials[name], dtype=float)
+
+
+def judge_along(
+    trials: pd.DataFrame,
+    by: str | list[str],
+    claim_id: str,
+    columns: ClaimColumns,
+    *,
+    min_trials: int = 30,
+    **figures: float | None,
+) -> list[tuple[Hashable, pd.DataFrame, Judged | None]]:
+    """The v2 rule at each point of a sweep: :func:`judge_claim` on each point's own trials.
+
+    Parameters
+    ----------
+    trials : pandas.DataFrame
+        One row per trial and sweep point, with the columns of ``columns``.
+    by : str or list of str
+        The swept input(s): one point per value (per combination), in ascending order.
+    claim_id, columns
+        As for :func:`judge_claim`.
+    min_trials : int, default 30
+        Rule 1 at a sweep point.
+    **figures
+        ``published`` and ``reference`` of :func:`judge_claim`.
+
+    Returns
+    -------
+    list of (value, pandas.DataFrame, Judged or None)
+        Per point: the value of ``by``, its trials, and the verdicts, or None where the point
+        has too few trials for a 95 % interval of the median.
+    """
+    out = []
+    for value, sub in trials.groupby(by, sort=True):
+        judged = verdict_or_none(
+            lambda s=sub: judge_claim(claim_id, s, columns, min_trials=min_trials, **figures)
+        )
+        out.append((value, sub, judged))
+    return out
+
+
+#: What a sweep table says at a point with too few trials for a 95 % interval of the median.
+TOO_FEW = "too few trials"
+
+
+def verdict_or_none(make):
+    """``make()``, or None when there are too few trials for an interval of the median (a sweep
+    point at CI size); any other refusal is raised."""
+    try:
+        return make()
+    except CalibrationError as exc:
+        if "interval for the median" not in str(exc):
+            raise
+        return None
+
+
+def verdict_runs(values: Sequence, verdicts: Sequence[str]) -> list[tuple[str, list]]:
+    """Where a verdict changes along a sweep: the runs of equal verdicts in the order given.
+
+    Parameters
+    ----------
+    values : sequence, length M
+        The swept values, one per point.
+    verdicts : sequence of str, length M
+        The verdict at each point.
+
+    Returns
+    -------
+    list of (str, list)
+        ``(verdict, values of the run)`` per run of consecutive equal verdicts; one run when
+        the verdict does not change.
+
+    Raises
+    ------
+    CalibrationError
+        If there are no points or the lengths differ.
+    """
+    values, verdicts = list(values), [str(v) for v in verdicts]
+    if len(values) != len(verdicts) or not values:
+        raise CalibrationError(f"{len(values)} values but {len(verdicts)} verdicts")
+    runs: list[tuple[str, list]] = []
+    for value, verdict in zip(values, verdicts, strict=True):
+        if runs and runs[-1][0] == verdict:
+            runs[-1][1].append(value)
+        else:
+            runs.append((verdict, [value]))
+    return runs
+
+
 def claim_row(
     claim_id: str,
-    verdict: RuleVerdict,
+    judged: Judged,
     *,
     published: str,
     unit: str,
     notebook: str,
-    null: RuleVerdict | None = None,
-    oracle: RuleVerdict | None = None,
+    note: str | None = None,
 ) -> ClaimRow:
-    """The claims-table row of a verdict of the v2 rule (:func:`calstudy.core.verdicts.judge`).
+    """The claims-table row of a verdict of the v2 rule (:func:`judge_claim`).
 
     ``reproduced``/``ci_low``/``ci_high`` are the median over trials and its 95 % confidence
-    interval; ``null``/``oracle`` are the controls judged on the same trials (their verdicts go
-    in the row, their figures in ``controls.csv``, see :func:`control_rows`).
+    interval; the controls' verdicts go in the row, their figures in ``controls.csv`` (see
+    :func:`control_rows`). ``note`` replaces the verdict's own note (which it usually quotes).
     """
+    verdict, null, oracle = judged
     controls = {
         "null_control": "" if null is None else null.verdict,
         "oracle_control": "" if oracle is None else oracle.verdict,
     }
     return ClaimRow(
         claim_id, published, verdict.median, verdict.ci_low, verdict.ci_high, unit,
-        verdict.verdict, notebook, verdict.note, verdict.n, verdict.replication_rate, **controls,
+        verdict.verdict, notebook, verdict.note if note is None else note, verdict.n,
+        verdict.replication_rate, **controls,
     )
 
 
-def control_rows(claim_id: str, null: RuleVerdict, oracle: RuleVerdict) -> list[dict]:
-    """The two rows of ``controls.csv`` for a claim, with the control definitions of the claims
-    register (columns ``null_control`` and ``oracle_control`` of ``data/claims.csv``).
+def control_rows(claim_id: str, judged: Judged) -> list[dict]:
+    """The two rows of ``controls.csv`` for a claim (none for a claim without controls), with
+    the control definitions of the claims register (columns ``null_control`` and
+    ``oracle_control`` of ``data/claims.csv``).
 
     Raises
     ------
@@ -144,6 +370,9 @@ def control_rows(claim_id: str, null: RuleVerdict, oracle: RuleVerdict) -> list[
         If the null control is anything but ``not reproduced`` (the test is broken), or the
         register defines no control for the claim.
     """
+    _, null, oracle = judged
+    if null is None:
+        return []
     check_null_control(null)
     register = claim_register(columns=("null_control", "oracle_control")).set_index("id")
     if claim_id not in register.index:

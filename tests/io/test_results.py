@@ -14,6 +14,7 @@ from calstudy import CalibrationError
 from calstudy.claims import (
     CLAIM_COLUMNS,
     ClaimRow,
+    Judged,
     claim_ids,
     claim_register,
     claim_row,
@@ -273,8 +274,8 @@ def test_claim_row_and_controls_round_trip(tmp_path):
         kind="ratio", direction="lower",
     )
     row = claim_row(
-        "binocular.coc", claim, published="0.049 -> 0.041", unit="ratio", notebook="04_demo",
-        null=null, oracle=oracle,
+        "binocular.coc", Judged(claim, null, oracle), published="0.049 -> 0.041", unit="ratio",
+        notebook="04_demo",
     )
     assert (row.verdict, row.null_control, row.oracle_control) == (
         "reproduced", "not reproduced", "reproduced",
@@ -285,7 +286,7 @@ def test_claim_row_and_controls_round_trip(tmp_path):
     assert list(back.columns) == list(CLAIM_COLUMNS)
     assert back.loc[0, "verdict"] == "reproduced" and back.loc[0, "n"] == 200
     assert back.loc[0, "ci_low"] < back.loc[0, "reproduced"] < back.loc[0, "ci_high"]
-    rows = control_rows("binocular.coc", null, oracle)
+    rows = control_rows("binocular.coc", Judged(claim, null, oracle))
     assert [r["control"] for r in rows] == ["null", "oracle"] and rows[0]["definition"]
     write_controls(tmp_path, rows)
     controls = pd.read_csv(tmp_path / "controls.csv")
@@ -299,9 +300,9 @@ def test_a_null_control_that_passes_is_refused(tmp_path):
     )
     # a "null control" that is the method itself: the test would be broken
     with pytest.raises(CalibrationError, match="the test is broken"):
-        control_rows("binocular.coc", claim, oracle)
+        control_rows("binocular.coc", Judged(claim, claim, oracle))
     rows = [{**r, "verdict": "reproduced"} if r["control"] == "null" else r
-            for r in control_rows("binocular.coc", null, oracle)]
+            for r in control_rows("binocular.coc", Judged(claim, null, oracle))]
     with pytest.raises(CalibrationError, match="null control of 'binocular.coc' came out"):
         write_controls(tmp_path, rows)
 

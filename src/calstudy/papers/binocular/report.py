@@ -14,26 +14,56 @@ import math
 import numpy as np
 import pandas as pd
 
-from calstudy.claims import claim_row, control_rows
-from calstudy.core.labels import claim_label
-from calstudy.core.verdicts import (
-    judge,
-    judge_controls,
-    median_interval,
-    not_testable,
-    oracle_gate,
+from calstudy.claims import (
+    ClaimColumns,
+    Judged,
+    claim_row,
+    control_rows,
+    judge_claim,
+    verdict_runs,
 )
+from calstudy.core.labels import claim_label
+from calstudy.core.verdicts import median_interval, not_testable
 from calstudy.estimators import binocular as bino
 from calstudy.papers.binocular.scenario import Scenario, paper_table, published
 
-#: The error source each correction targets, named when its oracle control is not significant.
-MECHANISMS = {
-    "binocular.coc": (
-        "a defocus error the rectification can act on (off-axis blur spots cut by the lens rim "
-        "move a defocused dot's centre; removing the defocus does not lower the RMSE here)"
+#: Where each claim's figures sit in the trial rows (``binocular_trial``, ``field_trial``), with
+#: the error source each correction targets, named when its oracle control is not significant;
+#: the rule is the register's.
+CLAIMS = {
+    "binocular.coc": ClaimColumns(
+        "t2_with",
+        baseline="t2_without",
+        null="t2_without",
+        oracle="t2_oracle",
+        mechanism=(
+            "a defocus error the rectification can act on (off-axis blur spots cut by the lens "
+            "rim move a defocused dot's centre; removing the defocus does not lower the RMSE "
+            "here)"
+        ),
     ),
-    "binocular.observed_error": "an observed (camera-model) error that the modification can see",
-    "binocular.transformation": "a hand-eye matrix error that dominates the Fig. 13 distances",
+    "binocular.observed_error": ClaimColumns(
+        "t3_holdout_with",
+        baseline="t3_holdout_without",
+        null="t3_holdout_without",
+        oracle="t3_holdout_truecam",
+        mechanism="an observed (camera-model) error that the modification can see",
+    ),
+    "binocular.transformation": ClaimColumns(
+        "fig13_updated",
+        baseline="fig13_preliminary",
+        null="fig13_preliminary",
+        oracle="fig13_true",
+        mechanism="a hand-eye matrix error that dominates the Fig. 13 distances",
+    ),
+    "binocular.field": ClaimColumns("field_updated_base", baseline="field_preliminary_base"),
+}
+
+#: Where the paper's before/after RMSEs of each correction are (``published(*key)``).
+PUBLISHED = {
+    "binocular.coc": ("calibrator", "table2_rmse"),
+    "binocular.observed_error": ("calibrator", "table3_rmse"),
+    "binocular.transformation": ("station", "fig13_rmse"),
 }
 
 
@@ -224,25 +254,11 @@ def rmse_summary(trials: pd.DataFrame, field: pd.DataFrame) -> pd.DataFrame:
 # verdicts
 
 
-def _judged(trials: pd.DataFrame, claim: str, col_without: str, col_with: str, col_oracle: str):
-    """Claim, null and oracle control of one correction on the same trials (v2 rule 8), and the
+def _judged(trials: pd.DataFrame, claim: str):
+    """Claim, null and oracle control of one correction on the same trials (v2 rule 8), the
     claim's verdict after the oracle gate."""
-    pub = {
-        "binocular.coc": published("calibrator", "table2_rmse"),
-        "binocular.observed_error": published("calibrator", "table3_rmse"),
-        "binocular.transformation": published("station", "fig13_rmse"),
-    }[claim]
-    before = trials[col_without].to_numpy()
-    v, null, oracle = judge_controls(
-        trials[col_with].to_numpy(),
-        before,
-        trials[col_oracle].to_numpy(),
-        published=pub[1] / pub[0],
-        baseline=before,
-        kind="ratio",
-        direction="lower",
-    )
-    return oracle_gate(v, oracle, MECHANISMS[claim]), null, oracle
+    pub = published(*PUBLISHED[claim])
+    return judge_claim(claim, trials, CLAIMS[claim], published=pub[1] / pub[0])
 
 
 def _with_note(v, extra: str):
@@ -254,12 +270,10 @@ def verdicts(trials: pd.DataFrame, field: pd.DataFrame) -> dict:
     has none), by the v2 rule from the default trials."""
     d = default(trials)
     out = {}
-    out["binocular.coc"] = _judged(d, "binocular.coc", "t2_without", "t2_with", "t2_oracle")
-    claim, null, oracle = _judged(
-        d, "binocular.observed_error", "t3_holdout_without", "t3_holdout_with", "t3_holdout_truecam"
-    )
+    out["binocular.coc"] = _judged(d, "binocular.coc")
+    claim, null, oracle = _judged(d, "binocular.observed_error")
     circ, lo, hi = median_interval(d["t3_with"] / d["t3_without"])
-    out["binocular.observed_error"] = (
+    out["binocular.observed_error"] = Judged(
         _with_note(
             claim,
             f"judged leave-one-target-out; the paper's protocol (scored on the distances the "
@@ -268,11 +282,9 @@ def verdicts(trials: pd.DataFrame, field: pd.DataFrame) -> dict:
         null,
         oracle,
     )
-    claim, null, oracle = _judged(
-        d, "binocular.transformation", "fig13_preliminary", "fig13_updated", "fig13_true"
-    )
+    claim, null, oracle = _judged(d, "binocular.transformation")
     he = {c: float(d[c].median()) for c in d if c.startswith(("rot_err", "trans_err"))}
-    out["binocular.transformation"] = (
+    out["binocular.transformation"] = Judged(
         _with_note(
             claim,
             "hand-eye error itself, preliminary -> updated: rotation "
@@ -285,13 +297,8 @@ def verdicts(trials: pd.DataFrame, field: pd.DataFrame) -> dict:
     )
     flange = field["field_updated_flange"] / field["field_preliminary_flange"]
     deviation = _tiny(float((flange - 1).abs().max()))
-    base = judge(
-        field["field_updated_base"].to_numpy(),
-        baseline=field["field_preliminary_base"].to_numpy(),
-        kind="ratio",
-        direction="lower",
-    )
-    out["binocular.field"] = (
+    base = judge_claim("binocular.field", field, CLAIMS["binocular.field"]).claim
+    out["binocular.field"] = Judged(
         not_testable(
             "identical by construction: a rigid change of the hand-eye matrix preserves every "
             "distance between points it maps (flange-frame ratio "
@@ -300,9 +307,7 @@ def verdicts(trials: pd.DataFrame, field: pd.DataFrame) -> dict:
             f"N={len(field)}",
             kind="ratio",
             n=len(field),
-        ),
-        None,
-        None,
+        )
     )
     return out
 
@@ -338,31 +343,18 @@ def _published_text(claim: str) -> str:
         t5 = np.array(published("station", "table5_rmse"))
         ratio = float(np.mean(t5[:, 1] / t5[:, 0]))
         return f"{ratio:.3f} (mean of " + ", ".join(f"{y:.3f}/{x:.3f}" for x, y in t5) + " mm)"
-    key = {
-        "binocular.coc": ("calibrator", "table2_rmse"),
-        "binocular.observed_error": ("calibrator", "table3_rmse"),
-        "binocular.transformation": ("station", "fig13_rmse"),
-    }[claim]
-    return _ratio(published(*key))[1]
+    return _ratio(published(*PUBLISHED[claim]))[1]
 
 
 def claim_rows(trials: pd.DataFrame, field: pd.DataFrame, notebook: str):
     """The four claim rows and the control rows (``controls.csv``)."""
     claims, controls = [], []
-    for claim, (v, null, oracle) in verdicts(trials, field).items():
+    for claim, judged in verdicts(trials, field).items():
+        published_text = _published_text(claim)
         claims.append(
-            claim_row(
-                claim,
-                v,
-                published=_published_text(claim),
-                unit="ratio",
-                notebook=notebook,
-                null=null,
-                oracle=oracle,
-            )
+            claim_row(claim, judged, published=published_text, unit="ratio", notebook=notebook)
         )
-        if null is not None:
-            controls += control_rows(claim, null, oracle)
+        controls += control_rows(claim, judged)
     return claims, controls
 
 
@@ -385,22 +377,15 @@ def sweep_table(trials: pd.DataFrame, sweep: str) -> pd.DataFrame:
         cols = [c for c in d if c.startswith(("t2_", "t3_", "fig13_", "rot_", "trans_"))]
         row.update({c: float(d[c].median()) for c in cols})
         specs = (
-            [("binocular.transformation", "fig13_preliminary", "fig13_updated", "fig13_true")]
+            ["binocular.transformation"]
             if sweep == "robot"
-            else [
-                ("binocular.coc", "t2_without", "t2_with", "t2_oracle"),
-                (
-                    "binocular.observed_error",
-                    "t3_holdout_without",
-                    "t3_holdout_with",
-                    "t3_holdout_truecam",
-                ),
-            ]
+            else ["binocular.coc", "binocular.observed_error"]
         )
-        for claim, a, b, o in specs:
-            v, _, oracle = _judged(d, claim, a, b, o)
+        for claim in specs:
+            v, _, oracle = _judged(d, claim)
             name = claim.split(".")[1]
-            row[f"{name}_ratio"] = float((d[b] / d[a]).median())
+            cols = CLAIMS[claim]
+            row[f"{name}_ratio"] = float((d[cols.figure] / d[cols.baseline]).median())
             row[f"{name}_oracle_ratio"] = oracle.effect_median
             row[f"verdict_{name}"] = v.verdict
         rows.append(row)
@@ -533,7 +518,7 @@ def optics_sweep_table(sweep: pd.DataFrame, key: str) -> pd.DataFrame:
         if key != "f_number" and value == 0.0:
             continue
         d = d.sort_values("trial")
-        v, _, oracle = _judged(d, "binocular.coc", "t2_without", "t2_with", "t2_oracle")
+        v, _, oracle = _judged(d, "binocular.coc")
         rows.append(
             {
                 key: float(value),
@@ -588,13 +573,10 @@ def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit:
             f"Over the {label} sweep ({fmt(vals[0])} to {fmt(vals[-1])}) {words} stays "
             f"{verdicts[0]}."
         )
-    parts, start = [], 0
-    for i in range(1, len(vals) + 1):  # one part per run of equal verdicts, with its values
-        if i == len(vals) or verdicts[i] != verdicts[start]:
-            last = fmt(vals[i - 1])
-            where = last if i - 1 == start else f"{fmt(vals[start])} to {last}"
-            parts.append(f"{verdicts[start]} at {where}")
-            start = i
+    parts = [  # one part per run of equal verdicts, with its values
+        f"{verdict} at {fmt(xs[0])}" + ("" if len(xs) == 1 else f" to {fmt(xs[-1])}")
+        for verdict, xs in verdict_runs(vals, verdicts)
+    ]
     return f"Along the {label} sweep {words} is " + ", ".join(parts) + "."
 
 

@@ -7,9 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from calstudy.claims import claim_row, control_rows
+from calstudy.claims import ClaimColumns, claim_row, control_rows, judge_claim
 from calstudy.core.stats import median_and_spread, round_to_uncertainty
-from calstudy.core.verdicts import judge_controls, oracle_gate
 from calstudy.papers.dualarm.experiments import marker_error
 from calstudy.papers.dualarm.scenario import SPHERES, Published, Scenario
 
@@ -306,34 +305,49 @@ def published_figures(published: Published) -> dict[str, float]:
     }
 
 
+#: Where each claim's figures sit in the table of :func:`claim_samples`; the rule is the
+#: register's.
+CLAIMS = {
+    "dualarm.icp": ClaimColumns(
+        "icp_after",
+        baseline="icp_before",
+        null="icp_before",
+        oracle="icp_oracle",
+        mechanism="pose errors between the views of a multi-view scan (drift)",
+    ),
+    "dualarm.global": ClaimColumns(
+        "coded",
+        null="none",
+        oracle="true",
+        mechanism="calibration error of the hand-eye and base-to-base transforms",
+    ),
+    "dualarm.vs_circular": ClaimColumns(
+        "coded",
+        baseline="plate",
+        null="plate",
+        oracle="true",
+        mechanism="calibration error of the two routes",
+    ),
+}
+
+
+def claim_figures(published: Published) -> dict[str, dict[str, float]]:
+    """Per claim, the paper's figure and the stated reference it is judged against."""
+    f = published_figures(published)
+    return {
+        "dualarm.icp": {"published": f["icp_ratio"]},
+        "dualarm.global": {"published": f["global"], "reference": f["global_reference"]},
+        "dualarm.vs_circular": {"published": f["vs_ratio"]},
+    }
+
+
 def dualarm_verdicts(trials: pd.DataFrame, published: Published) -> dict:
     """The three claims by the v2 rule with their null and oracle controls, on the same trials:
-    claim id -> (claim verdict after the oracle gate, null control, oracle control)."""
+    claim id -> :class:`calstudy.claims.Judged` (verdict after the oracle gate, null control,
+    oracle control)."""
     x = claim_samples(trials)
-    f = published_figures(published)
-    ratio = dict(kind="ratio", direction="lower")
-    icp = judge_controls(
-        x["icp_after"],
-        x["icp_before"],
-        x["icp_oracle"],
-        published=f["icp_ratio"],
-        baseline=x["icp_before"],
-        **ratio,
-    )
-    value = dict(kind="value", direction="lower", null=f["global_reference"])
-    glob = judge_controls(x["coded"], x["none"], x["true"], published=f["global"], **value)
-    vs = judge_controls(
-        x["coded"], x["plate"], x["true"], published=f["vs_ratio"], baseline=x["plate"], **ratio
-    )
-    mech = {
-        "dualarm.icp": "pose errors between the views of a multi-view scan (drift)",
-        "dualarm.global": "calibration error of the hand-eye and base-to-base transforms",
-        "dualarm.vs_circular": "calibration error of the two routes",
-    }
-    out = {}
-    for cid, (claim, null, oracle) in zip(mech, (icp, glob, vs), strict=True):
-        out[cid] = (oracle_gate(claim, oracle, mech[cid]), null, oracle)
-    return out
+    figures = claim_figures(published)
+    return {cid: judge_claim(cid, x, CLAIMS[cid], **figures[cid]) for cid in CLAIMS}
 
 
 def dualarm_claims(trials: pd.DataFrame, published: Published, notebook: str):
@@ -357,10 +371,8 @@ def dualarm_claims(trials: pd.DataFrame, published: Published, notebook: str):
         ),
     }
     claims, controls = [], []
-    for cid, (v, null, oracle) in dualarm_verdicts(trials, published).items():
+    for cid, judged in dualarm_verdicts(trials, published).items():
         pub, unit = labels[cid]
-        claims.append(
-            claim_row(cid, v, published=pub, unit=unit, notebook=notebook, null=null, oracle=oracle)
-        )
-        controls += control_rows(cid, null, oracle)
+        claims.append(claim_row(cid, judged, published=pub, unit=unit, notebook=notebook))
+        controls += control_rows(cid, judged)
     return claims, controls

@@ -12,12 +12,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from calstudy.claims import ClaimColumns, judge_along, verdict_runs
 from calstudy.core import geometry as geo
-from calstudy.core.verdicts import judge, median_interval
+from calstudy.core.errors import CalibrationError
+from calstudy.core.verdicts import median_interval
 from calstudy.models.targets import circle_centre_bias
 from calstudy.papers.dualarm import simulate as sim
 from calstudy.papers.dualarm.experiments import BUDGET_SOURCES
-from calstudy.papers.dualarm.report import part, published_figures
+from calstudy.papers.dualarm.report import claim_figures, part, published_figures
 from calstudy.papers.dualarm.scenario import Published, Scenario
 
 #: the three inputs of the survey sweeps: column -> words
@@ -28,25 +30,22 @@ SWEEPS = {
 }
 
 
-def _global_verdict(samples, published: Published):
-    f = published_figures(published)
-    return judge(
-        samples,
-        kind="value",
-        direction="lower",
-        null=f["global_reference"],
-        published=f["global"],
-        min_trials=30,
-    )
-
-
 def sweep_table(sweep: pd.DataFrame, published: Published) -> pd.DataFrame:
     """Per sweep point: the coded-marker route's mean Euclidean sphere-centre error (median over
     trials with its 95 % interval), the survey's link error, and the verdict ``dualarm.global``
     would get at that point by the v2 rule."""
     rows = []
-    for key, g in sweep.groupby(list(SWEEPS), sort=True):
-        v = _global_verdict(g["coded_euclid_mm"].to_numpy(), published)
+    points = judge_along(
+        sweep,
+        list(SWEEPS),
+        "dualarm.global",
+        ClaimColumns("coded_euclid_mm"),
+        **claim_figures(published)["dualarm.global"],
+    )
+    for key, g, judged in points:
+        if judged is None:
+            raise CalibrationError(f"sweep point {key}: {len(g)} trials, too few for the rule")
+        v = judged.claim
         rows.append(
             {
                 **dict(zip(SWEEPS, key, strict=True)),
@@ -98,16 +97,16 @@ def sweep_sentences(table: pd.DataFrame, scn: Scenario) -> str:
             f"median {line['median_mm'].iloc[0]:.3f} mm at {_fmt(xs[0])}, "
             f"{line['median_mm'].iloc[-1]:.3f} mm at {_fmt(xs[-1])}"
         )
-        changes = [k for k in range(1, len(xs)) if verdicts[k] != verdicts[k - 1]]
-        if not changes:
+        runs = verdict_runs(xs, verdicts)
+        if len(runs) == 1:
             out.append(
                 f"Along the {name} ({', '.join(map(_fmt, xs))}), the verdict stays "
                 f"'{verdicts[0]}' ({ends})."
             )
         else:
             steps = "; ".join(
-                f"from '{verdicts[k - 1]}' at {_fmt(xs[k - 1])} to '{verdicts[k]}' at {_fmt(xs[k])}"
-                for k in changes
+                f"from '{a}' at {_fmt(xa[-1])} to '{b}' at {_fmt(xb[0])}"
+                for (a, xa), (b, xb) in zip(runs, runs[1:], strict=False)
             )
             out.append(f"Along the {name}, the verdict changes {steps} ({ends}).")
     return " ".join(out)

@@ -10,21 +10,31 @@ beside the published ones, the summaries of the sweeps, and the claims ``hybrid.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 
-from calstudy.claims import claim_row, control_rows
+from calstudy.claims import (
+    TOO_FEW,
+    ClaimColumns,
+    Judged,
+    claim_row,
+    control_rows,
+    judge_claim,
+    verdict_or_none,
+)
 from calstudy.core.errors import CalibrationError
 from calstudy.core.stats import median_and_spread
-from calstudy.core.verdicts import judge, judge_controls, not_testable, oracle_gate
+from calstudy.core.verdicts import not_testable
 from calstudy.papers.hybrid.compensation import analyse_run
 from calstudy.papers.hybrid.report_sweeps import (
     CHI2_CRITICAL,
+    CLAIMS,
     CRB_MULTIPLE,
     ML_MULTIPLE,
     bin_distance,
     chi_square_distance,
-    deviation_controls,
     deviation_verdicts,
     kolmogorov_bound,
     stationary_ratios,
@@ -134,54 +144,40 @@ def calibration_claims(handeye, stationary, notebook: str):
     Returns (claim rows, control rows).
     """
     fig = handeye_figures(handeye)
-    rule = {"kind": "bound", "direction": "lower", "bound": CRB_MULTIPLE}
-    he, null, oracle = judge_controls(
-        fig["sphere"], fig["null control"], fig["oracle control"], **rule
-    )
-    ml = judge(fig["ML"], **rule)
-    he_final = oracle_gate(he, oracle, "sensor noise on the sphere centres")
+    he = judge_claim("hybrid.handeye", fig, CLAIMS["hybrid.handeye"], reference=CRB_MULTIPLE)
+    ml = judge_claim("hybrid.handeye", fig, ClaimColumns("ML"), reference=CRB_MULTIPLE).claim
     note = (
-        f"sphere method / CRB (max of rotation, translation), sensor noise only: {he_final.note}; "
-        f"ML (full covariance) / CRB median {ml.median:.3g}"
+        f"sphere method / CRB (max of rotation, translation), sensor noise only: "
+        f"{he.claim.note}; ML (full covariance) / CRB median {ml.median:.3g}"
     )
     rows = [
-        _with_note(
-            claim_row(
-                "hybrid.handeye",
-                he_final,
-                published=f"<= {CRB_MULTIPLE:g} x CRB",
-                unit="x CRB RMS",
-                notebook=notebook,
-                null=null,
-                oracle=oracle,
-            ),
-            note,
+        claim_row(
+            "hybrid.handeye",
+            he,
+            published=f"<= {CRB_MULTIPLE:g} x CRB",
+            unit="x CRB RMS",
+            notebook=notebook,
+            note=note,
         )
     ]
-    controls = control_rows("hybrid.handeye", null, oracle)
+    controls = control_rows("hybrid.handeye", he)
     st = stationary_figures(stationary)
-    rule = {"kind": "bound", "direction": "lower", "bound": ML_MULTIPLE}
-    v, st_null, st_oracle = judge_controls(st["ratio"], st["null"], st["oracle"], **rule)
-    v_final = oracle_gate(v, st_oracle, "an error of the homography that the ML PnP avoids")
+    v = judge_claim("hybrid.stationary", st, CLAIMS["hybrid.stationary"], reference=ML_MULTIPLE)
     rows.append(
-        _with_note(
-            claim_row(
-                "hybrid.stationary",
-                v_final,
-                published=f"<= {ML_MULTIPLE:g} x PnP",
-                unit="field error ratio",
-                notebook=notebook,
-                null=st_null,
-                oracle=st_oracle,
-            ),
-            f"homography / PnP chain, images only, RMS field error over 10 sensors: "
-            f"{v_final.note}; null (design pose, mounting error left) median "
-            f"{st_null.median:.3g}; oracle (exact target: hole tolerance and CMM error removed) "
-            f"median {st_oracle.median:.3g}; full chain (calibrated hand-eye, reported poses) "
+        claim_row(
+            "hybrid.stationary",
+            v,
+            published=f"<= {ML_MULTIPLE:g} x PnP",
+            unit="field error ratio",
+            notebook=notebook,
+            note=f"homography / PnP chain, images only, RMS field error over 10 sensors: "
+            f"{v.claim.note}; null (design pose, mounting error left) median "
+            f"{v.null.median:.3g}; oracle (exact target: hole tolerance and CMM error removed) "
+            f"median {v.oracle.median:.3g}; full chain (calibrated hand-eye, reported poses) "
             f"ratio median {np.median(st['ratio_full_chain']):.3g}",
         )
     )
-    controls += control_rows("hybrid.stationary", st_null, st_oracle)
+    controls += control_rows("hybrid.stationary", v)
     rps = stationary[(stationary["step"] == "rps") & (stationary["scenario"] == VERDICT_SCENARIO)]
     pen = rps[rps["solver"].str.startswith("penalty")].set_index("trial")["frame_error_mm"]
     so3 = rps[rps["solver"] == "SO(3)"].set_index("trial")["frame_error_mm"].reindex(pen.index)
@@ -195,19 +191,13 @@ def calibration_claims(handeye, stationary, notebook: str):
     rows.append(
         claim_row(
             "hybrid.rps",
-            not_testable(reason, kind="ratio", n=len(pen)),
+            Judged(not_testable(reason, kind="ratio", n=len(pen))),
             published="",
             unit="frame error ratio",
             notebook=notebook,
         )
     )
     return rows, controls
-
-
-def _with_note(row, note: str):
-    from dataclasses import replace
-
-    return replace(row, note=note)
 
 
 def summarise_rps(rps):
@@ -397,11 +387,13 @@ def summarise_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (name, value), sub in sweep.groupby(["parameter", "value"], sort=False):
         row = {"parameter": name, "value": value, "trials": len(sub)}
-        bound = kolmogorov_bound(168)
         row["correlation_verdict"] = _verdict_text(
-            lambda s=sub, b=bound: judge(s["r_distance"], kind="bound", direction="lower", bound=b)
+            lambda s=sub: judge_claim(
+                "hybrid.correlation", s, CLAIMS["hybrid.correlation"],
+                reference=kolmogorov_bound(168),
+            )
         )
-        row["deviation_verdict"] = _verdict_text(lambda s=sub: deviation_verdicts(s)[0])
+        row["deviation_verdict"] = _verdict_text(lambda s=sub: deviation_verdicts(s))
         for col in ("within_0p3", "r_above_0p7", "r_distance"):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
         rows.append(row)
@@ -425,7 +417,7 @@ def summarise_robot_error_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
         ):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
         row["systematic_verdict"] = _verdict_text(lambda s=sub: _systematic_verdict(s, pub)[0])
-        row["deviation_verdict"] = _verdict_text(lambda s=sub: deviation_controls(s, pub)[0])
+        row["deviation_verdict"] = _verdict_text(lambda s=sub: deviation_verdicts(s))
         row["within_0p3_uncompensated"] = float(np.median(sub["within_0p3_uncompensated"]))
         rows.append(row)
     return pd.DataFrame(rows)
@@ -456,27 +448,19 @@ def station_table1(run: dict, n_compensation: int) -> pd.DataFrame:
 
 
 def _verdict_text(make) -> str:
-    """The verdict of ``make()``, or why there is none (too few trials for an interval)."""
-    try:
-        return make().verdict
-    except CalibrationError as exc:
-        if "interval for the median" not in str(exc):
-            raise
-        return "too few trials"
+    """The verdict of ``make()`` (a :class:`calstudy.claims.Judged`), or why there is none (too
+    few trials for an interval)."""
+    judged = verdict_or_none(make)
+    return TOO_FEW if judged is None else judged.claim.verdict
 
 
 def _systematic_verdict(sub: pd.DataFrame, pub):
     """Both readings of "2-4 mm": per coordinate (judged) and the 3-D length (reported)."""
     lo_pub, hi_pub = pub.systematic_mm
+    columns = CLAIMS["hybrid.systematic"]
     return tuple(
-        judge(
-            sub[column],
-            kind="value",
-            direction="higher",
-            published=(lo_pub + hi_pub) / 2.0,
-            baseline=sub["scatter_median_mm"],
-        )
-        for column in ("systematic_coord_median_mm", "systematic_median_mm")
+        judge_claim("hybrid.systematic", sub, columns, published=(lo_pub + hi_pub) / 2.0)
+        for columns in (columns, replace(columns, figure="systematic_median_mm"))
     )
 
 
@@ -505,39 +489,32 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     v, v3 = _systematic_verdict(sub, pub)
     lo_pub, hi_pub = pub.systematic_mm
     rows = [
-        _with_note(
-            claim_row(
-                "hybrid.systematic",
-                v,
-                published=f"{lo_pub:g}-{hi_pub:g}",
-                unit="mm",
-                notebook=notebook,
-            ),
-            f"per-coordinate reading, size minus panel-to-panel scatter: {v.note}; share of "
-            f"coordinates >= 2 mm {np.median(sub['coord_above_2mm']):.3g} %; 3-D reading "
-            f"(length of the mean vector per point): median {v3.median:.3g} mm, {v3.verdict}; "
-            f"Lilliefors does not reject normality for "
+        claim_row(
+            "hybrid.systematic",
+            v,
+            published=f"{lo_pub:g}-{hi_pub:g}",
+            unit="mm",
+            notebook=notebook,
+            note=f"per-coordinate reading, size minus panel-to-panel scatter: {v.claim.note}; "
+            f"share of coordinates >= 2 mm {np.median(sub['coord_above_2mm']):.3g} %; 3-D "
+            f"reading (length of the mean vector per point): median {v3.claim.median:.3g} mm, "
+            f"{v3.claim.verdict}; Lilliefors does not reject normality for "
             f"{np.median(sub['lilliefors_not_rejected']):.3g} % of the coordinates, mean "
             f"significantly non-zero for {np.median(sub['mean_nonzero']):.3g} % (medians)",
         )
     ]
-    dev, null, oracle = deviation_controls(sub, pub)
-    dev_final = oracle_gate(dev, oracle, "a systematic error that an offset can remove")
+    dev = deviation_verdicts(sub, 200)
     dev_counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy()
     dist = bin_distance(dev_counts, pub.deviation_percent)
     chi = chi_square_distance(dev_counts, pub.deviation_percent)
     rows.append(
-        _with_note(
-            claim_row(
-                "hybrid.deviation",
-                dev_final,
-                published=f"{pub.within_0p3_percent}",
-                unit="%",
-                notebook=notebook,
-                null=null,
-                oracle=oracle,
-            ),
-            f"offset from {n_compensation} products; {dev_final.note}; beyond 0.5 mm "
+        claim_row(
+            "hybrid.deviation",
+            dev,
+            published=f"{pub.within_0p3_percent}",
+            unit="%",
+            notebook=notebook,
+            note=f"offset from {n_compensation} products; {dev.claim.note}; beyond 0.5 mm "
             f"{np.median(sub['beyond_0p5']):.3g} % (published 0); the whole distribution: "
             f"Kolmogorov distance of the 5 bins to the published ones median "
             f"{np.median(dist):.3g} (5 % critical {kolmogorov_bound(_n_vectors(sub)):.3g}), "
@@ -545,25 +522,27 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
             f"oracle: the drift removed, so the offset's target holds still",
         )
     )
-    controls = control_rows("hybrid.deviation", null, oracle)
+    controls = control_rows("hybrid.deviation", dev)
     n_defined = _n_vectors(sub) - int(np.median(sub["n_fixed"]))
     dist_r = bin_distance(
         sub[[f"correlation_bin{k}" for k in range(5)]].to_numpy(), pub.correlation_percent
     )
-    bound = kolmogorov_bound(n_defined)
-    vr = judge(dist_r, kind="bound", direction="lower", bound=bound)
+    vr = judge_claim(
+        "hybrid.correlation",
+        {"r_distance": dist_r},
+        CLAIMS["hybrid.correlation"],
+        reference=kolmogorov_bound(n_defined),
+    )
     rows.append(
-        _with_note(
-            claim_row(
-                "hybrid.correlation",
-                vr,
-                published=f"bins {pub.correlation_percent}",
-                unit="Kolmogorov distance",
-                notebook=notebook,
-            ),
-            f"Kolmogorov distance of the correlation bins to the published ones, {n_defined} "
-            f"coordinates where r is defined: {vr.note}; share above 0.7 median "
-            f"{np.median(sub['r_above_0p7']):.3g} % (published {pub.r_above_0p7_percent})",
+        claim_row(
+            "hybrid.correlation",
+            vr,
+            published=f"bins {pub.correlation_percent}",
+            unit="Kolmogorov distance",
+            notebook=notebook,
+            note=f"Kolmogorov distance of the correlation bins to the published ones, "
+            f"{n_defined} coordinates where r is defined: {vr.claim.note}; share above 0.7 "
+            f"median {np.median(sub['r_above_0p7']):.3g} % (published {pub.r_above_0p7_percent})",
         )
     )
     return rows, controls

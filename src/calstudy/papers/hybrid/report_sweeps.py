@@ -14,15 +14,44 @@ import numpy as np
 import pandas as pd
 from scipy.stats import chi2
 
+from calstudy.claims import TOO_FEW, ClaimColumns, judge_claim, verdict_or_none, verdict_runs
 from calstudy.core.errors import CalibrationError
 from calstudy.core.labels import plain
 from calstudy.core.stats import median_and_spread
-from calstudy.core.verdicts import judge, judge_controls, oracle_gate
 from calstudy.papers.hybrid.scenario import load_published
 
 #: "works" criterion of hybrid.handeye (stated, not fitted): the larger of the rotation and
 #: translation errors, each divided by the Cramer-Rao RMS of the same poses, at most this
 CRB_MULTIPLE = 3.0
+
+#: Where each claim's figures sit in the per-trial tables of the two notebooks: notebook 01's
+#: :func:`handeye_ratios` and :func:`stationary_ratios`, notebook 02's trial table
+#: (``trial_summary``); the rule is the register's.
+CLAIMS = {
+    "hybrid.handeye": ClaimColumns(
+        "sphere",
+        null="null control",
+        oracle="oracle control",
+        mechanism="sensor noise on the sphere centres",
+    ),
+    "hybrid.stationary": ClaimColumns(
+        "ratio",
+        null="null",
+        oracle="oracle",
+        mechanism="an error of the homography that the ML PnP avoids",
+    ),
+    "hybrid.systematic": ClaimColumns(
+        "systematic_coord_median_mm", baseline="scatter_median_mm"
+    ),
+    "hybrid.deviation": ClaimColumns(
+        "within_0p3",
+        baseline="within_0p3_uncompensated",
+        null="within_0p3_uncompensated",
+        oracle="within_0p3_oracle",
+        mechanism="a systematic error that an offset can remove",
+    ),
+    "hybrid.correlation": ClaimColumns("r_distance"),
+}
 #: quantiles of the per-trial hand-eye ratio reported
 RATIO_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 
@@ -57,16 +86,6 @@ def ratio_distribution(ratios: pd.DataFrame, column: str = "sphere", keys=()) ->
     return pd.DataFrame(rows)
 
 
-def _verdict_or_reason(make):
-    """``make()`` (a Verdict), or None when there are too few trials for an interval."""
-    try:
-        return make()
-    except CalibrationError as exc:
-        if "interval for the median" not in str(exc):
-            raise
-        return None
-
-
 def summarise_handeye_sweep(trials: pd.DataFrame, keys) -> pd.DataFrame:
     """A hand-eye sweep (sensor noise only): per value of ``keys`` the median hand-eye ratio with
     its 95 % confidence interval, the 95th percentile, the ML's median ratio and the
@@ -77,17 +96,22 @@ def summarise_handeye_sweep(trials: pd.DataFrame, keys) -> pd.DataFrame:
     for key, sub in ratios.groupby(keys, sort=True):
         row = dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True))
         extra = {"ml_median_ratio": float(np.median(sub["ML"]))}
-        rows.append(row | _bound_summary(sub["sphere"], CRB_MULTIPLE, extra))
+        rows.append(row | _bound_summary(sub, "hybrid.handeye", CRB_MULTIPLE, extra))
     return pd.DataFrame(rows)
 
 
-def _bound_summary(ratios: pd.Series, bound: float, extra: dict) -> dict:
-    """The columns of a sweep point judged as a bound on ``ratios`` (its trials): count, median
-    with its 95 % confidence interval, 95th percentile, ``extra`` and the verdict by the rule
-    (at least 30 trials)."""
-    v = _verdict_or_reason(
-        lambda: judge(ratios, kind="bound", direction="lower", bound=bound, min_trials=30)
+def _bound_summary(sub: pd.DataFrame, claim_id: str, bound: float, extra: dict) -> dict:
+    """The columns of a sweep point (its trials ``sub``) judged by the bound of ``claim_id`` on
+    the claim's figure alone: count, median with its 95 % confidence interval, 95th percentile,
+    ``extra`` and the verdict by the rule (at least 30 trials)."""
+    column = CLAIMS[claim_id].figure
+    ratios = sub[column]
+    judged = verdict_or_none(
+        lambda: judge_claim(
+            claim_id, sub, ClaimColumns(column), reference=bound, min_trials=30
+        )
     )
+    v = None if judged is None else judged.claim
     return {
         "trials": len(ratios),
         "median_ratio": float(np.median(ratios)),
@@ -95,7 +119,7 @@ def _bound_summary(ratios: pd.Series, bound: float, extra: dict) -> dict:
         "ci_high": np.nan if v is None else v.ci_high,
         "p95_ratio": float(np.quantile(ratios, 0.95)),
         **extra,
-        "verdict": "too few trials" if v is None else v.verdict,
+        "verdict": TOO_FEW if v is None else v.verdict,
     }
 
 
@@ -137,7 +161,8 @@ def summarise_stationary_sweep(stationary: pd.DataFrame, key: str) -> pd.DataFra
     rows = []
     for value, sub in ratios.groupby(key, sort=True):
         extra = {"oracle_median_ratio": float(np.median(sub["oracle"]))}
-        rows.append({key: float(value)} | _bound_summary(sub["ratio"], ML_MULTIPLE, extra))
+        summary = _bound_summary(sub, "hybrid.stationary", ML_MULTIPLE, extra)
+        rows.append({key: float(value)} | summary)
     return pd.DataFrame(rows)
 
 
@@ -154,10 +179,10 @@ def where_verdict_changes(values, verdicts, default, what: str, unit: str = "") 
     values = [values[i] for i in order]
     verdicts = [verdicts[i] for i in order]
     unit = f" {unit}" if unit else ""
+    runs = verdict_runs(values, verdicts)
     changes = [
-        f"from {verdicts[i]} at {values[i]:g}{unit} to {verdicts[i + 1]} at {values[i + 1]:g}{unit}"
-        for i in range(len(values) - 1)
-        if verdicts[i] != verdicts[i + 1]
+        f"from {a} at {xa[-1]:g}{unit} to {b} at {xb[0]:g}{unit}"
+        for (a, xa), (b, xb) in zip(runs, runs[1:], strict=False)
     ]
     span = f"{values[0]:g}-{values[-1]:g}{unit}"
     at = [v for x, v in zip(values, verdicts, strict=True) if np.isclose(x, float(default))]
@@ -228,27 +253,16 @@ def deviation_distribution(trials: pd.DataFrame, n_compensation: int) -> pd.Data
     return pd.DataFrame(rows)
 
 
-def deviation_controls(sub: pd.DataFrame, pub, **rule):
-    """``hybrid.deviation`` and its controls, ungated, on the trials of ``sub`` (columns
-    ``within_0p3``, ``within_0p3_uncompensated``, ``within_0p3_oracle``); ``rule``: further
-    keywords of :func:`calstudy.core.verdicts.judge` (``min_trials`` for a sweep point)."""
-    return judge_controls(
-        sub["within_0p3"],
-        sub["within_0p3_uncompensated"],
-        sub["within_0p3_oracle"],
-        published=pub.within_0p3_percent,
-        kind="percent",
-        direction="higher",
-        baseline=sub["within_0p3_uncompensated"],
-        **rule,
+def deviation_verdicts(sub: pd.DataFrame, min_trials: int = 30):
+    """``hybrid.deviation`` and its controls (:data:`CLAIMS`) on the trials of ``sub``, the
+    verdict gated by the oracle; ``min_trials`` 30 at a sweep point."""
+    return judge_claim(
+        "hybrid.deviation",
+        sub,
+        CLAIMS["hybrid.deviation"],
+        published=load_published().within_0p3_percent,
+        min_trials=min_trials,
     )
-
-
-def deviation_verdicts(sub: pd.DataFrame):
-    """``hybrid.deviation`` and its controls at a sweep point (>= 30 trials), the verdict gated
-    by the oracle."""
-    claim, null, oracle = deviation_controls(sub, load_published(), min_trials=30)
-    return oracle_gate(claim, oracle, "a systematic error that an offset can remove"), null, oracle
 
 
 def summarise_drift(sweep: pd.DataFrame) -> pd.DataFrame:
@@ -261,7 +275,7 @@ def summarise_drift(sweep: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for value, sub in drift.groupby("value", sort=True):
         counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy(float)
-        v = _verdict_or_reason(lambda s=sub: deviation_verdicts(s)[0])
+        judged = verdict_or_none(lambda s=sub: deviation_verdicts(s))
         rows.append(
             {
                 "drift_sigma_mm": float(value),
@@ -271,7 +285,7 @@ def summarise_drift(sweep: pd.DataFrame) -> pd.DataFrame:
                 "bin_le_0p1_pct": float(np.median(100.0 * counts[:, 0] / counts.sum(axis=1))),
                 "kolmogorov": float(np.median(bin_distance(counts, pub.deviation_percent))),
                 "chi_square": float(np.median(chi_square_distance(counts, pub.deviation_percent))),
-                "verdict": "too few trials" if v is None else v.verdict,
+                "verdict": TOO_FEW if judged is None else judged.claim.verdict,
             }
         )
     return pd.DataFrame(rows)

@@ -22,14 +22,15 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.ticker import FuncFormatter, MaxNLocator  # noqa: E402
 
-from calstudy.claims import ClaimRow, claim_row, control_rows  # noqa: E402
-from calstudy.core.verdicts import (  # noqa: E402
-    Verdict,
-    judge,
-    judge_controls,
-    median_interval,
-    oracle_gate,
+from calstudy.claims import (  # noqa: E402
+    ClaimColumns,
+    ClaimRow,
+    Judged,
+    claim_row,
+    control_rows,
+    judge_claim,
 )
+from calstudy.core.verdicts import median_interval  # noqa: E402
 from calstudy.papers.selfcal.experiments import (  # noqa: E402
     HISTORY_LENGTH,
     MAX_EVALUATIONS,
@@ -265,66 +266,70 @@ UNITS = {
 }
 
 
-def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict:
-    """Verdicts by the v2 rule from the calibration trials: claim id -> (claim, null, oracle),
-    the controls None where the claim has none (convergence)."""
-    col = lambda m, c: method_column(calib, m, c)  # noqa: E731
+#: Where each claim's figures sit in the table of :func:`claim_samples`; the rule is the
+#: register's.
+CLAIMS = {
+    "selfcal.identification": ClaimColumns(
+        "model_over_crb",
+        null="null_model_over_crb",
+        oracle="oracle_model_over_crb",
+        mechanism="the geometric errors of robot, sensor mounting and base",
+    ),
+    "selfcal.convergence": ClaimColumns("poor_start_iterations"),
+    "selfcal.robot_params": ClaimColumns(
+        "robot_param_error",
+        baseline="null_robot_param_error",
+        null="null_robot_param_error",
+        oracle="oracle_robot_param_error",
+        mechanism="manufacturing errors of the robot",
+    ),
+    "selfcal.residual": ClaimColumns(
+        "val_max_mm",
+        null="null_val_max_mm",
+        oracle="oracle_val_max_mm",
+        mechanism="geometric errors that identification can correct",
+    ),
+    "selfcal.one_step": ClaimColumns(
+        "val_mean_mm",
+        baseline="best_route_val_mean_mm",
+        null="null_val_mean_mm",
+        oracle="oracle_val_mean_mm",
+        mechanism="error propagation between calibration steps",
+    ),
+}
+
+
+def claim_samples(calib: pd.DataFrame) -> dict[str, np.ndarray]:
+    """The per-trial figures of the five claims (one value per trial, in trial order): the
+    one-step route's (no prefix), the null control's (``null_``: nothing identified), the oracle
+    control's (``oracle_``: noise-free identification), the model error over its Cramer-Rao
+    prediction, the iterations from the very poor start and the best multi-step route's mean
+    validation error."""
     one = calib[calib["method"] == ONE_STEP].sort_values("trial")
     crb = one["crb_model_rms_mm"].to_numpy(float)
-    out: dict[str, tuple[Verdict, Verdict | None, Verdict | None]] = {}
-
-    bound = {"kind": "bound", "direction": "lower"}
-    c, n, o = judge_controls(
-        col(ONE_STEP, "model_rms_mm") / crb,
-        col(NULL, "model_rms_mm") / crb,
-        col(ORACLE, "model_rms_mm") / crb,
-        bound=scenario.crb_multiple,
-        **bound,
-    )
-    out["selfcal.identification"] = (
-        oracle_gate(c, o, "the geometric errors of robot, sensor mounting and base"),
-        n,
-        o,
-    )
-
-    iters = poor_start_iterations(one)
-    out["selfcal.convergence"] = (
-        judge(iters, bound=float(scenario.published_iterations), **bound),
-        None,
-        None,
-    )
-
-    base = col(NULL, "robot_param_error")
-    ratio = {"kind": "ratio", "direction": "lower", "baseline": base}
-    c, n, o = judge_controls(
-        col(ONE_STEP, "robot_param_error"), base, col(ORACLE, "robot_param_error"), **ratio
-    )
-    out["selfcal.robot_params"] = (oracle_gate(c, o, "manufacturing errors of the robot"), n, o)
-
-    c, n, o = judge_controls(
-        col(ONE_STEP, "val_max_mm"),
-        col(NULL, "val_max_mm"),
-        col(ORACLE, "val_max_mm"),
-        bound=scenario.requirement_mm,
-        **bound,
-    )
-    out["selfcal.residual"] = (
-        oracle_gate(c, o, "geometric errors that identification can correct"),
-        n,
-        o,
-    )
-
-    best = col(best_route(calib), "val_mean_mm")
-    ratio = {"kind": "ratio", "direction": "lower", "baseline": best}
-    c, n, o = judge_controls(
-        col(ONE_STEP, "val_mean_mm"), col(NULL, "val_mean_mm"), col(ORACLE, "val_mean_mm"), **ratio
-    )
-    out["selfcal.one_step"] = (
-        oracle_gate(c, o, "error propagation between calibration steps"),
-        n,
-        o,
-    )
+    out = {"poor_start_iterations": poor_start_iterations(one)}
+    for prefix, method in (("", ONE_STEP), ("null_", NULL), ("oracle_", ORACLE)):
+        for metric in ("model_rms_mm", "robot_param_error", "val_max_mm", "val_mean_mm"):
+            out[prefix + metric] = method_column(calib, method, metric)
+        out[prefix + "model_over_crb"] = out[prefix + "model_rms_mm"] / crb
+    out["best_route_val_mean_mm"] = method_column(calib, best_route(calib), "val_mean_mm")
     return out
+
+
+def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict[str, Judged]:
+    """Verdicts by the v2 rule from the calibration trials: claim id ->
+    :class:`calstudy.claims.Judged` (claim after the oracle gate, null and oracle control; the
+    controls None where the claim has none, convergence)."""
+    x = claim_samples(calib)
+    references = {
+        "selfcal.identification": scenario.crb_multiple,
+        "selfcal.convergence": float(scenario.published_iterations),
+        "selfcal.residual": scenario.requirement_mm,
+    }
+    return {
+        cid: judge_claim(cid, x, columns, reference=references.get(cid))
+        for cid, columns in CLAIMS.items()
+    }
 
 
 def claim_rows(verdicts: dict, scenario: Scenario, notebook: str) -> list[ClaimRow]:
@@ -336,25 +341,15 @@ def claim_rows(verdicts: dict, scenario: Scenario, notebook: str) -> list[ClaimR
     }
     return [
         claim_row(
-            cid,
-            v,
-            published=published.get(cid, ""),
-            unit=UNITS[cid],
-            notebook=notebook,
-            null=n,
-            oracle=o,
+            cid, judged, published=published.get(cid, ""), unit=UNITS[cid], notebook=notebook
         )
-        for cid, (v, n, o) in verdicts.items()
+        for cid, judged in verdicts.items()
     ]
 
 
 def controls_rows(verdicts: dict) -> list[dict]:
     """The rows of ``controls.csv`` (claims with controls only)."""
-    rows = []
-    for cid, (_, n, o) in verdicts.items():
-        if n is not None:
-            rows += control_rows(cid, n, o)
-    return rows
+    return [row for cid, judged in verdicts.items() for row in control_rows(cid, judged)]
 
 
 def claims_frame(rows: list[ClaimRow]) -> pd.DataFrame:
