@@ -631,10 +631,10 @@ def test_misfit_is_flagged_by_default():
 # Coverage of the public functions of core, models and estimators (function -> property test):
 #   core.circles       fit_circle_2d ................................... point_fitters
 #   core.geometry      euler_zyx_to_matrix, project_to_so3, matrix_to_euler_zyx  rotation_converters
-#   core.stats         finite_samples, round_to_uncertainty, rmse, percentile_interval,
-#                      bootstrap_interval, median_and_spread, lilliefors_test(s) ... stats
-#   core.verdicts      median_ranks, median_interval, replication_rate, judge,
-#                      judge_controls ....................................... verdicts
+#   core.stats         finite_samples, round_to_uncertainty, rmse, trial_values,
+#                      interval_level, median_ranks, median_interval, median_and_spread,
+#                      lilliefors_test(s) ................................... stats
+#   core.verdicts      replication_rate, judge, judge_controls .............. verdicts
 #   models.kinematics  Robot.fk, fk_many, jacobian, ik, parameters, with_parameters,
 #                      random_configurations ................................ robot
 #   models.reach       reach_bound, ReachBound.excess, margin_mm, unreachable .... robot
@@ -853,8 +853,10 @@ def test_property_stats(data, level, x):
     _check(stats.round_to_uncertainty, x, float(s[0]) if len(s) else 0.0)
     _check(stats.rmse, s)
     _check(stats.rmse, m, axis=0)
-    _check(stats.percentile_interval, s, level)
-    _check(stats.bootstrap_interval, s, lambda b: b.mean(axis=1), np.random.default_rng(0), n_boot=20, level=level)
+    _check(stats.trial_values, "s", s)
+    _check(stats.interval_level, level)
+    _check(stats.median_ranks, len(s), level)
+    _check(stats.median_interval, s, level)
     _check(stats.median_and_spread, s, level)
     _check(stats.lilliefors_test, s)
     _check(stats.lilliefors_tests, m)
@@ -870,8 +872,6 @@ def test_property_stats(data, level, x):
 def test_property_verdicts(data, kind, direction, published, null, level):
     """A verdict's figures are finite (or NaN where the verdict says untestable), or refused."""
     s, base, oracle = data
-    _check(verdicts.median_ranks, len(s), level)
-    _check(verdicts.median_interval, s, level)
     _check(verdicts.replication_rate, s, null, direction)
     rule = {"kind": kind, "direction": direction, "null": null, "bound": published, "min_trials": 1}
     for fn, args in ((verdicts.judge, (s,)), (verdicts.judge_controls, (s, base, oracle))):

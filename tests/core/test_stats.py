@@ -1,5 +1,7 @@
-"""Tests of calstudy.core.stats: median_and_spread (the one spread helper of the tables) and the
-Lilliefors test against statsmodels, by hand, and on bad input."""
+"""Tests of calstudy.core.stats: median_and_spread (the one spread helper of the tables), the
+checks the intervals share, and the Lilliefors test against statsmodels, by hand, and on bad
+input. The order-statistic interval of the median is tested with the verdicts
+(tests/core/test_verdicts.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,14 @@ import pytest
 from statsmodels.stats.diagnostic import lilliefors
 
 from calstudy import CalibrationError
-from calstudy.core.stats import lilliefors_test, lilliefors_tests, median_and_spread
+from calstudy.core.stats import (
+    interval_level,
+    lilliefors_test,
+    lilliefors_tests,
+    median_and_spread,
+    median_interval,
+    trial_values,
+)
 
 
 def test_median_and_central_95_percent_of_a_known_sample():
@@ -23,6 +32,23 @@ def test_single_value_and_bad_input():
         median_and_spread([])
     with pytest.raises(CalibrationError):
         median_and_spread([1.0, np.nan])
+
+
+def test_the_intervals_share_one_level_check_and_one_trial_check():
+    assert interval_level(0.9) == 0.9
+    for bad in (0.0, 1.0, float("nan"), -0.5):
+        with pytest.raises(CalibrationError, match="expected strictly between 0 and 1"):
+            interval_level(bad)
+    with pytest.raises(CalibrationError, match="level is 'high'; expected a finite number"):
+        interval_level("high")
+    for fn in (median_and_spread, median_interval):
+        with pytest.raises(CalibrationError, match="level is 1.5; expected strictly between"):
+            fn(np.arange(10.0), level=1.5)
+    np.testing.assert_array_equal(trial_values("x", [1, 2]), [1.0, 2.0])
+    with pytest.raises(CalibrationError, match=r"x has shape \(2, 2\); expected \(N,\)"):
+        trial_values("x", np.ones((2, 2)))
+    with pytest.raises(CalibrationError, match="samples has shape \\(0,\\)"):
+        median_interval([])
 
 
 def test_lilliefors_matches_statsmodels():

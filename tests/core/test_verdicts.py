@@ -18,13 +18,12 @@ from hypothesis import strategies as st
 from scipy.stats import binom
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core.stats import median_interval, median_ranks
 from calstudy.core.verdicts import (
     Verdict,
     check_null_control,
     judge,
     judge_controls,
-    median_interval,
-    median_ranks,
     not_testable,
     oracle_gate,
     replication_rate,

@@ -21,7 +21,7 @@ from calstudy.claims import (
     control_rows,
 )
 from calstudy.core.paths import DATA_DIR, RESULTS_DIR
-from calstudy.core.stats import bootstrap_interval, percentile_interval, rmse
+from calstudy.core.stats import median_and_spread, rmse
 from calstudy.core.verdicts import judge_controls
 from calstudy.io.results import (
     PINNED_PACKAGES,
@@ -223,37 +223,16 @@ def test_run_json_rejects_bad_input(tmp_path):
 # stats
 
 
-def test_rmse_and_percentile_interval():
+def test_rmse_and_the_spread_over_trials():
     assert rmse([3.0, -4.0]) == pytest.approx(np.sqrt(12.5))
     np.testing.assert_allclose(rmse([[3.0, 4.0], [0.0, 0.0]], axis=1), [np.sqrt(12.5), 0.0])
-    lo, hi = percentile_interval(np.arange(101.0))
-    assert (lo, hi) == pytest.approx((2.5, 97.5))
+    assert median_and_spread(np.arange(101.0)) == pytest.approx((50.0, 2.5, 97.5))
     with pytest.raises(CalibrationError, match="empty"):
         rmse([])
     with pytest.raises(CalibrationError, match="non-finite"):
-        percentile_interval([1.0, np.nan, 2.0])
-    with pytest.raises(CalibrationError, match="at least 2"):
-        percentile_interval([1.0])
-    with pytest.raises(CalibrationError, match="level"):
-        percentile_interval([1.0, 2.0], level=1.0)
-
-
-def test_bootstrap_interval_vectorised_and_seeded():
-    x = np.random.default_rng(1).normal(10.0, 1.0, 400)
-
-    def mean(s):
-        return s.mean(axis=1)
-
-    est, lo, hi = bootstrap_interval(x, mean, np.random.default_rng(2), n_boot=1000)
-    assert est == pytest.approx(x.mean())
-    assert lo < est < hi
-    assert hi - lo == pytest.approx(2 * 1.96 / np.sqrt(400), rel=0.2)
-    again = bootstrap_interval(x, mean, np.random.default_rng(2), n_boot=1000)
-    assert again == (est, lo, hi)
-    with pytest.raises(CalibrationError, match="Generator"):
-        bootstrap_interval(x, mean, 2)
-    with pytest.raises(CalibrationError, match="shape"):
-        bootstrap_interval(x, lambda s: s, np.random.default_rng(0), n_boot=10)
+        median_and_spread([1.0, np.nan, 2.0])
+    with pytest.raises(CalibrationError, match="level is 1.0; expected strictly between 0 and 1"):
+        median_and_spread([1.0, 2.0], level=1.0)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,12 +1,15 @@
-"""Summary statistics over Monte Carlo trials: RMSE, percentile and bootstrap intervals.
+"""Summary statistics over Monte Carlo trials: RMSE and the two intervals of the study.
 
-Every verdict of the study rests on these few functions, so they check their input and raise
-:class:`calstudy.CalibrationError` rather than return NaN.
+The intervals: :func:`median_interval`, the order-statistic confidence interval of the median
+that every verdict uses (rule 2), and :func:`median_and_spread`, the central spread of the
+trials that the tables show beside a median. Every verdict of the study rests on these few
+functions, so they check their input and raise :class:`calstudy.CalibrationError` rather than
+return NaN.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from functools import lru_cache
 
 import numpy as np
 
@@ -75,10 +78,35 @@ def round_to_uncertainty(value: float, std: float) -> float:
     return float(round(float(value), digits))
 
 
-def _check_level(level: float) -> float:
-    if not 0.0 < level < 1.0:
-        raise CalibrationError(f"interval level {level!r} is not strictly between 0 and 1")
-    return float(level)
+def trial_values(name: str, values: object) -> np.ndarray:
+    """``values`` as a finite float array of shape (N,), N >= 1, one value per trial.
+
+    Raises
+    ------
+    CalibrationError
+        Naming ``name``, if the shape is not (N,) with N >= 1 or a value is not finite.
+    """
+    shape = np.shape(values) if not isinstance(values, str) else ()
+    if len(shape) != 1 or shape[0] == 0:
+        raise CalibrationError(f"{name} has shape {shape}; expected (N,), one value per trial")
+    return finite_samples(name, values)
+
+
+def interval_level(level: object) -> float:
+    """``level`` as a float, checked to be a coverage strictly between 0 and 1.
+
+    Raises
+    ------
+    CalibrationError
+        If ``level`` is not a finite number in (0, 1).
+    """
+    try:
+        x = float(level)
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(f"level is {level!r}; expected a finite number") from exc
+    if not 0.0 < x < 1.0:  # NaN fails too
+        raise CalibrationError(f"level is {level!r}; expected strictly between 0 and 1")
+    return x
 
 
 def rmse(x, axis: int | None = None) -> float | np.ndarray:
@@ -109,108 +137,106 @@ def rmse(x, axis: int | None = None) -> float | np.ndarray:
     return float(out) if np.ndim(out) == 0 else out
 
 
-def percentile_interval(samples, level: float = 0.95) -> tuple[float, float]:
-    """Central percentile interval of ``samples`` (for example over Monte Carlo trials).
+@lru_cache(maxsize=512)
+def median_ranks(n: int, level: float = 0.95) -> tuple[int, int, float]:
+    """Ranks of the order-statistic confidence interval for the median of ``n`` samples.
+
+    With ``B ~ Binomial(n, 1/2)`` the number of samples below the true median (of a continuous
+    distribution), ``P(x_(j) < median < x_(k)) = P(j <= B < k)``. The ranks are symmetric,
+    ``k = n + 1 - j``, and ``j`` is the largest with ``P(j <= B < k) >= level``: the narrowest
+    symmetric interval that reaches the level. The coverage is exact, hence conservative.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples.
+    level : float, default 0.95
+        Required coverage, in (0, 1).
+
+    Returns
+    -------
+    (int, int, float)
+        1-based ranks ``j < k`` of the bounds and the exact coverage ``1 - 2 P(B <= j - 1)``.
+
+    Raises
+    ------
+    CalibrationError
+        If ``level`` is not in (0, 1) or ``n`` cannot reach it (below 6 for 95 %: the full
+        range of 5 samples covers 93.75 %).
+    """
+    level = interval_level(level)
+    if int(n) != n or n < 1:
+        raise CalibrationError(f"n is {n!r}; expected a positive sample count")
+    from scipy.stats import binom  # lazy: scipy.stats takes about 1 s to import
+
+    alpha_half = (1.0 - level) / 2.0
+    cdf = binom.cdf(np.arange(n // 2 + 1), n, 0.5)  # cdf at n // 2 is >= 1/2 > alpha_half
+    j = int(np.count_nonzero(cdf <= alpha_half))
+    if j == 0:
+        n_min = next(m for m in range(1, 2000) if binom.cdf(0, m, 0.5) <= alpha_half)
+        raise CalibrationError(
+            f"{n} samples cannot give a {100 * level:g} % interval for the median "
+            f"(the full range covers {100 * (1 - 2 * 0.5**n):.3g} %); at least {n_min} needed"
+        )
+    return j, n + 1 - j, float(1.0 - 2.0 * cdf[j - 1])
+
+
+def median_interval(samples: object, level: float = 0.95) -> tuple[float, float, float]:
+    """Median of ``samples`` and its distribution-free order-statistic confidence interval.
+
+    The interval is ``[x_(j), x_(k)]`` of the sorted samples with the binomial ranks of
+    :func:`median_ranks` (symmetric, the narrowest reaching ``level``). This is the interval
+    used for every verdict; no bootstrap, so no resampling generator and no Monte Carlo error.
 
     Parameters
     ----------
     samples : array_like, shape (N,)
         One value per trial.
     level : float, default 0.95
+        Coverage of the interval.
+
+    Returns
+    -------
+    (float, float, float)
+        Median (``numpy.median``), lower bound, upper bound.
+
+    Raises
+    ------
+    CalibrationError
+        If ``samples`` is not (N,), holds NaN or infinity, or N is below the smallest count that
+        reaches ``level`` (6 for 95 %).
+    """
+    x = np.sort(trial_values("samples", samples))
+    j, k, _ = median_ranks(x.size, interval_level(level))
+    return float(np.median(x)), float(x[j - 1]), float(x[k - 1])
+
+
+def median_and_spread(samples, level: float = 0.95) -> tuple[float, float, float]:
+    """Median of ``samples`` and their central ``level`` percentile interval: a spread over
+    trials, not a confidence interval of the median (that is :func:`median_interval`).
+
+    Parameters
+    ----------
+    samples : array_like
+        Values over trials (flattened).
+    level : float, default 0.95
         Probability mass inside the interval; the bounds are the ``(1 - level) / 2`` and
         ``(1 + level) / 2`` quantiles (linear interpolation, numpy's default).
 
     Returns
     -------
-    (float, float)
-        Lower and upper bound.
-
-    Raises
-    ------
-    CalibrationError
-        If there are fewer than 2 samples, a sample is not finite, or ``level`` is not in (0, 1).
-    """
-    level = _check_level(level)
-    a = finite_samples("samples", samples, min_count=2)
-    if a.ndim != 1:
-        raise CalibrationError(f"samples has shape {a.shape}; expected (N,)")
-    lo, hi = np.quantile(a, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
-    return float(lo), float(hi)
-
-
-def bootstrap_interval(
-    samples,
-    statistic: Callable[[np.ndarray], np.ndarray],
-    rng: np.random.Generator,
-    n_boot: int = 2000,
-    level: float = 0.95,
-) -> tuple[float, float, float]:
-    """Percentile bootstrap interval of ``statistic`` over resampled trials, vectorised.
-
-    Trials (the first axis of ``samples``) are drawn with replacement ``n_boot`` times in one
-    index array; rows stay together, so paired values (say a method's and a baseline's error on
-    the same simulated data) are resampled as pairs.
-
-    Parameters
-    ----------
-    samples : array_like, shape (N, ...)
-        One row per trial.
-    statistic : callable
-        Takes an array of shape ``(B, N, ...)`` and returns shape ``(B,)``: the statistic of each
-        of ``B`` resampled data sets, reducing axis 1. Example for an RMS:
-        ``lambda s: np.sqrt(np.mean(s**2, axis=1))``.
-    rng : numpy.random.Generator
-        Source of the resampling indices (required; no default, so runs are reproducible).
-    n_boot : int, default 2000
-        Number of bootstrap resamples.
-    level : float, default 0.95
-        Probability mass inside the interval.
-
-    Returns
-    -------
     (float, float, float)
-        The statistic on the original samples, then the lower and upper bound.
+        Median, lower and upper bound; one sample gives ``(x, x, x)``.
 
     Raises
     ------
     CalibrationError
-        If there are fewer than 2 trials, a value is not finite, ``n_boot < 1``, ``level`` is
-        not in (0, 1), or ``statistic`` does not return one finite value per resample.
+        On no or non-finite values, or ``level`` not in (0, 1).
     """
-    level = _check_level(level)
-    if not isinstance(rng, np.random.Generator):
-        raise CalibrationError(f"rng is a {type(rng).__name__}; expected numpy.random.Generator")
-    if int(n_boot) < 1:
-        raise CalibrationError(f"n_boot is {n_boot}; at least 1 resample needed")
-    a = finite_samples("samples", samples, min_count=2)
-    n = a.shape[0]
-    estimate = np.asarray(statistic(a[None, ...]), dtype=float).reshape(-1)
-    idx = rng.integers(0, n, size=(int(n_boot), n))
-    values = np.asarray(statistic(a[idx]), dtype=float)
-    if estimate.shape != (1,) or values.shape != (int(n_boot),):
-        raise CalibrationError(
-            f"statistic returned shape {values.shape} for {int(n_boot)} resamples; it must reduce "
-            "axis 1 of a (B, N, ...) array to shape (B,)"
-        )
-    if not np.all(np.isfinite(values)) or not np.isfinite(estimate[0]):
-        raise CalibrationError(
-            f"statistic is not finite on {int((~np.isfinite(values)).sum())} of {int(n_boot)} "
-            "resamples (a division by a zero error?)"
-        )
-    lo, hi = np.quantile(values, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
-    return float(estimate[0]), float(lo), float(hi)
-
-
-def median_and_spread(samples, level: float = 0.95) -> tuple[float, float, float]:
-    """Median of ``samples`` and their central ``level`` percentile interval (a spread over
-    trials, not a confidence interval of the median: that is
-    :func:`calstudy.core.verdicts.median_interval`).
-
-    One sample gives ``(x, x, x)``. Raises :class:`CalibrationError` on no or non-finite values.
-    """
+    level = interval_level(level)
     a = finite_samples("samples", samples, min_count=1).reshape(-1)
-    lo, hi = percentile_interval(a, level) if a.size >= 2 else (float(a[0]), float(a[0]))
-    return float(np.median(a)), lo, hi
+    lo, hi = np.quantile(a, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
+    return float(np.median(a)), float(lo), float(hi)
 
 
 def lilliefors_test(samples) -> tuple[float, float]:

@@ -6,7 +6,7 @@ difference, no effect 0; or the value itself against a stated reference). :func:
 one claim's :class:`Verdict` from the per-trial figures:
 
 - reproduced figure: the median over trials with the order-statistic 95 % interval of
-  :func:`median_interval` (rule 2);
+  :func:`calstudy.core.stats.median_interval` (rule 2);
 - significant: the interval of the median effect lies strictly on the claimed side of no effect
   (rule 3); magnitude: the median within a factor 1.5 of the published figure, or 10 percentage
   points for percentages (rule 4); verdict by rule 5; requirements (``kind="bound"``) by rule 7;
@@ -20,14 +20,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from scipy.stats import binom
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.stats import finite_samples
+from calstudy.core.stats import interval_level, median_interval, trial_values
 
 #: The four verdicts of the claims register.
 VERDICTS = ("reproduced", "direction only", "not reproduced", "not testable")
@@ -116,95 +114,8 @@ def _finite(name: str, value: object) -> float:
     return x
 
 
-def _trials(name: str, values: object) -> np.ndarray:
-    """``values`` as a finite float array of shape (N,), N >= 1."""
-    shape = np.shape(values) if not isinstance(values, str) else ()
-    if len(shape) != 1 or shape[0] == 0:
-        raise CalibrationError(f"{name} has shape {shape}; expected (N,), one value per trial")
-    return finite_samples(name, values)
-
-
-def _check_level(level: float) -> float:
-    level = _finite("level", level)
-    if not 0.0 < level < 1.0:
-        raise CalibrationError(f"level is {level!r}; expected strictly between 0 and 1")
-    return level
-
-
 # ----------------------------------------------------------------------------------------------
 # statistics
-
-
-@lru_cache(maxsize=512)
-def median_ranks(n: int, level: float = 0.95) -> tuple[int, int, float]:
-    """Ranks of the order-statistic confidence interval for the median of ``n`` samples.
-
-    With ``B ~ Binomial(n, 1/2)`` the number of samples below the true median (of a continuous
-    distribution), ``P(x_(j) < median < x_(k)) = P(j <= B < k)``. The ranks are symmetric,
-    ``k = n + 1 - j``, and ``j`` is the largest with ``P(j <= B < k) >= level``: the narrowest
-    symmetric interval that reaches the level. The coverage is exact, hence conservative.
-
-    Parameters
-    ----------
-    n : int
-        Number of samples.
-    level : float, default 0.95
-        Required coverage, in (0, 1).
-
-    Returns
-    -------
-    (int, int, float)
-        1-based ranks ``j < k`` of the bounds and the exact coverage ``1 - 2 P(B <= j - 1)``.
-
-    Raises
-    ------
-    CalibrationError
-        If ``level`` is not in (0, 1) or ``n`` cannot reach it (below 6 for 95 %: the full
-        range of 5 samples covers 93.75 %).
-    """
-    level = _check_level(level)
-    if int(n) != n or n < 1:
-        raise CalibrationError(f"n is {n!r}; expected a positive sample count")
-    alpha_half = (1.0 - level) / 2.0
-    cdf = binom.cdf(np.arange(n // 2 + 1), n, 0.5)  # cdf at n // 2 is >= 1/2 > alpha_half
-    j = int(np.count_nonzero(cdf <= alpha_half))
-    if j == 0:
-        n_min = next(m for m in range(1, 2000) if binom.cdf(0, m, 0.5) <= alpha_half)
-        raise CalibrationError(
-            f"{n} samples cannot give a {100 * level:g} % interval for the median "
-            f"(the full range covers {100 * (1 - 2 * 0.5**n):.3g} %); at least {n_min} needed"
-        )
-    return j, n + 1 - j, float(1.0 - 2.0 * cdf[j - 1])
-
-
-def median_interval(samples: object, level: float = 0.95) -> tuple[float, float, float]:
-    """Median of ``samples`` and its distribution-free order-statistic confidence interval.
-
-    The interval is ``[x_(j), x_(k)]`` of the sorted samples with the binomial ranks of
-    :func:`median_ranks` (symmetric, the narrowest reaching ``level``). This is the interval
-    used for every verdict; no bootstrap, so no resampling generator and no Monte Carlo error.
-
-    Parameters
-    ----------
-    samples : array_like, shape (N,)
-        One value per trial.
-    level : float, default 0.95
-        Coverage of the interval.
-
-    Returns
-    -------
-    (float, float, float)
-        Median (``numpy.median``), lower bound, upper bound.
-
-    Raises
-    ------
-    CalibrationError
-        If ``samples`` is not (N,), holds NaN or infinity, or N is below the smallest count that
-        reaches ``level`` (6 for 95 %).
-    """
-    x = np.sort(_trials("samples", samples))
-    j, k, _ = median_ranks(x.size, _check_level(level))
-    return float(np.median(x)), float(x[j - 1]), float(x[k - 1])
 
 
 def replication_rate(effect: object, null: float, direction: str) -> float:
@@ -220,7 +131,7 @@ def replication_rate(effect: object, null: float, direction: str) -> float:
         The claimed side.
     """
     _check_choice("direction", direction, DIRECTIONS)
-    e, null = _trials("effect", effect), _finite("null", null)
+    e, null = trial_values("effect", effect), _finite("null", null)
     return float(np.mean(e < null if direction == "lower" else e > null))
 
 
@@ -244,7 +155,7 @@ def _effect(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Figure, effect and no-effect value of a ratio, value or percent claim."""
     if baseline is not None:
-        b = _trials("baseline", baseline)
+        b = trial_values("baseline", baseline)
         if b.shape != s.shape:
             raise CalibrationError(
                 f"baseline has {b.size} trials but samples {s.size}; pair them trial by trial"
@@ -416,7 +327,7 @@ def judge(
     band_pp : float, default 10
         Magnitude band of ``"percent"``, in percentage points.
     level : float, default 0.95
-        Coverage of the order-statistic intervals (:func:`median_interval`).
+        Coverage of the order-statistic intervals (:func:`calstudy.core.stats.median_interval`).
     min_trials : int, default 200
         Rule 1: fewer trials do not change the verdict, but the note says so.
 
@@ -438,13 +349,13 @@ def judge(
     """
     _check_choice("kind", kind, KINDS)
     _check_choice("direction", direction, DIRECTIONS)
-    level = _check_level(level)
+    level = interval_level(level)
     if not _finite("factor", factor) > 1.0 or not _finite("band_pp", band_pp) >= 0.0:
         raise CalibrationError(f"factor is {factor!r} (must exceed 1), band_pp {band_pp!r} (>= 0)")
     if int(min_trials) < 1:
         raise CalibrationError(f"min_trials is {min_trials!r}; expected at least 1")
     min_trials = int(min_trials)
-    s = _trials("samples", samples)
+    s = trial_values("samples", samples)
     if kind == "bound":
         others = {"published": published, "baseline": baseline, "null": null}
         return _judge_bound(direction, s, bound, others, level, min_trials)
@@ -515,9 +426,9 @@ def judge_controls(
     >>> check_null_control(null_v)          # raises if the test is broken
     >>> final = oracle_gate(claim, oracle_v, mechanism="circle-of-confusion defocus")
     """
-    n = _trials("samples", samples).size
+    n = trial_values("samples", samples).size
     for name, values in (("null control", null_samples), ("oracle control", oracle_samples)):
-        m = _trials(name, values).size
+        m = trial_values(name, values).size
         if m != n:
             raise CalibrationError(f"{name} has {m} trials but the claim {n}; use the same trials")
     return (

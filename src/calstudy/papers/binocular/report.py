@@ -23,7 +23,8 @@ from calstudy.claims import (
     verdict_runs,
 )
 from calstudy.core.labels import claim_label
-from calstudy.core.verdicts import median_interval, not_testable
+from calstudy.core.stats import median_interval
+from calstudy.core.verdicts import not_testable
 from calstudy.estimators import binocular as bino
 from calstudy.papers.binocular.scenario import Scenario, paper_table, published
 

@@ -15,7 +15,7 @@ import pandas as pd
 from calstudy.claims import ClaimColumns, judge_along, verdict_runs
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.verdicts import median_interval
+from calstudy.core.stats import median_interval
 from calstudy.models.targets import circle_centre_bias
 from calstudy.papers.dualarm import simulate as sim
 from calstudy.papers.dualarm.experiments import BUDGET_SOURCES

@@ -36,7 +36,7 @@ import pandas as pd
 from calstudy.core.config import read_toml, scenario_file
 from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.montecarlo import Experiment, child_rng, streams, trial_rng
-from calstudy.core.verdicts import median_interval
+from calstudy.core.stats import median_interval
 from calstudy.papers.selfcal.design import (
     candidate_jacobians,
     observability,

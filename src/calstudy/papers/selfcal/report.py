@@ -30,7 +30,7 @@ from calstudy.claims import (  # noqa: E402
     control_rows,
     judge_claim,
 )
-from calstudy.core.verdicts import median_interval  # noqa: E402
+from calstudy.core.stats import median_interval  # noqa: E402
 from calstudy.papers.selfcal.experiments import (  # noqa: E402
     HISTORY_LENGTH,
     MAX_EVALUATIONS,

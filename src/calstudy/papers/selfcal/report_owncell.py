@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
-from calstudy.core.verdicts import median_interval  # noqa: E402
+from calstudy.core.stats import median_interval  # noqa: E402
 from calstudy.papers.selfcal.experiments import OPTIMISED, RANDOM  # noqa: E402
 from calstudy.papers.selfcal.report import legend_outside  # noqa: E402
 
