@@ -351,7 +351,7 @@ def describe_figure(fig, name: str, limit: int = 400) -> str:
         panel = " ".join(p for p in (f'"{title}"' if title else "", what) if p)
         if panel:
             panels.append(panel)
-    suptitle = fig._suptitle.get_text() if getattr(fig, "_suptitle", None) else ""
+    suptitle = fig.get_suptitle()
     head = f'Figure "{name.replace("_", " ")}"'
     if suptitle:
         head += f" ({_label(suptitle)})"
