@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import chi2
 
-from calstudy.claims import TOO_FEW, ClaimColumns, judge_claim, verdict_or_none, verdict_runs
+from calstudy.claims import TOO_FEW, ClaimColumns, judge_along, judge_claim, verdict_runs
 from calstudy.core.errors import CalibrationError
 from calstudy.core.labels import plain
 from calstudy.core.stats import median_and_spread
@@ -91,26 +91,26 @@ def summarise_handeye_sweep(trials: pd.DataFrame, keys) -> pd.DataFrame:
     its 95 % confidence interval, the 95th percentile, the ML's median ratio and the
     ``hybrid.handeye`` verdict by its rule on that value's trials."""
     keys = list(keys)
-    ratios = handeye_ratios(trials, keys)
     rows = []
-    for key, sub in ratios.groupby(keys, sort=True):
+    for key, sub, judged in _bound_points(handeye_ratios(trials, keys), keys, "hybrid.handeye"):
         row = dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True))
         extra = {"ml_median_ratio": float(np.median(sub["ML"]))}
-        rows.append(row | _bound_summary(sub, "hybrid.handeye", CRB_MULTIPLE, extra))
+        rows.append(row | _bound_summary(sub["sphere"], judged, extra))
     return pd.DataFrame(rows)
 
 
-def _bound_summary(sub: pd.DataFrame, claim_id: str, bound: float, extra: dict) -> dict:
-    """The columns of a sweep point (its trials ``sub``) judged by the bound of ``claim_id`` on
-    the claim's figure alone: count, median with its 95 % confidence interval, 95th percentile,
-    ``extra`` and the verdict by the rule (at least 30 trials)."""
-    column = CLAIMS[claim_id].figure
-    ratios = sub[column]
-    judged = verdict_or_none(
-        lambda: judge_claim(
-            claim_id, sub, ClaimColumns(column), reference=bound, min_trials=30
-        )
-    )
+def _bound_points(ratios: pd.DataFrame, by, claim_id: str) -> list:
+    """:func:`calstudy.claims.judge_along` on the claim's figure alone (its bound:
+    :data:`CRB_MULTIPLE` or :data:`ML_MULTIPLE`)."""
+    bound = {"hybrid.handeye": CRB_MULTIPLE, "hybrid.stationary": ML_MULTIPLE}[claim_id]
+    figure = ClaimColumns(CLAIMS[claim_id].figure)
+    return judge_along(ratios, by, claim_id, figure, reference=bound)
+
+
+def _bound_summary(ratios: pd.Series, judged, extra: dict) -> dict:
+    """The columns of a sweep point judged by a bound on ``ratios`` (its trials): count, median
+    with its 95 % confidence interval, 95th percentile, ``extra`` and the verdict (``judged``,
+    None for too few trials)."""
     v = None if judged is None else judged.claim
     return {
         "trials": len(ratios),
@@ -157,12 +157,11 @@ def summarise_stationary_sweep(stationary: pd.DataFrame, key: str) -> pd.DataFra
     """A stationary-sensor sweep: per value of ``key`` the median ratio of the claim with its
     95 % confidence interval, the 95th percentile, the oracle's median ratio and the
     ``hybrid.stationary`` verdict by its rule on that value's trials."""
-    ratios = stationary_ratios(stationary, [key])
     rows = []
-    for value, sub in ratios.groupby(key, sort=True):
+    ratios = stationary_ratios(stationary, [key])
+    for value, sub, judged in _bound_points(ratios, key, "hybrid.stationary"):
         extra = {"oracle_median_ratio": float(np.median(sub["oracle"]))}
-        summary = _bound_summary(sub, "hybrid.stationary", ML_MULTIPLE, extra)
-        rows.append({key: float(value)} | summary)
+        rows.append({key: float(value)} | _bound_summary(sub["ratio"], judged, extra))
     return pd.DataFrame(rows)
 
 
@@ -273,9 +272,12 @@ def summarise_drift(sweep: pd.DataFrame) -> pd.DataFrame:
     pub = load_published()
     drift = sweep[sweep["parameter"] == "drift_sigma_mm"]
     rows = []
-    for value, sub in drift.groupby("value", sort=True):
+    points = judge_along(
+        drift, "value", "hybrid.deviation", CLAIMS["hybrid.deviation"],
+        published=pub.within_0p3_percent,
+    )
+    for value, sub, judged in points:
         counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy(float)
-        judged = verdict_or_none(lambda s=sub: deviation_verdicts(s))
         rows.append(
             {
                 "drift_sigma_mm": float(value),
