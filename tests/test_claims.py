@@ -8,6 +8,8 @@ the oracle gate; :func:`judge_along` does the same at each point of a sweep, and
 
 from __future__ import annotations
 
+import ast
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -24,6 +26,7 @@ from calstudy.claims import (
     verdict_runs,
 )
 from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import REPO_ROOT
 from calstudy.core.verdicts import judge
 
 COC = ClaimColumns(
@@ -123,3 +126,30 @@ def test_verdict_runs_say_where_the_verdict_changes():
         verdict_runs([1, 2], ["a"])
     with pytest.raises(CalibrationError, match="0 values but 0 verdicts"):
         verdict_runs([], [])
+
+
+def rule_imports(source: str) -> set[str]:
+    """Names a module imports from the verdict rule (``calstudy.core.verdicts``)."""
+    names = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom) and node.module == "calstudy.core.verdicts":
+            names |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module == "calstudy.core":
+            names |= {a.name for a in node.names if a.name == "verdicts"}
+        elif isinstance(node, ast.Import):
+            names |= {a.name for a in node.names if a.name == "calstudy.core.verdicts"}
+    return names
+
+
+def test_paper_modules_judge_claims_through_the_register_only():
+    papers = sorted((REPO_ROOT / "src" / "calstudy" / "papers").glob("*/*.py"))
+    assert len(papers) > 20
+    # a claim a simulation cannot test (rule 9) is recorded with its reason; nothing else of
+    # the rule is called from a paper: judge_claim reads the kind and direction from the register
+    found = {p.relative_to(REPO_ROOT).as_posix(): rule_imports(p.read_text()) for p in papers}
+    assert {path: names for path, names in found.items() if names - {"not_testable"}} == {}
+    assert rule_imports("from calstudy.core.verdicts import judge, not_testable") == {
+        "judge",
+        "not_testable",
+    }
+    assert rule_imports("from calstudy.core import verdicts") == {"verdicts"}
