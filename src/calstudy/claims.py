@@ -289,8 +289,24 @@ TOO_FEW = "too few trials"
 
 
 def verdict_or_none(make):
-    """``make()``, or None when there are too few trials for an interval of the median (a sweep
-    point at CI size); any other refusal is raised."""
+    """``make()``, or None when there are too few trials for an interval of the median.
+
+    Parameters
+    ----------
+    make : callable
+        Takes no argument and judges (for example a sweep point with a handful of trials).
+
+    Returns
+    -------
+    object or None
+        What ``make`` returns; None when it refused for too few trials (written
+        :data:`TOO_FEW` in a table).
+
+    Raises
+    ------
+    CalibrationError
+        Any other refusal of ``make``.
+    """
     try:
         return make()
     except CalibrationError as exc:
@@ -343,9 +359,24 @@ def claim_row(
 ) -> ClaimRow:
     """The claims-table row of a verdict of the v2 rule (:func:`judge_claim`).
 
-    ``reproduced``/``ci_low``/``ci_high`` are the median over trials and its 95 % confidence
-    interval; the controls' verdicts go in the row, their figures in ``controls.csv`` (see
-    :func:`control_rows`). ``note`` replaces the verdict's own note (which it usually quotes).
+    Parameters
+    ----------
+    claim_id : str
+        Id in ``data/claims.csv``.
+    judged : Judged
+        The claim's verdict and its controls: ``reproduced``/``ci_low``/``ci_high`` are the
+        median over trials and its 95 % confidence interval; the controls' verdicts go in the
+        row, their figures in ``controls.csv`` (see :func:`control_rows`).
+    published, unit : str
+        The paper's figure as text and the unit of the reproduced figure.
+    notebook : str
+        Stem of the notebook that computed it.
+    note : str, optional
+        Replaces the verdict's own note (which it usually quotes).
+
+    Returns
+    -------
+    ClaimRow
     """
     verdict, null, oracle = judged
     controls = {
