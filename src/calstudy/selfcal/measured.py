@@ -12,7 +12,7 @@ and checks them; every message names the file, and the row and column where ther
     flange frame, ``xyz_mm = [x, y, z]`` and ``zyx_deg = [rz, ry, rx]`` (``R = Rz Ry Rx``);
     optional in ``[sensor]``: ``standoff_mm``, ``field_mm``, ``depth_mm``, the sensor's working
     distance and the half-widths of its field across and along the optical axis (the pose
-    planning of :func:`calstudy.papers.selfcal.experiments.suggest_poses` plans for them);
+    planning of :func:`calstudy.selfcal.planning.suggest_poses` plans for them);
     optional ``[noise]``: standard deviations per axis ``sensor_mm`` (fitted sphere centre),
     ``repeatability_mm`` and ``tracker_mm``. Without ``[noise]`` the covariance of the parameters
     comes from the residuals (the error of each view and the one shared by the views of a
@@ -28,8 +28,8 @@ and checks them; every message names the file, and the row and column where ther
 Units are declared in the header: ``<u>`` is ``mm`` or ``m``, ``<a>`` is ``deg`` or ``rad``.
 Lines starting with ``#`` are comments.
 
-:func:`identify_cell` identifies the 30 parameters from the calibration rows
-(:func:`calstudy.papers.selfcal.identify.identify`), flags outliers by a stated rejection rule
+:func:`identify_measurements` identifies the 30 parameters from the calibration rows
+(:func:`calstudy.selfcal.identify.identify`), flags outliers by a stated rejection rule
 and refits without them; :func:`validation_report` compares the position errors of the held-out
 rows before and after against a requirement.
 """
@@ -55,14 +55,15 @@ from calstudy.core.schema import check_toml
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import load_robot
 from calstudy.models.urdf import robot_from_urdf
-from calstudy.papers.selfcal.design import BaseParameters, base_parameters
-from calstudy.papers.selfcal.identify import (
+from calstudy.selfcal.cellfile import CellFile
+from calstudy.selfcal.design import BaseParameters, base_parameters
+from calstudy.selfcal.identify import (
     Identification,
     Measurements,
     identify,
     scaled_jacobian,
 )
-from calstudy.papers.selfcal.model import (
+from calstudy.selfcal.model import (
     IS_LENGTH,
     N_PARAMS,
     PARAM_NAMES,
@@ -71,7 +72,6 @@ from calstudy.papers.selfcal.model import (
     default_model,
     parameters_from_robot,
 )
-from calstudy.papers.selfcal.schema import CellFile
 
 CELL_FILE, SPHERES_FILE, MEASUREMENTS_FILE = "cell.toml", "spheres.csv", "measurements.csv"
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
@@ -97,7 +97,7 @@ START_SIGMA_MM = 0.01
 #: largest share of the calibration rows the rejection rule may set aside
 MAX_OUTLIER_SHARE = 0.25
 IDENTIFIED, FIXED_BY_YOU, NOT_IDENTIFIABLE = "identified", "fixed by you", "not identifiable"
-#: the two bases of the covariance of :func:`identify_cell`
+#: the two bases of the covariance of :func:`identify_measurements`
 DECLARED = "declared noise"
 RESIDUAL = "residual variances (per view and per sphere)"
 
@@ -478,7 +478,7 @@ def write_cell(
     robot_file = Path(robot_file)
     shutil.copyfile(robot_file, folder / robot_file.name)
     text = [
-        "# calstudy selfcal: one cell (read by calstudy.papers.selfcal.measured.read_cell)",
+        "# calstudy selfcal: one cell (read by calstudy.selfcal.read_cell)",
         f'robot = "{robot_file.name}"  # nominal MDH table, data/robots/*.toml form',
         "",
         _toml_pose("base", part2base, "nominal robot base in the part (tracker) frame"),
@@ -519,7 +519,7 @@ def write_cell(
 
 @dataclass
 class CellFit:
-    """Identification of a measured cell (:func:`identify_cell`).
+    """Identification of a measured cell (:func:`identify_measurements`).
 
     Attributes
     ----------
@@ -548,7 +548,7 @@ class CellFit:
         Per parameter: ``name``, ``status`` (:data:`IDENTIFIED`, :data:`FIXED_BY_YOU` or
         :data:`NOT_IDENTIFIABLE`) and ``combination``: for a parameter fixed as not identifiable,
         the directions the poses do not fix in which it has a share (unit vectors in scaled
-        units, :attr:`~calstudy.papers.selfcal.design.BaseParameters.unidentified`).
+        units, :attr:`~calstudy.selfcal.design.BaseParameters.unidentified`).
     notes : list of str
         What the fit fixed and why, and any rank warning (also issued as a
         :class:`~calstudy.core.errors.CalibrationWarning`).
@@ -669,7 +669,7 @@ PARALLEL_SIN = 1e-6
 def parallel_axes_note(start) -> str:
     """A sentence on nominally parallel axes beyond the pair 2-3 (which Hayati's ``beta2``
     models), or "" if there are none: the DH link between them cannot separate the offsets
-    along the two axes, so one of them is fixed (:func:`identify_cell` does so)."""
+    along the two axes, so one of them is fixed (:func:`identify_measurements` does so)."""
     pairs = [
         f"{i} and {j}"
         for (i, j), k in _DH_TWISTS.items()
@@ -705,7 +705,7 @@ def _outlier_round(norm: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return new
 
 
-def identify_cell(
+def identify_measurements(
     meas: Measurements,
     start,
     noise: dict | None = None,
@@ -720,8 +720,8 @@ def identify_cell(
 
     Identifiable parameters: at the start (nominal parameters, all rows) and again at the fit
     (kept rows, with the residual scale), the column-pivoted QR of the scaled Jacobian with a
-    noise-aware rank (:func:`calstudy.papers.selfcal.design.base_parameters`: a direction fixed
-    with a standard deviation above :data:`~calstudy.papers.selfcal.design.STD_LIMIT_MM` is not
+    noise-aware rank (:func:`calstudy.selfcal.design.base_parameters`: a direction fixed
+    with a standard deviation above :data:`~calstudy.selfcal.design.STD_LIMIT_MM` is not
     identified; at the start without declared noise :data:`START_SIGMA_MM` is assumed) gives the
     parameters
     the poses identify; the others stay at their nominal value, named with the combinations

@@ -11,7 +11,7 @@
   parameters and the sphere readings (what is known before measuring).
 
 Nothing here knows the simulation: the inputs are a model, parameters, joint angles and points.
-Millimetres and radians; angles are scaled as in :func:`calstudy.papers.selfcal.identify.
+Millimetres and radians; angles are scaled as in :func:`calstudy.selfcal.identify.
 scaled_jacobian` (1 rad counts as ``ANGLE_SCALE_MM`` mm).
 """
 
@@ -25,8 +25,8 @@ import pandas as pd
 import scipy.linalg
 
 from calstudy.core.errors import CalibrationError
-from calstudy.papers.selfcal.identify import RANK_RTOL, scaled_jacobian
-from calstudy.papers.selfcal.model import (
+from calstudy.selfcal.identify import RANK_RTOL, scaled_jacobian
+from calstudy.selfcal.model import (
     ANGLE_SCALE_MM,
     IS_LENGTH,
     PARAM_NAMES,
