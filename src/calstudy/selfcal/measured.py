@@ -350,6 +350,11 @@ def measurements_from_poses(
     arm_mm : float
         Distance of the axis points from the target's origin; about the target's size.
 
+    Returns
+    -------
+    Measurements
+        ``4 m`` rows, noise not declared.
+
     Raises
     ------
     CalibrationError
@@ -391,6 +396,17 @@ def measurements_from_poses(
 
 def read_cell(folder) -> MeasuredCell:
     """Read and check a measurement folder (format in the module docstring).
+
+    Parameters
+    ----------
+    folder : str or path-like
+        The folder holding ``cell.toml``, ``spheres.csv`` and ``measurements.csv``.
+
+    Returns
+    -------
+    MeasuredCell
+        The nominal robot and start parameters, the rows of each set (mm, rad), the sphere
+        readings, the declared noise and sensor geometry.
 
     Raises
     ------
@@ -472,6 +488,34 @@ def write_cell(
     Joint angles in degrees rounded to ``joint_decimals`` (a controller's display), lengths in
     mm rounded to ``length_decimals`` (1 um). ``sphere`` of the measurements indexes
     ``spheres_part``; sphere ids are written from 1, pose ids from 1 in row order.
+
+    Parameters
+    ----------
+    folder : str or path-like
+        Where to write (created if missing).
+    robot_file : str or path-like
+        The nominal robot table, copied into the folder.
+    part2base, sensor2flange : array_like, shape (4, 4)
+        The nominal base placement in the part frame and sensor mounting, mm.
+    spheres_part : array_like, shape (k, 3)
+        The tracker readings of the spheres, mm.
+    calibration, validation : Measurements
+        The rows of each set (``validation`` optional).
+    noise : dict, optional
+        Standard deviations per axis (``sensor_mm``, ``repeatability_mm``, ``tracker_mm``);
+        None writes no ``[noise]`` table.
+    joint_decimals, length_decimals : int
+        Decimals of the joint angles (deg) and lengths (mm).
+
+    Returns
+    -------
+    pathlib.Path
+        The folder.
+
+    Raises
+    ------
+    OSError
+        A folder that cannot be written or a robot file that cannot be read.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -754,6 +798,8 @@ def identify_measurements(
         Fits allowed for the rejection; default ``len(meas) // 4 + 2``.
     pose_ids : array_like, optional
         Ids of the rows for the residual table (default 1..m).
+    model : GlobalModel, optional
+        The model (default the shared one).
     fixed : sequence of str, optional
         Parameters to hold at ``start`` (names of :data:`PARAM_NAMES`), e.g. lengths you know
         from a measurement of the arm.
@@ -768,6 +814,12 @@ def identify_measurements(
         fewer than :data:`MIN_IDENTIFIED` directions beyond those you fixed (a pose repeated,
         one joint moving); more than :data:`MAX_OUTLIER_SHARE` of the rows beyond the rejection
         threshold (declared noise too small, or a model that does not fit); LM not converged.
+
+    Returns
+    -------
+    CellFit
+        The fit, its covariance, residuals with the outliers flagged, identifiability and
+        notes.
     """
     model = default_model() if model is None else model
     start = np.asarray(start, float)
@@ -967,7 +1019,29 @@ def check_sensor_columns(meas: Measurements, start, model: GlobalModel | None = 
 def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
     """Per parameter: nominal, identified, change and standard deviation (mm or deg), with the
     ``status`` of :attr:`CellFit.identifiability` and the ``combination`` a parameter fixed as not
-    identifiable enters; the standard deviation of a fixed parameter is NaN (not zero)."""
+    identifiable enters; the standard deviation of a fixed parameter is NaN (not zero).
+
+    Parameters
+    ----------
+    cell_fit : CellFit
+        The identification (:func:`identify_measurements`).
+    start : array_like, shape (30,)
+        The nominal parameters, mm and rad.
+
+    Returns
+    -------
+    pandas.DataFrame
+        30 rows: ``name``, ``unit``, ``nominal``, ``identified``, ``change``, ``std``,
+        ``status``, ``combination``.
+
+    Raises
+    ------
+    CalibrationError
+        A ``start`` that is not 30 numbers.
+    """
+    start = np.asarray(start, float)
+    if start.shape != (N_PARAMS,):
+        raise CalibrationError(f"start has shape {start.shape}; the 30 parameters are needed")
     p = cell_fit.params
     std = np.sqrt(np.clip(np.diag(cell_fit.covariance), 0.0, None))
     std = np.where(cell_fit.free, std, np.nan)
@@ -976,9 +1050,9 @@ def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
         {
             "name": PARAM_NAMES,
             "unit": np.where(IS_LENGTH, "mm", "deg"),
-            "nominal": np.asarray(start) * conv,
+            "nominal": start * conv,
             "identified": p * conv,
-            "change": angle_wrap(p - np.asarray(start)) * conv,
+            "change": angle_wrap(p - start) * conv,
             "std": std * conv,
             "status": cell_fit.identifiability["status"].to_numpy(),
             "combination": cell_fit.identifiability["combination"].to_numpy(),
@@ -999,9 +1073,29 @@ def validation_report(
 ) -> tuple[pd.DataFrame, dict]:
     """Position errors ``|P_i - P_i^n|`` of held-out measurements before and after calibration.
 
-    Returns the per-measurement table (``sphere``, ``before_mm``, ``after_mm``, ``within``) and a
-    summary (count, mean, RMS and largest error before and after, the requirement and whether
-    the largest error after calibration meets it).
+    Parameters
+    ----------
+    meas : Measurements
+        The held-out rows.
+    before, after : array_like, shape (30,)
+        The parameters before (nominal) and after calibration, mm and rad.
+    requirement_mm : float
+        The accuracy required of every held-out row, mm.
+    model : GlobalModel, optional
+        The model (default the shared one).
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        Per row: ``sphere``, ``before_mm``, ``after_mm``, ``within``.
+    summary : dict
+        Count, mean, RMS and largest error before and after, the requirement and
+        ``meets_requirement`` (the largest error after calibration within it).
+
+    Raises
+    ------
+    CalibrationError
+        No rows, or a requirement that is not a positive finite number.
     """
     if len(meas) == 0:
         raise CalibrationError("no validation measurements: mark some rows set = validation")

@@ -260,7 +260,13 @@ def parameters_from_robot(robot: Robot, part2base, sensor2flange) -> np.ndarray:
     Returns
     -------
     numpy.ndarray, shape (30,)
-        In the order of :data:`PARAM_NAMES`.
+        In the order of :data:`PARAM_NAMES`, mm and rad.
+
+    Raises
+    ------
+    CalibrationError
+        A robot that is not six DH links, Hayati ``beta`` on a link other than 2, or ``d2``
+        not zero.
     """
     _check_table(robot)
     links = robot.links
