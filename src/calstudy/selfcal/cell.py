@@ -5,7 +5,8 @@ the 30 parameters from the calibration rows with the outlier rule
 (:func:`calstudy.selfcal.measured.identify_measurements`), and judges the held-out rows against
 a requirement (:func:`calstudy.selfcal.measured.validation_report`). The result names what a
 user wants of it: the identified robot table, base placement and sensor mounting, the
-parameter table with standard deviations, the residuals and the validation.
+parameter table with standard deviations, the base parameters of the kept poses, the residuals
+and the validation.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import pandas as pd
 
 from calstudy.core.errors import CalibrationError
 from calstudy.models.kinematics import Robot
+from calstudy.selfcal.design import BaseParameters, base_parameters
 from calstudy.selfcal.measured import (
     DEFAULT_REQUIREMENT_MM,
     CellFit,
@@ -26,9 +28,10 @@ from calstudy.selfcal.measured import (
     identify_measurements,
     parameter_report,
     read_cell,
+    subset,
     validation_report,
 )
-from calstudy.selfcal.model import cell_from_parameters
+from calstudy.selfcal.model import cell_from_parameters, default_model
 
 
 @dataclass(frozen=True)
@@ -45,6 +48,10 @@ class CellCalibration:
     parameters : pandas.DataFrame
         Per parameter: nominal, identified, change and standard deviation (mm or deg), status
         (:func:`calstudy.selfcal.measured.parameter_report`).
+    base : BaseParameters
+        Base parameters of the kept poses at the identified parameters, with the noise-aware
+        rank at the fit's residual scale: which parameters the poses identify alone, which only
+        in combination (and the combination), which not at all.
     robot : Robot
         The identified robot table.
     part2base : numpy.ndarray, shape (4, 4)
@@ -62,6 +69,7 @@ class CellCalibration:
     cell: MeasuredCell
     fit: CellFit
     parameters: pd.DataFrame
+    base: BaseParameters
     robot: Robot
     part2base: np.ndarray
     sensor2flange: np.ndarray
@@ -128,6 +136,8 @@ def identify_cell(
         check_columns=check_columns,
     )
     robot, part2base, sensor2flange = cell_from_parameters(cell.robot, fit.params)
+    kept = subset(cell.calibration, ~fit.outliers)
+    _, jac = default_model().points_and_jacobian(fit.params, kept.Q, kept.C)
     validation = summary = None
     if len(cell.validation):
         validation, summary = validation_report(
@@ -137,6 +147,7 @@ def identify_cell(
         cell,
         fit,
         parameter_report(fit, cell.start),
+        base_parameters(jac, sigma_mm=fit.sigma_mm),
         robot,
         part2base,
         sensor2flange,
