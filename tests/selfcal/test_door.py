@@ -17,6 +17,7 @@ from calstudy.core.errors import CalibrationWarning
 from calstudy.core.paths import REPO_ROOT, data_path
 from calstudy.models.robots import load_robot
 from calstudy.selfcal import (
+    base_parameters,
     cell_from_parameters,
     identify_cell,
     identify_measurements,
@@ -127,6 +128,10 @@ def test_one_call_from_a_folder_is_the_steps_a_user_took_by_hand():
     assert result.fit.params.tobytes() == fit.params.tobytes()
     assert result.fit.residuals.equals(fit.residuals)
     assert result.parameters.equals(parameter_report(fit, cell.start))
+    kept = subset(cell.calibration, ~fit.outliers)
+    assert fit.outliers.sum() == 2  # the example's planted outliers
+    _, jac = default_model().points_and_jacobian(fit.params, kept.Q, kept.C)
+    assert result.base.table.equals(base_parameters(jac, sigma_mm=fit.sigma_mm).table)
     table, summary = validation_report(cell.validation, cell.start, fit.params, 0.3)
     assert result.validation.equals(table) and result.validation_summary == summary
     assert result.validation_summary["requirement_mm"] == 0.3
