@@ -1,6 +1,6 @@
 """Time one selfcal identification: 24 sphere-centre measurements, 30 parameters (budget 10 ms).
 
-Prints the best of several repeats (wall clock) of ``calstudy.papers.selfcal.identify.identify``
+Prints the best of several repeats (wall clock) of ``calstudy.selfcal.identify.identify``
 from the good initial estimate and from the very poor one, and of one model evaluation with its
 Jacobian.
 """
@@ -11,10 +11,10 @@ import numpy as np
 from timing import best_ms
 
 from calstudy.papers.selfcal.experiments import example_station
-from calstudy.papers.selfcal.identify import identify
-from calstudy.papers.selfcal.model import N_PARAMS, GlobalModel
 from calstudy.papers.selfcal.scenario import load_scenario
 from calstudy.papers.selfcal.simulate import poor_start
+from calstudy.selfcal.identify import identify
+from calstudy.selfcal.model import N_PARAMS, GlobalModel
 
 BUDGET_MS = 10.0
 REPEATS = 20

@@ -1,4 +1,4 @@
-"""Coverage of the 95 % intervals of ``measured.identify_cell`` over simulated cells.
+"""Coverage of the 95 % intervals of ``measured.identify_measurements`` over simulated cells.
 
 Each cell is drawn as in the calibration experiment of notebook 03 (the paper's scenario with
 the joint compliance off, so that the truth lies in the model class): 24 calibration views of 4
@@ -22,10 +22,10 @@ import numpy as np
 from scipy.stats import chi2
 
 from calstudy.core.errors import CalibrationWarning
-from calstudy.papers.selfcal import measured
-from calstudy.papers.selfcal.model import N_PARAMS, angle_wrap
 from calstudy.papers.selfcal.scenario import load_scenario
 from calstudy.papers.selfcal.simulate import draw_station, simulate
+from calstudy.selfcal import measured
+from calstudy.selfcal.model import N_PARAMS, angle_wrap
 
 Z95 = 1.959964
 ELLIPSOID95 = float(chi2.ppf(0.95, N_PARAMS))
@@ -56,10 +56,10 @@ def main(n_cells: int = 200) -> None:
         bare = replace(meas, cov=None, tracker_cov=None, C_true=None, Q_true=None)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", CalibrationWarning)
-            declared = measured.identify_cell(
+            declared = measured.identify_measurements(
                 meas, station.nominal_params, _noise(scenario)
             )
-            plain = measured.identify_cell(bare, station.nominal_params)
+            plain = measured.identify_measurements(bare, station.nominal_params)
         rows["declared noise"].append(_scores(declared, station.true_params))
         rows["no noise declared"].append(_scores(plain, station.true_params))
     seconds = time.perf_counter() - start

@@ -47,7 +47,7 @@ from calstudy.models.targets import Sphere
 from calstudy.papers.hybrid import compensation
 from calstudy.papers.hybrid import handeye_experiments as hhe
 from calstudy.papers.hybrid.scenario import Scenario as ProductionScenario
-from calstudy.papers.selfcal.identify import identify
+from calstudy.selfcal.identify import identify
 
 # hypothesis keeps a cache folder (.hypothesis/) even without an example database: put it in a
 # temporary folder removed at exit, so no run leaves one in the checkout

@@ -96,6 +96,7 @@ EDITS = [
     ("src/calstudy/papers/dualarm/report_design.py", {"05"}),
     ("src/calstudy/papers/hybrid/compensation.py", {"01", "02"}),
     ("src/calstudy/papers/selfcal/__init__.py", {"03"}),
+    ("src/calstudy/selfcal/measured.py", {"03"}),
     ("data/selfcal/scenario.toml", {"03"}),
     ("data/dualarm/published.toml", {"05"}),
     ("data/robots/kuka_kr16_2.toml", {"01", "02", "03", "04"}),

@@ -85,7 +85,7 @@ def test_notebook03_stops_at_the_measurements_cell(tmp_path):
         tmp_path, "03_selfcal_one_step_identification", {"measurements_dir": str(folder)}
     )
     assert "cell.toml: sensor.xyz_mm" in err.evalue and "at least 3" in err.evalue
-    assert "measured.read_cell(" in err.source
+    assert "cell = read_cell(measurements_dir)" in err.source
 
 
 def test_notebook03_stops_at_the_scenario_cell(tmp_path):

@@ -11,8 +11,8 @@ import pytest
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
-from calstudy.papers.selfcal import measured
 from calstudy.papers.selfcal.scenario import load_scenario
+from calstudy.selfcal import measured
 
 SCENARIO = data_path("selfcal", "scenario.toml").read_text()
 

@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from calstudy import CalibrationError
-from calstudy.papers.selfcal import design
-from calstudy.papers.selfcal.experiments import candidate_views
-from calstudy.papers.selfcal.model import IS_LENGTH, PARAM_NAMES, GlobalModel, params_to_pose
+from calstudy.papers.selfcal.simulate import view_geometry
+from calstudy.selfcal import design
+from calstudy.selfcal.model import IS_LENGTH, PARAM_NAMES, GlobalModel, params_to_pose
+from calstudy.selfcal.planning import candidate_views
 
 
 def _planar_jacobian(Q, p):
@@ -100,7 +101,9 @@ def test_one_point_sensor_leaves_three_sensor_combinations(noise_free):
 def test_selection_beats_random_and_runs_within_5_s(quiet, noise_free):
     station, _, _ = noise_free
     rng = np.random.default_rng(3)
-    Q, sphere = candidate_views(quiet, station.spheres_base, 50, rng)
+    Q, sphere = candidate_views(
+        quiet.robot, quiet.sensor_design, view_geometry(quiet), station.spheres_base, 50, rng
+    )
     # 5,000 candidates: the 200 planned views, each turned about joint 6 in 25 steps
     turns = np.linspace(-math.pi, math.pi, 25, endpoint=False)
     Q = np.repeat(Q, 25, axis=0)

@@ -16,8 +16,8 @@ from calstudy.papers.selfcal.experiments import (
     identifiability_designs,
     scenario_key,
 )
-from calstudy.papers.selfcal.model import SENSOR_NAMES, scaled_error
 from calstudy.papers.selfcal.routes import three_step_alternated, two_step
+from calstudy.selfcal.model import SENSOR_NAMES, scaled_error
 
 
 def test_identifiability_scanner_full_rank_one_point_rank_27(scenario, noise_free):

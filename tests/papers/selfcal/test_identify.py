@@ -9,19 +9,6 @@ import numpy as np
 import pytest
 
 from calstudy import CalibrationError
-from calstudy.papers.selfcal.identify import (
-    Measurements,
-    check_sphere_layout,
-    covariance,
-    fit_sphere_cap,
-    identify,
-)
-from calstudy.papers.selfcal.model import (
-    GlobalModel,
-    angle_wrap,
-    parameters_from_robot,
-    scaled_error,
-)
 from calstudy.papers.selfcal.routes import (
     hand_eye,
     three_step,
@@ -30,6 +17,19 @@ from calstudy.papers.selfcal.routes import (
     two_step,
 )
 from calstudy.papers.selfcal.simulate import draw_station, poor_start, scan_cap, simulate
+from calstudy.selfcal.identify import (
+    Measurements,
+    check_sphere_layout,
+    covariance,
+    fit_sphere_cap,
+    identify,
+)
+from calstudy.selfcal.model import (
+    GlobalModel,
+    angle_wrap,
+    parameters_from_robot,
+    scaled_error,
+)
 
 
 def test_noise_free_identification_recovers_the_truth(noise_free):

@@ -10,10 +10,10 @@ import pytest
 
 from calstudy import CalibrationError
 from calstudy.core.paths import data_path
-from calstudy.papers.selfcal import measured
 from calstudy.papers.selfcal.experiments import EXAMPLE_OUTLIERS, write_example_measurements
-from calstudy.papers.selfcal.identify import identify
-from calstudy.papers.selfcal.model import GlobalModel, angle_wrap
+from calstudy.selfcal import measured
+from calstudy.selfcal.identify import identify
+from calstudy.selfcal.model import GlobalModel, angle_wrap
 
 ROBOT_FILE = data_path("robots", "fanuc_m710ic_50.toml")
 
@@ -43,7 +43,7 @@ def test_noise_free_files_identify_the_truth(tmp_path, scenario, noise_free):
     cell = measured.read_cell(folder)
     assert (len(cell.calibration), len(cell.validation)) == (24, 10)
     np.testing.assert_allclose(cell.start, station.nominal_params, atol=1e-9)
-    fit = measured.identify_cell(cell.calibration, cell.start)
+    fit = measured.identify_measurements(cell.calibration, cell.start)
     assert np.abs(angle_wrap(fit.params - station.true_params)).max() < 1e-8
     assert not fit.outliers.any()
     assert fit.covariance_basis == measured.RESIDUAL
@@ -55,12 +55,12 @@ def test_noise_free_files_identify_the_truth(tmp_path, scenario, noise_free):
 def test_a_planted_outlier_is_flagged(tmp_path, scenario):
     folder = write_example_measurements(tmp_path / "example", scenario)
     cell = measured.read_cell(folder)
-    fit = measured.identify_cell(
+    fit = measured.identify_measurements(
         cell.calibration, cell.start, pose_ids=cell.pose_ids["calibration"]
     )
     flagged = set(fit.residuals.loc[fit.outliers, "pose"])
     assert flagged == {row + 1 for row, _ in EXAMPLE_OUTLIERS}
-    without = measured.identify_cell(cell.calibration, cell.start, reject=False)
+    without = measured.identify_measurements(cell.calibration, cell.start, reject=False)
     _, kept = measured.validation_report(cell.validation, cell.start, fit.params)
     _, all_rows = measured.validation_report(cell.validation, cell.start, without.params)
     assert kept["after_rms_mm"] < all_rows["after_rms_mm"]
@@ -79,7 +79,7 @@ def test_declared_noise_gives_maximum_likelihood(tmp_path, scenario, noise_free)
     noise = {"sensor_mm": 0.01, "repeatability_mm": 0.02, "tracker_mm": 0.01}
     cell = measured.read_cell(_write_exact(tmp_path / "c", scenario, station, meas, val, noise))
     assert cell.noise == noise and cell.calibration.cov is not None
-    fit = measured.identify_cell(cell.calibration, cell.start, cell.noise)
+    fit = measured.identify_measurements(cell.calibration, cell.start, cell.noise)
     assert fit.covariance_basis == "declared noise"
     assert np.abs(angle_wrap(fit.params - station.true_params)).max() < 1e-7
 

@@ -11,7 +11,7 @@ from calstudy import CalibrationError
 from calstudy.core.geometry import make_transform, random_rotation
 from calstudy.models.kinematics import Link
 from calstudy.models.robots import perturb_robot
-from calstudy.papers.selfcal.model import (
+from calstudy.selfcal.model import (
     GlobalModel,
     parameters_from_robot,
     params_to_pose,

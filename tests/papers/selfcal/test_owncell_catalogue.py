@@ -22,16 +22,17 @@ from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
 from calstudy.models.kinematics import Link, Robot
 from calstudy.models.robots import load_robot
 from calstudy.models.urdf import robot_from_urdf
-from calstudy.papers.selfcal import design, measured
-from calstudy.papers.selfcal.experiments import simulate_cell_rows, suggest_poses
-from calstudy.papers.selfcal.identify import Measurements
-from calstudy.papers.selfcal.model import (
+from calstudy.papers.selfcal.scenario import load_scenario
+from calstudy.papers.selfcal.simulate import view_geometry
+from calstudy.selfcal import design, measured
+from calstudy.selfcal.identify import Measurements
+from calstudy.selfcal.model import (
     IS_LENGTH,
     PARAM_NAMES,
     default_model,
     parameters_from_robot,
 )
-from calstudy.papers.selfcal.scenario import load_scenario
+from calstudy.selfcal.planning import simulate_cell_rows, suggest_poses
 
 NOISE = {"sensor_mm": 0.02, "repeatability_mm": 0.01, "tracker_mm": 0.005}
 BASE = make_transform(euler_zyx_to_matrix(30.0, 0.0, 0.0), [1500.0, -800.0, -600.0])
@@ -157,7 +158,7 @@ def test_two_rows_off_by_2_mm_are_flagged_with_declared_noise(fanuc):
     nominal, truth, meas = _cell(fanuc, np.random.default_rng(1), n=24, declared=True)
     meas.C[5] += [2.0, 0.0, 0.0]
     meas.C[17] += [0.0, -1.2, 1.6]
-    fit = measured.identify_cell(meas, nominal, NOISE)
+    fit = measured.identify_measurements(meas, nominal, NOISE)
     assert set(np.flatnonzero(fit.outliers)) == {5, 17}
     kept = fit.residuals.loc[~fit.outliers, "normalised"]
     assert kept.max() < measured.CHI2_3_999
@@ -167,7 +168,7 @@ def test_two_rows_off_by_2_mm_are_flagged_with_declared_noise(fanuc):
 def test_declared_noise_far_too_small_is_refused(fanuc):
     nominal, _, meas = _cell(fanuc, np.random.default_rng(2), n=24, sigma=0.2, declared=True)
     with pytest.raises(CalibrationError, match="declared noise is too small"):
-        measured.identify_cell(meas, nominal, NOISE)
+        measured.identify_measurements(meas, nominal, NOISE)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -178,7 +179,7 @@ def test_scanner_on_a_6r_arm_identifies_30(arm):
     nominal, truth, meas = _cell(arm, np.random.default_rng(3))
     with warnings.catch_warnings():
         warnings.simplefilter("error", CalibrationWarning)
-        fit = measured.identify_cell(meas, nominal)
+        fit = measured.identify_measurements(meas, nominal)
     assert fit.n_identified == 30 and not fit.notes
     assert (fit.identifiability["status"] == measured.IDENTIFIED).all()
 
@@ -187,7 +188,7 @@ def test_scanner_on_a_6r_arm_identifies_30(arm):
 def test_one_point_probe_identifies_27_and_names_the_sensor_rotations(arm, declared):
     nominal, truth, meas = _cell(arm, np.random.default_rng(4), probe=True, declared=declared)
     with pytest.warns(CalibrationWarning, match="identify 27 parameters"):
-        fit = measured.identify_cell(meas, nominal, NOISE if declared else None)
+        fit = measured.identify_measurements(meas, nominal, NOISE if declared else None)
     assert fit.n_identified == 27
     assert fit.notes[0].startswith("at the start: the poses identify 27")
     table = fit.identifiability.set_index("name")
@@ -204,7 +205,7 @@ def test_one_point_probe_identifies_27_and_names_the_sensor_rotations(arm, decla
     # the guidance: hold the sensor rotations yourself, and nothing more is lost or warned of
     with warnings.catch_warnings():
         warnings.simplefilter("error", CalibrationWarning)
-        held = measured.identify_cell(
+        held = measured.identify_measurements(
             meas, nominal, NOISE if declared else None, fixed=["gamma1", "phi1", "eps1"]
         )
     assert held.n_identified == 27 and not held.notes
@@ -221,7 +222,7 @@ def test_ur_type_arm_identifies_29_with_d4_fixed(tmp_path, source):
         robot = _ur_table()
     nominal, truth, meas = _cell(robot, np.random.default_rng(5))
     with pytest.warns(CalibrationWarning, match="axes 3 and 4 of the nominal robot are parallel"):
-        fit = measured.identify_cell(meas, nominal)
+        fit = measured.identify_measurements(meas, nominal)
     assert fit.n_identified == 29
     lost = fit.identifiability.set_index("name")
     lost = lost[lost["status"] == measured.NOT_IDENTIFIABLE]
@@ -241,7 +242,7 @@ def test_one_pose_repeated_is_refused(fanuc):
     Q = np.tile(rng.uniform(-2, 2, 6), (24, 1))
     nominal, _, meas = _cell(fanuc, rng, Q=Q, sphere=np.zeros(24, int))
     with pytest.raises(CalibrationError, match=r"identify 3 of the 30 .*poses repeated"):
-        measured.identify_cell(meas, nominal)
+        measured.identify_measurements(meas, nominal)
 
 
 def test_only_joint_6_moving_is_refused(fanuc):
@@ -250,13 +251,13 @@ def test_only_joint_6_moving_is_refused(fanuc):
     Q[:, 5] = np.linspace(-2.5, 2.5, 24)
     nominal, _, meas = _cell(fanuc, rng, Q=Q, sphere=np.zeros(24, int))
     with pytest.raises(CalibrationError, match="one joint moving"):
-        measured.identify_cell(meas, nominal)
+        measured.identify_measurements(meas, nominal)
 
 
 def test_one_sphere_reports_the_base_rotation_not_identified(fanuc):
     nominal, _, meas = _cell(fanuc, np.random.default_rng(8), sphere=np.zeros(40, int))
     with pytest.warns(CalibrationWarning, match="identify 27 parameters"):
-        fit = measured.identify_cell(meas, nominal)
+        fit = measured.identify_measurements(meas, nominal)
     report = measured.parameter_report(fit, nominal).set_index("name")
     lost = report[report["status"] == measured.NOT_IDENTIFIABLE]
     assert set(lost.index) == {"gamma2", "phi2", "eps2"}
@@ -270,7 +271,7 @@ def test_one_sphere_reports_the_base_rotation_not_identified(fanuc):
 
 def test_parameters_fixed_on_request_stay_at_the_start(fanuc):
     nominal, truth, meas = _cell(fanuc, np.random.default_rng(9))
-    fit = measured.identify_cell(meas, nominal, fixed=["a2", "alpha3"])
+    fit = measured.identify_measurements(meas, nominal, fixed=["a2", "alpha3"])
     for name in ("a2", "alpha3"):
         i = PARAM_NAMES.index(name)
         assert fit.params[i] == nominal[i] and not fit.free[i]
@@ -278,7 +279,7 @@ def test_parameters_fixed_on_request_stay_at_the_start(fanuc):
         assert np.all(fit.covariance[i] == 0.0)
     assert fit.n_identified == 28
     with pytest.raises(CalibrationError, match="fixed parameter 'a7' is not one of"):
-        measured.identify_cell(meas, nominal, fixed=["a7"])
+        measured.identify_measurements(meas, nominal, fixed=["a7"])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -293,7 +294,7 @@ def test_swapped_or_negated_columns_are_refused_with_the_cause(fanuc, order, sig
     nominal, _, meas = _cell(fanuc, np.random.default_rng(10))
     meas.C[:] = meas.C[:, order] * np.array(signs)
     with pytest.raises(CalibrationError, match=f"look swapped or negated: read with {cause} "):
-        measured.identify_cell(meas, nominal)
+        measured.identify_measurements(meas, nominal)
 
 
 def test_candidate_blocks_non_finite_or_zero_are_refused():
@@ -365,12 +366,12 @@ def test_one_target_read_in_6d_identifies_all_30(fanuc):
     meas = measured.measurements_from_poses(Q, target2sensor, target2part, np.zeros(15, int))
     meas.C[:] += rng.normal(0, 0.01, meas.C.shape)
     assert len(meas) == 60 and set(meas.sphere) == {0, 1, 2, 3}
-    fit = measured.identify_cell(meas, nominal)
+    fit = measured.identify_measurements(meas, nominal)
     assert fit.n_identified == 30 and not fit.notes
     assert np.abs(fit.params - truth)[IS_LENGTH].max() < 0.2
     # the same robot poses seeing only the target's origin (one sphere) lose the base rotation
     origin = measured.subset(meas, np.arange(0, 60, 4))
-    assert _quiet(measured.identify_cell, origin, nominal).n_identified == 27
+    assert _quiet(measured.identify_measurements, origin, nominal).n_identified == 27
     with pytest.raises(CalibrationError, match="target indices must be integers in 0..0"):
         measured.measurements_from_poses(Q, target2sensor, target2part, np.ones(15, int))
 
@@ -395,7 +396,9 @@ def test_planning_uses_your_sensor_and_is_compared_with_your_poses(tmp_path):
     scenario = load_scenario()
     own = _example_cell(tmp_path, "standoff_mm = 150.0\nfield_mm = 20.0\ndepth_mm = 20.0\n")
     assert own.sensor_geometry == {"standoff_mm": 150.0, "field_mm": 20.0, "depth_mm": 20.0}
-    suggested, compare, random = suggest_poses(scenario, own, 15, np.random.default_rng(1))
+    suggested, compare, random = suggest_poses(
+        own, 15, np.random.default_rng(1), view_geometry(scenario)
+    )
     assert random["standoff_mm"] == 150.0 and len(suggested) == len(own.calibration) == 24
     # the candidates really stand at 150 mm: the spheres lie near the sensor's z = 150 mm
     model = default_model()
@@ -409,9 +412,11 @@ def test_planning_uses_your_sensor_and_is_compared_with_your_poses(tmp_path):
     assert compare["better"].tolist() == [False, bool(selected < yours)]
     assert random["ratio_ci_low"] > 1.0  # planned beats random selections of the same number
     with pytest.raises(CalibrationError, match="25 poses asked for from 24 candidates"):
-        suggest_poses(scenario, own, 6, np.random.default_rng(1), n_poses=25)
+        suggest_poses(own, 6, np.random.default_rng(1), view_geometry(scenario), n_poses=25)
     with pytest.raises(CalibrationError, match="standoff_mm = -1.0 must be a positive"):
-        suggest_poses(scenario, own, 6, np.random.default_rng(1), standoff_mm=-1.0)
+        suggest_poses(
+            own, 6, np.random.default_rng(1), view_geometry(scenario), standoff_mm=-1.0
+        )
 
 
 def _example_fit():
@@ -420,7 +425,7 @@ def _example_fit():
     own = measured.read_cell(data_path("selfcal", "example_measurements"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CalibrationWarning)
-        return own, measured.identify_cell(own.calibration, own.start, own.noise)
+        return own, measured.identify_measurements(own.calibration, own.start, own.noise)
 
 
 def test_planned_poses_beat_random_ones_measured_on_your_cell():
@@ -429,7 +434,8 @@ def test_planned_poses_beat_random_ones_measured_on_your_cell():
 
     def measured_comparison(seed):
         return suggest_poses(
-            scenario, own, 15, np.random.default_rng(seed), truth=fit, replications=50
+            own, 15, np.random.default_rng(seed), view_geometry(scenario), truth=fit,
+            replications=50,
         )[2]
 
     first = measured_comparison(1)
@@ -456,7 +462,7 @@ def test_measured_comparison_refuses_too_few_replications(replications):
     own, fit = _example_fit()
     with pytest.raises(CalibrationError, match=f"replications = {replications}: at least 6"):
         suggest_poses(
-            load_scenario(), own, 15, np.random.default_rng(1), truth=fit,
+            own, 15, np.random.default_rng(1), view_geometry(load_scenario()), truth=fit,
             replications=replications,
         )
 

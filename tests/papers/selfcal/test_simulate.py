@@ -28,7 +28,7 @@ def test_roll_is_scipys_rotation_to_the_bit():
     """The view's roll about the optical axis, built directly, is the transform of
     euler_zyx_to_matrix (scipy) byte for byte, signed zeros included."""
     from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
-    from calstudy.papers.selfcal.simulate import _roll
+    from calstudy.selfcal.planning import _roll
 
     rng = np.random.default_rng(4)
     special = [0.0, -0.0, 45.0, -45.0, 90.0, -90.0, 180.0, -180.0, 270.0, 1e-300, -1e-300]

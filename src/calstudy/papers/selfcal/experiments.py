@@ -26,7 +26,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -34,34 +33,8 @@ import numpy as np
 import pandas as pd
 
 from calstudy.core.config import read_toml, scenario_file
-from calstudy.core.errors import CalibrationError, CalibrationWarning
-from calstudy.core.montecarlo import Experiment, child_rng, streams, trial_rng
-from calstudy.core.stats import median_interval
-from calstudy.papers.selfcal.design import (
-    candidate_jacobians,
-    observability,
-    select_poses,
-    select_poses_sizes,
-)
-from calstudy.papers.selfcal.identify import (
-    RANK_RTOL,
-    Identification,
-    Measurements,
-    crb_covariance,
-    identifiability,
-    identify,
-    scaled_jacobian,
-)
-from calstudy.papers.selfcal.measured import CellFit, MeasuredCell, identify_cell, write_cell
-from calstudy.papers.selfcal.model import (
-    IS_LENGTH,
-    N_PARAMS,
-    PARAM_NAMES,
-    ROBOT,
-    angle_wrap,
-    default_model,
-    scaled_error,
-)
+from calstudy.core.errors import CalibrationError
+from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
 from calstudy.papers.selfcal.routes import (
     hand_eye,
     three_step,
@@ -74,10 +47,35 @@ from calstudy.papers.selfcal.simulate import (
     Station,
     draw_placements,
     draw_station,
-    plan_views,
     poor_start,
     simulate,
+    view_geometry,
 )
+from calstudy.selfcal.design import (
+    candidate_jacobians,
+    observability,
+    select_poses_sizes,
+)
+from calstudy.selfcal.identify import (
+    RANK_RTOL,
+    Identification,
+    Measurements,
+    crb_covariance,
+    identifiability,
+    identify,
+    scaled_jacobian,
+)
+from calstudy.selfcal.measured import MeasuredCell, write_cell
+from calstudy.selfcal.model import (
+    IS_LENGTH,
+    N_PARAMS,
+    PARAM_NAMES,
+    ROBOT,
+    angle_wrap,
+    default_model,
+    scaled_error,
+)
+from calstudy.selfcal.planning import candidate_views
 
 ONE_STEP = "one-step (paper)"
 ONE_STEP_ML = "one-step ML"
@@ -369,7 +367,7 @@ def _null_space_parameters(meas: Measurements, params, rank: int) -> list[str]:
 
 
 def identifiability_designs(scenario: Scenario, meas: Measurements, params) -> dict:
-    """:func:`calstudy.papers.selfcal.identify.identifiability` for the scanner's measurements
+    """:func:`calstudy.selfcal.identify.identifiability` for the scanner's measurements
     and for a one-point sensor.
 
     The second design replaces every measured centre by the same sensor-frame point (on the
@@ -416,299 +414,6 @@ OPTIMISED = "optimised (D-optimal)"
 RANDOM = "random"
 
 
-def candidate_views(scenario: Scenario, spheres_base, per_sphere: int, rng) -> tuple:
-    """Candidate joint angles (k per_sphere, 6) and their sphere index: ``per_sphere`` reachable
-    views of each placement, planned with the nominal robot and sensor (:func:`plan_views`)."""
-    (views_rng,) = streams(rng, "candidate views")
-    views = [
-        plan_views(scenario, c, per_sphere, child_rng(views_rng, str(k)))
-        for k, c in enumerate(np.asarray(spheres_base, float))
-    ]
-    return np.vstack(views), np.repeat(np.arange(len(views)), per_sphere)
-
-
-#: random selections of the same size that the planned poses are compared with
-RANDOM_SELECTIONS = 200
-#: replications of the measured comparison of planned and random poses (the notebook's default)
-MEASURED_REPLICATIONS = 200
-#: fewest replications whose median has a 95 % order-statistic interval
-MIN_REPLICATIONS = 6
-
-
-def predicted_std(blocks) -> float:
-    """RMS standard deviation of the parameters (scaled units) per mm of measurement noise that
-    a selection of scaled Jacobian blocks (k, 3, p) predicts: ``sqrt(trace((J^T J)^-1) / p)``
-    (A-optimality); inf if the selection does not fix every parameter."""
-    b = np.asarray(blocks, float)
-    j = b.reshape(-1, b.shape[-1])
-    s = np.linalg.svd(j, compute_uv=False)
-    if len(s) < b.shape[-1] or s[-1] <= s[0] * 1e-12:
-        return math.inf
-    return float(np.sqrt(np.mean(1.0 / s**2)))
-
-
-def suggest_poses(
-    scenario: Scenario,
-    cell: MeasuredCell,
-    per_sphere: int,
-    rng: np.random.Generator,
-    n_poses: int | None = None,
-    standoff_mm: float | None = None,
-    field_mm: float | None = None,
-    depth_mm: float | None = None,
-    free=None,
-    truth: CellFit | None = None,
-    replications: int = MEASURED_REPLICATIONS,
-) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
-    """Poses to measure next time on a user's cell, planned for the user's sensor.
-
-    Candidates: ``per_sphere`` reachable views of each sphere the calibration used, planned with
-    the cell's nominal robot and sensor mounting, the sphere within ``field_mm`` of the optical
-    axis and ``depth_mm`` of the working distance ``standoff_mm`` (defaults: the cell's
-    ``[sensor]`` geometry, else the scenario's scanner). From them, ``n_poses`` (default: as
-    many as the calibration has) D-optimal ones
-    (:func:`calstudy.papers.selfcal.design.select_poses`) in the parameters ``free`` (default
-    all; pass :attr:`CellFit.free` to plan for what the poses can identify).
-
-    Returns
-    -------
-    suggested : pandas.DataFrame
-        The joint angles (deg) with the sphere id, ``n_poses`` rows.
-    compare : pandas.DataFrame
-        Observability (:func:`observability`) and :func:`predicted_std` of your poses and of the
-        selection; ``better`` is True on the selection only if its predicted standard deviation
-        is below that of your poses (else keep yours).
-    random : dict
-        The selection against :data:`RANDOM_SELECTIONS` random choices of ``n_poses`` from the
-        same candidates: median of the ratio random / planned of :func:`predicted_std` with its
-        95 % order-statistic interval (``ratio_median``, ``ratio_ci_low``, ``ratio_ci_high``).
-        With ``truth``, also the measured comparison of :func:`measured_selection_errors`
-        (``replications``, ``noise_sigma_mm``, ``planned_rms_mm``, ``random_rms_mm``, the
-        paired ratio ``measured_ratio_median``, ``measured_ratio_ci_low``,
-        ``measured_ratio_ci_high`` and the failed identifications ``failed_planned``,
-        ``failed_random``).
-
-    Other Parameters
-    ----------------
-    truth : CellFit, optional
-        The cell's identification (:func:`~calstudy.papers.selfcal.measured.identify_cell`):
-        its parameters are taken as the truth of a Monte Carlo of measured errors.
-    replications : int
-        Replications of that Monte Carlo (default :data:`MEASURED_REPLICATIONS`; at least
-        :data:`MIN_REPLICATIONS`).
-
-    Raises
-    ------
-    CalibrationError
-        Fewer candidates than poses asked for (plan more views per sphere), a sensor
-        geometry that is not positive, or fewer than :data:`MIN_REPLICATIONS` replications.
-    """
-    if truth is not None:
-        _check_replications(replications)
-    given = {"standoff_mm": standoff_mm, "field_mm": field_mm, "depth_mm": depth_mm}
-    own = cell.sensor_geometry or {}
-    sensor = {
-        k: float(v if v is not None else own.get(k, getattr(scenario, k)))
-        for k, v in given.items()
-    }
-    for key, value in sensor.items():
-        if not (math.isfinite(value) and value > 0):
-            raise CalibrationError(f"the sensor's {key} = {value} must be a positive length")
-    n = len(cell.calibration) if n_poses is None else int(n_poses)
-    free = np.ones(N_PARAMS, bool) if free is None else np.asarray(free, bool)
-    plan = scenario.with_(robot=cell.robot, sensor_design=cell.sensor2flange, **sensor)
-    used = np.unique(cell.calibration.sphere)
-    base2part = np.linalg.inv(cell.part2base)
-    spheres_base = cell.spheres[used] @ base2part[:3, :3].T + base2part[:3, 3]
-    cand_q, cand_s = candidate_views(plan, spheres_base, per_sphere, rng)
-    if n > len(cand_q):
-        raise CalibrationError(
-            f"{n} poses asked for from {len(cand_q)} candidates ({per_sphere} per sphere of "
-            f"{len(used)}); plan at least {math.ceil(n / len(used))} views per sphere"
-        )
-    blocks, _ = candidate_jacobians(cell.start, cand_q, cell.spheres[used], cand_s)
-    blocks = blocks[:, :, free]
-    chosen = select_poses(blocks, n)
-    _, own = default_model().points_and_jacobian(cell.start, cell.calibration.Q, cell.calibration.C)
-    own_blocks = scaled_jacobian(own).reshape(len(cell.calibration), 3, -1)[:, :, free]
-    suggested = pd.DataFrame(np.degrees(cand_q[chosen]), columns=[f"q{i}_deg" for i in range(1, 7)])
-    suggested.insert(0, "sphere", cell.sphere_ids[used][cand_s[chosen]])
-    own_std, planned_std = predicted_std(own_blocks), predicted_std(blocks[chosen])
-    compare = pd.DataFrame(
-        [
-            {"poses": "yours", **observability(own_blocks), "predicted_std": own_std},
-            {"poses": "selected", **observability(blocks[chosen]), "predicted_std": planned_std},
-        ]
-    )
-    compare["better"] = [False, bool(planned_std < own_std)]
-    ratios = [
-        predicted_std(blocks[rng.choice(len(cand_q), n, replace=False)]) / planned_std
-        for _ in range(RANDOM_SELECTIONS)
-    ]
-    med, lo, hi = median_interval(np.asarray(ratios, float))
-    random = {
-        "n_poses": n,
-        "candidates": len(cand_q),
-        "draws": RANDOM_SELECTIONS,
-        "ratio_median": med,
-        "ratio_ci_low": lo,
-        "ratio_ci_high": hi,
-        **sensor,
-    }
-    if truth is not None:
-        random |= measured_selection_errors(
-            cell, truth, cand_q, used[cand_s], chosen, replications, rng
-        )
-    return suggested, compare, random
-
-
-def _check_replications(replications) -> None:
-    if int(replications) != replications or replications < MIN_REPLICATIONS:
-        raise CalibrationError(
-            f"replications = {replications}: at least {MIN_REPLICATIONS} are needed for a 95 % "
-            "interval of the median ratio"
-        )
-
-
-def simulate_cell_rows(truth, Q, sphere, spheres_part, sigma_mm: float, declared: bool, rng):
-    """A measured cell's rows simulated from its identified parameters.
-
-    Each row is the sphere centre in the sensor frame that the parameters ``truth`` put at the
-    joint angles, plus Gaussian noise of ``sigma_mm`` per axis (the whole per-axis noise of a
-    row: sensor, repeatability and tracker together); the tracker reading is the sphere's
-    reading.
-
-    Parameters
-    ----------
-    truth : array_like, shape (30,)
-        The parameters taken as the truth (mm, rad).
-    Q : array_like, shape (m, 6)
-        Joint angles, rad.
-    sphere : array_like, shape (m,)
-        Index of each row's sphere into ``spheres_part``.
-    spheres_part : array_like, shape (k, 3)
-        Sphere centres in the part frame, mm.
-    sigma_mm : float
-        Per-axis standard deviation of a row, mm.
-    declared : bool
-        Give the rows their covariance (``sigma_mm**2 I``), as a cell with declared noise.
-    rng : numpy.random.Generator
-        The noise stream.
-
-    Returns
-    -------
-    Measurements
-        ``C_true`` the noise-free centres.
-    """
-    Q = np.asarray(Q, float)
-    sphere = np.asarray(sphere, int)
-    p = np.asarray(spheres_part, float)[sphere]
-    local = default_model().sensor_centres(np.asarray(truth, float), Q, p)
-    cov = np.tile(sigma_mm**2 * np.eye(3), (len(Q), 1, 1)) if declared else None
-    return Measurements(Q, local + rng.normal(0.0, sigma_mm, local.shape), p, sphere, local, cov)
-
-
-def measured_selection_errors(
-    cell: MeasuredCell,
-    truth: CellFit,
-    cand_q,
-    cand_sphere,
-    chosen,
-    replications: int,
-    rng: np.random.Generator,
-) -> dict:
-    """Monte Carlo of the measured error of planned against random poses on a user's cell.
-
-    The cell's identified parameters are the truth; the noise is the declared one (the fit then
-    weights by it) or, without, the fit's per-axis residual scale. Per replication the planned
-    poses ``chosen`` and a random choice of as many from the same candidates are measured with
-    new noise (:func:`simulate_cell_rows`), each identified from the cell's start as the cell
-    was (:func:`~calstudy.papers.selfcal.measured.identify_cell`, outlier rule on; the column
-    check is skipped: the columns are right by construction), and scored by the RMS position
-    error at the cell's held-out validation rows (the calibration rows when it has none):
-    identified against true model, at their joint angles and sensor-frame centres, without noise.
-
-    Parameters
-    ----------
-    cell : MeasuredCell
-        The cell (start, spheres, noise, validation rows).
-    truth : CellFit
-        Its identification.
-    cand_q : array_like, shape (c, 6)
-        Candidate joint angles, rad.
-    cand_sphere : array_like, shape (c,)
-        Each candidate's sphere (index into ``cell.spheres``).
-    chosen : array_like of int, shape (n,)
-        The planned candidates.
-    replications : int
-        At least :data:`MIN_REPLICATIONS`.
-    rng : numpy.random.Generator
-        Replication ``r`` draws from ``child_rng(rng, "measured replication r")`` alone.
-
-    Returns
-    -------
-    dict
-        ``replications``, ``noise_sigma_mm``, medians ``planned_rms_mm`` and ``random_rms_mm``,
-        the paired ratio random / planned (``measured_ratio_median``, ``measured_ratio_ci_low``,
-        ``measured_ratio_ci_high``; order-statistic 95 % interval over the replications where
-        both identifications succeeded) and the failed identifications ``failed_planned``,
-        ``failed_random``.
-
-    Raises
-    ------
-    CalibrationError
-        Fewer than :data:`MIN_REPLICATIONS` replications, or fewer pairs that both succeeded.
-    """
-    _check_replications(replications)
-    model = default_model()
-    cand_q, cand_sphere = np.asarray(cand_q, float), np.asarray(cand_sphere, int)
-    chosen = np.asarray(chosen, int)
-    declared = cell.noise is not None
-    sigma = truth.sigma_mm
-    sites = cell.validation if len(cell.validation) else cell.calibration
-    true_points = model.points(truth.params, sites.Q, sites.C)
-
-    def error(picks, noise_rng) -> float:
-        meas = simulate_cell_rows(
-            truth.params, cand_q[picks], cand_sphere[picks], cell.spheres, sigma, declared,
-            noise_rng,
-        )
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", CalibrationWarning)
-                fit = identify_cell(meas, cell.start, cell.noise, check_columns=False)
-        except CalibrationError:
-            return math.nan
-        d = model.points(fit.params, sites.Q, sites.C) - true_points
-        return float(np.sqrt(np.mean(np.einsum("ij,ij->i", d, d))))
-
-    planned, random = [], []
-    for r in range(int(replications)):
-        rep = child_rng(rng, f"measured replication {r}")
-        picks = np.sort(child_rng(rep, "selection").choice(len(cand_q), len(chosen), replace=False))
-        planned.append(error(chosen, child_rng(rep, "planned measurements")))
-        random.append(error(picks, child_rng(rep, "random measurements")))
-    planned_a, random_a = np.array(planned), np.array(random)
-    both = np.isfinite(planned_a) & np.isfinite(random_a)
-    if both.sum() < MIN_REPLICATIONS:
-        raise CalibrationError(
-            f"only {int(both.sum())} of {replications} replications identified both selections "
-            f"(at least {MIN_REPLICATIONS} needed)"
-        )
-    med, lo, hi = median_interval(random_a[both] / planned_a[both])
-    return {
-        "replications": int(replications),
-        "noise_sigma_mm": float(sigma),
-        "planned_rms_mm": float(np.median(planned_a[both])),
-        "random_rms_mm": float(np.median(random_a[both])),
-        "measured_ratio_median": med,
-        "measured_ratio_ci_low": lo,
-        "measured_ratio_ci_high": hi,
-        "failed_planned": int((~np.isfinite(planned_a)).sum()),
-        "failed_random": int((~np.isfinite(random_a)).sum()),
-    }
-
-
 def _measure_selection(scenario, st, Q, sphere, chosen, rng) -> Measurements:
     k = len(st.spheres_base)
     views = [Q[chosen][sphere[chosen] == s] for s in range(k)]
@@ -735,14 +440,21 @@ def pose_selection_trial(
 
     Candidates: ``per_sphere`` planned views of each of the cell's spheres. Optimised: the ``N``
     that maximise D-optimality of the scaled Jacobian at the nominal parameters and the sphere
-    positions (:func:`calstudy.papers.selfcal.design.select_poses`); random: ``N`` drawn
+    positions (:func:`calstudy.selfcal.design.select_poses`); random: ``N`` drawn
     uniformly from the same candidates. Both are measured (new noise), identified from the good
     start and validated on the same 10 new placements. One row per (N, selection).
     ``sizes`` is the list of ``N`` as one string of integers ("12 18 24 36": the engine's sweep
     points hold scalars).
     """
     st = draw_station(scenario, child_rng(rng, "station"))
-    Q, sphere = candidate_views(scenario, st.spheres_base, per_sphere, child_rng(rng, "candidates"))
+    Q, sphere = candidate_views(
+        scenario.robot,
+        scenario.sensor_design,
+        view_geometry(scenario),
+        st.spheres_base,
+        per_sphere,
+        child_rng(rng, "candidates"),
+    )
     blocks, _ = candidate_jacobians(st.nominal_params, Q, st.spheres_part, sphere)
     sites = draw_placements(scenario, scenario.n_validation, child_rng(rng, "validation sites"))
     val = simulate(scenario, st, sites, 1, child_rng(rng, "validation measurements"))

@@ -40,16 +40,16 @@ from calstudy.papers.selfcal.experiments import (  # noqa: E402
     ORACLE,
     ROUTES,
 )
-from calstudy.papers.selfcal.identify import Measurements  # noqa: E402
-from calstudy.papers.selfcal.model import (  # noqa: E402
+from calstudy.papers.selfcal.scenario import Scenario  # noqa: E402
+from calstudy.papers.selfcal.simulate import Station  # noqa: E402
+from calstudy.selfcal.identify import Measurements  # noqa: E402
+from calstudy.selfcal.model import (  # noqa: E402
     GROUPS,
     IS_LENGTH,
     PARAM_NAMES,
     ROBOT_NAMES,
     angle_wrap,
 )
-from calstudy.papers.selfcal.scenario import Scenario  # noqa: E402
-from calstudy.papers.selfcal.simulate import Station  # noqa: E402
 
 METRICS = ("val_mean_mm", "val_max_mm", "model_rms_mm", "robot_param_error")
 

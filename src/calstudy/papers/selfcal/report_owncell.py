@@ -160,7 +160,7 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str):
 def planned_vs_random_table(random: dict) -> pd.DataFrame:
     """The planned poses against random ones for a user's cell, predicted and measured: one row
     each with the median ratio random / planned and its 95 % interval, from the ``random`` dict
-    of :func:`calstudy.papers.selfcal.experiments.suggest_poses`."""
+    of :func:`calstudy.selfcal.planning.suggest_poses`."""
     stats = ("median", "ci_low", "ci_high")
     return pd.DataFrame(
         [
@@ -179,7 +179,7 @@ def planned_vs_random_table(random: dict) -> pd.DataFrame:
 
 def measured_selection_sentence(random: dict) -> str:
     """One sentence on the measured comparison of planned and random poses
-    (:func:`calstudy.papers.selfcal.experiments.measured_selection_errors`)."""
+    (:func:`calstudy.selfcal.planning.measured_selection_errors`)."""
     lo, hi = random["measured_ratio_ci_low"], random["measured_ratio_ci_high"]
     verdict = (
         "the planned poses measure better than random ones"

@@ -21,8 +21,8 @@ import numpy as np
 from calstudy.core.estimation import levenberg_marquardt
 from calstudy.estimators.fitting import fit_rigid
 from calstudy.models.kinematics import Robot
-from calstudy.papers.selfcal.identify import Measurements, identify
-from calstudy.papers.selfcal.model import (
+from calstudy.selfcal.identify import Measurements, identify
+from calstudy.selfcal.model import (
     ANGLE_SCALE_MM,
     BASE,
     IS_LENGTH,

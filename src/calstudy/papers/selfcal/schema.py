@@ -1,7 +1,7 @@
-"""Schemas of the selfcal paper's files: ``scenario.toml`` (the simulated cell, or a copy
-describing yours) and the ``cell.toml`` of a measurement folder.
+"""Schema of the selfcal paper's ``scenario.toml`` (the simulated cell, or a copy describing
+yours); a measurement folder's ``cell.toml`` is :mod:`calstudy.selfcal.cellfile`.
 
-Both are checked on load (:func:`calstudy.core.schema.check_toml`): every key read must be there
+It is checked on load (:func:`calstudy.core.schema.check_toml`): every key read must be there
 with its type and range (lengths mm, angles degrees where the key says ``_deg``), unknown keys
 are refused, and the cross-field rules below hold (the sphere envelope is a box, its spheres fit
 in it at their minimum separation, the scanner stands outside the spheres it measures, noise
@@ -26,11 +26,10 @@ from calstudy.core.schema import (
     NonNegativeFinite,
     PositiveFinite,
     PositiveInt,
-    Schema,
     Vec3,
 )
+from calstudy.selfcal.cellfile import RobotName
 
-RobotName = Annotated[str, Field(min_length=1)]
 #: a half-angle of a cone, degrees
 HalfAngle = Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
 AngleSigma = Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
@@ -55,23 +54,6 @@ MAX_SPHERES, MAX_VIEWS, MAX_PLACEMENTS, MAX_POINTS = 50, 100, 1000, 100_000
 def _noise(bound: str):
     """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
     return noise_level(NOISE_BOUNDS[bound])
-
-
-class Pose(Schema):
-    """The ``[base]`` table of a cell's cell.toml."""
-
-    xyz_mm: Vec3
-    zyx_deg: Annotated[list[Degrees], Field(min_length=3, max_length=3)]
-
-
-class SensorPose(Pose):
-    """The ``[sensor]`` table of a cell's cell.toml: the mounting and, optionally, the sensor's
-    working distance and the half-widths of its field across and along the optical axis (mm),
-    which the pose planning uses (the paper's scanner when absent)."""
-
-    standoff_mm: PositiveFinite | None = None
-    field_mm: PositiveFinite | None = None
-    depth_mm: PositiveFinite | None = None
 
 
 class Repeatability(Inputs):
@@ -208,22 +190,4 @@ class ScenarioFile(Ledgered, Inputs):
             )
 
 
-class Noise(Schema):
-    """The ``[noise]`` table of a cell's cell.toml."""
-
-    sensor_mm: NonNegativeFinite
-    repeatability_mm: NonNegativeFinite
-    tracker_mm: NonNegativeFinite
-
-
-class CellFile(Documented):
-    """``cell.toml`` of a measurement folder (:mod:`calstudy.papers.selfcal.measured`)."""
-
-    robot: RobotName
-    flange: RobotName | None = None
-    base: Pose
-    sensor: SensorPose
-    noise: Noise | None = None
-
-
-__all__ = ["CellFile", "ScenarioFile"]
+__all__ = ["ScenarioFile"]

@@ -2,7 +2,7 @@
 
 A drawn :class:`Station` is the "true" system (robot with manufacturing errors, base placement,
 sensor mounting, sphere placements); :func:`simulate` moves it to planned views and returns what
-the identification sees (:class:`calstudy.papers.selfcal.identify.Measurements`), with the
+the identification sees (:class:`calstudy.selfcal.identify.Measurements`), with the
 scanner, repeatability and tracker noise of the scenario. Every function that draws takes the
 ``rng`` it draws from.
 
@@ -18,13 +18,13 @@ from functools import cache
 
 import numpy as np
 
-from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import look_at, make_transform, rotvec_to_matrix
 from calstudy.core.montecarlo import child_rng, streams
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import perturb_robot
-from calstudy.papers.selfcal.identify import Measurements, check_sphere_layout, fit_sphere_cap
-from calstudy.papers.selfcal.model import (
+from calstudy.papers.selfcal.scenario import Scenario
+from calstudy.selfcal.identify import Measurements, check_sphere_layout, fit_sphere_cap
+from calstudy.selfcal.model import (
     BASE,
     IS_LENGTH,
     N_PARAMS,
@@ -35,7 +35,7 @@ from calstudy.papers.selfcal.model import (
     params_to_pose,
     pose_to_params,
 )
-from calstudy.papers.selfcal.scenario import Scenario
+from calstudy.selfcal.planning import ViewGeometry, draw_until, plan_views
 
 # ----------------------------------------------------------------------------------------------
 # the true station
@@ -77,65 +77,15 @@ class Station:
         return self.spheres_base @ self.part2base[:3, :3].T + self.part2base[:3, 3]
 
 
-def _draw_until(n: int, tries: int, draw, failure) -> np.ndarray:
-    """``n`` results (n, ...) of ``draw(found)`` in at most ``tries`` calls (``None`` is a miss).
-
-    Raises a :class:`CalibrationError` with the message ``failure(len(found))`` otherwise.
-    """
-    out: list[np.ndarray] = []
-    for _ in range(tries):
-        item = draw(out)
-        if item is not None:
-            out.append(item)
-            if len(out) == n:
-                return np.array(out)
-    raise CalibrationError(failure(len(out)))
-
-
-def _roll(deg: float) -> np.ndarray:
-    """``make_transform(euler_zyx_to_matrix(deg, 0, 0), 0)``, a turn about z by ``deg``, built
-    as scipy builds it (the quaternion ``(x, y, z, w) = (0, 0, sin h, cos h)`` of the half angle
-    ``h``, then its matrix): the same bytes, signed zeros included, at a tenth of the cost (a
-    test checks it)."""
-    half = float(np.deg2rad(deg)) / 2.0 + 0.0  # -0 turns as +0, as in scipy
-    x = y = 0.0
-    z, w = math.sin(half), math.cos(half)
-    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
-    xy, xz, xw, yz, yw, zw = x * y, x * z, x * w, y * z, y * w, z * w
-    return np.array(
-        [
-            [x2 - y2 - z2 + w2, 2.0 * (xy - zw), 2.0 * (xz + yw), 0.0],
-            [2.0 * (xy + zw), -x2 + y2 - z2 + w2, 2.0 * (yz - xw), 0.0],
-            [2.0 * (xz - yw), 2.0 * (yz + xw), -x2 - y2 + z2 + w2, 0.0],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )
-
-
-def _view_pose(scenario: Scenario, centre: np.ndarray, frame: np.ndarray, rng) -> np.ndarray:
-    """A drawn sensor pose (4, 4) in the base frame looking at ``centre`` (see plan_views).
-
-    ``frame`` (3, 3) has its z column along the unit direction from the sphere to the robot's
-    shoulder (``look_at(0, towards)``).
-    """
-    tilt = scenario.view_cone_rad * math.sqrt(rng.uniform())
-    turn = rng.uniform(0, 2 * math.pi)
-    d = frame @ [
-        math.sin(tilt) * math.cos(turn),
-        math.sin(tilt) * math.sin(turn),
-        math.cos(tilt),
-    ]
-    offset = rng.uniform(-1.0, 1.0, 3) * [
-        scenario.field_mm,
+def view_geometry(scenario: Scenario) -> ViewGeometry:
+    """The scenario's scanner as the view planning sees it: standoff, field, view cone, roll."""
+    return ViewGeometry(
+        scenario.standoff_mm,
         scenario.field_mm,
         scenario.depth_mm,
-    ]
-    distance = scenario.standoff_mm + offset[2]
-    eye = centre + distance * d
-    sensor2base = look_at(eye, centre)
-    roll = _roll(rng.uniform(-scenario.roll_deg, scenario.roll_deg))
-    shift = make_transform(np.eye(3), [-offset[0], -offset[1], 0.0])
-    return sensor2base @ roll @ shift
+        scenario.view_cone_rad,
+        scenario.roll_deg,
+    )
 
 
 def draw_placements(scenario: Scenario, n: int, rng: np.random.Generator, tries: int = 1000):
@@ -151,7 +101,7 @@ def draw_placements(scenario: Scenario, n: int, rng: np.random.Generator, tries:
             c if all(np.linalg.norm(c - o) >= scenario.min_separation_mm for o in found) else None
         )
 
-    return _draw_until(
+    return draw_until(
         n,
         tries,
         draw,
@@ -260,59 +210,6 @@ def tracker_sigma(scenario: Scenario, points_part) -> np.ndarray:
     return (u0 + u1 * dist_m) / k / math.sqrt(3.0)
 
 
-def _shoulder(robot: Robot) -> np.ndarray:
-    """Point on axis 1 at the height of axis 2, robot base frame (where views look from)."""
-    return robot.base[:3, :3] @ [0.0, 0.0, robot.links[0].d] + robot.base[:3, 3]
-
-
-def plan_views(
-    scenario: Scenario,
-    centre_base,
-    n: int,
-    rng: np.random.Generator,
-    sensor2flange=None,
-    max_tries: int = 200,
-) -> np.ndarray:
-    """Joint angles (n, 6) that show the sphere at ``centre_base`` to the sensor.
-
-    Planned with the nominal robot and the design sensor pose (all the controller knows): each
-    view looks at a point within ``field_mm``/``depth_mm`` of the sphere, from a direction within
-    ``view_cone`` of the direction to the robot's shoulder, turned about the optical axis at
-    random. Views whose inverse kinematics fails or leaves the joint limits are redrawn.
-    """
-    robot = scenario.robot
-    s2f = scenario.sensor_design if sensor2flange is None else sensor2flange
-    flange2sensor = np.linalg.inv(s2f)
-    centre = np.asarray(centre_base, float)
-    towards = _shoulder(robot) - centre
-    towards /= np.linalg.norm(towards)
-    frame = look_at(np.zeros(3), towards)[:3, :3]
-
-    def draw(_found: list[np.ndarray]) -> np.ndarray | None:
-        flange2base = _view_pose(scenario, centre, frame, rng) @ flange2sensor
-        q0 = _seed_configuration(robot, flange2base[:3, 3])
-        try:
-            return robot.ik(flange2base, q0)
-        except CalibrationError:
-            return None
-
-    return _draw_until(
-        n,
-        max_tries,
-        draw,
-        lambda found: (
-            f"found only {found} of {n} reachable views of the sphere at "
-            f"{np.round(centre, 1).tolist()} mm after {max_tries} tries"
-        ),
-    )
-
-
-def _seed_configuration(robot: Robot, flange_xyz) -> np.ndarray:
-    """An elbow-up start for IK: joint 1 towards the point, arm half bent, wrist bent down."""
-    q1 = math.atan2(flange_xyz[1], flange_xyz[0])
-    return np.array([q1, 0.3, 0.0, 0.0, -0.8, 0.0])
-
-
 GRAVITY_MPS2 = 9.81
 
 
@@ -396,7 +293,14 @@ def simulate(
     repeat = scenario.repeatability_mm**2 * np.eye(3)
     for k, centre in enumerate(placements):
         if views is None:
-            planned = plan_views(scenario, centre, views_per_sphere, child_rng(views_rng, str(k)))
+            planned = plan_views(
+                scenario.robot,
+                scenario.sensor_design,
+                view_geometry(scenario),
+                centre,
+                views_per_sphere,
+                child_rng(views_rng, str(k)),
+            )
         elif len(views[k]) == 0:
             continue
         else:

@@ -12,7 +12,7 @@ and checks them; every message names the file, and the row and column where ther
     flange frame, ``xyz_mm = [x, y, z]`` and ``zyx_deg = [rz, ry, rx]`` (``R = Rz Ry Rx``);
     optional in ``[sensor]``: ``standoff_mm``, ``field_mm``, ``depth_mm``, the sensor's working
     distance and the half-widths of its field across and along the optical axis (the pose
-    planning of :func:`calstudy.papers.selfcal.experiments.suggest_poses` plans for them);
+    planning of :func:`calstudy.selfcal.planning.suggest_poses` plans for them);
     optional ``[noise]``: standard deviations per axis ``sensor_mm`` (fitted sphere centre),
     ``repeatability_mm`` and ``tracker_mm``. Without ``[noise]`` the covariance of the parameters
     comes from the residuals (the error of each view and the one shared by the views of a
@@ -28,8 +28,8 @@ and checks them; every message names the file, and the row and column where ther
 Units are declared in the header: ``<u>`` is ``mm`` or ``m``, ``<a>`` is ``deg`` or ``rad``.
 Lines starting with ``#`` are comments.
 
-:func:`identify_cell` identifies the 30 parameters from the calibration rows
-(:func:`calstudy.papers.selfcal.identify.identify`), flags outliers by a stated rejection rule
+:func:`identify_measurements` identifies the 30 parameters from the calibration rows
+(:func:`calstudy.selfcal.identify.identify`), flags outliers by a stated rejection rule
 and refits without them; :func:`validation_report` compares the position errors of the held-out
 rows before and after against a requirement.
 """
@@ -55,14 +55,15 @@ from calstudy.core.schema import check_toml
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import load_robot
 from calstudy.models.urdf import robot_from_urdf
-from calstudy.papers.selfcal.design import BaseParameters, base_parameters
-from calstudy.papers.selfcal.identify import (
+from calstudy.selfcal.cellfile import CellFile
+from calstudy.selfcal.design import BaseParameters, base_parameters
+from calstudy.selfcal.identify import (
     Identification,
     Measurements,
     identify,
     scaled_jacobian,
 )
-from calstudy.papers.selfcal.model import (
+from calstudy.selfcal.model import (
     IS_LENGTH,
     N_PARAMS,
     PARAM_NAMES,
@@ -71,7 +72,6 @@ from calstudy.papers.selfcal.model import (
     default_model,
     parameters_from_robot,
 )
-from calstudy.papers.selfcal.schema import CellFile
 
 CELL_FILE, SPHERES_FILE, MEASUREMENTS_FILE = "cell.toml", "spheres.csv", "measurements.csv"
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
@@ -97,7 +97,7 @@ START_SIGMA_MM = 0.01
 #: largest share of the calibration rows the rejection rule may set aside
 MAX_OUTLIER_SHARE = 0.25
 IDENTIFIED, FIXED_BY_YOU, NOT_IDENTIFIABLE = "identified", "fixed by you", "not identifiable"
-#: the two bases of the covariance of :func:`identify_cell`
+#: the two bases of the covariance of :func:`identify_measurements`
 DECLARED = "declared noise"
 RESIDUAL = "residual variances (per view and per sphere)"
 
@@ -350,6 +350,11 @@ def measurements_from_poses(
     arm_mm : float
         Distance of the axis points from the target's origin; about the target's size.
 
+    Returns
+    -------
+    Measurements
+        ``4 m`` rows, noise not declared.
+
     Raises
     ------
     CalibrationError
@@ -391,6 +396,17 @@ def measurements_from_poses(
 
 def read_cell(folder) -> MeasuredCell:
     """Read and check a measurement folder (format in the module docstring).
+
+    Parameters
+    ----------
+    folder : str or path-like
+        The folder holding ``cell.toml``, ``spheres.csv`` and ``measurements.csv``.
+
+    Returns
+    -------
+    MeasuredCell
+        The nominal robot and start parameters, the rows of each set (mm, rad), the sphere
+        readings, the declared noise and sensor geometry.
 
     Raises
     ------
@@ -472,13 +488,41 @@ def write_cell(
     Joint angles in degrees rounded to ``joint_decimals`` (a controller's display), lengths in
     mm rounded to ``length_decimals`` (1 um). ``sphere`` of the measurements indexes
     ``spheres_part``; sphere ids are written from 1, pose ids from 1 in row order.
+
+    Parameters
+    ----------
+    folder : str or path-like
+        Where to write (created if missing).
+    robot_file : str or path-like
+        The nominal robot table, copied into the folder.
+    part2base, sensor2flange : array_like, shape (4, 4)
+        The nominal base placement in the part frame and sensor mounting, mm.
+    spheres_part : array_like, shape (k, 3)
+        The tracker readings of the spheres, mm.
+    calibration, validation : Measurements
+        The rows of each set (``validation`` optional).
+    noise : dict, optional
+        Standard deviations per axis (``sensor_mm``, ``repeatability_mm``, ``tracker_mm``);
+        None writes no ``[noise]`` table.
+    joint_decimals, length_decimals : int
+        Decimals of the joint angles (deg) and lengths (mm).
+
+    Returns
+    -------
+    pathlib.Path
+        The folder.
+
+    Raises
+    ------
+    OSError
+        A folder that cannot be written or a robot file that cannot be read.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     robot_file = Path(robot_file)
     shutil.copyfile(robot_file, folder / robot_file.name)
     text = [
-        "# calstudy selfcal: one cell (read by calstudy.papers.selfcal.measured.read_cell)",
+        "# calstudy selfcal: one cell (read by calstudy.selfcal.read_cell)",
         f'robot = "{robot_file.name}"  # nominal MDH table, data/robots/*.toml form',
         "",
         _toml_pose("base", part2base, "nominal robot base in the part (tracker) frame"),
@@ -519,7 +563,7 @@ def write_cell(
 
 @dataclass
 class CellFit:
-    """Identification of a measured cell (:func:`identify_cell`).
+    """Identification of a measured cell (:func:`identify_measurements`).
 
     Attributes
     ----------
@@ -548,7 +592,7 @@ class CellFit:
         Per parameter: ``name``, ``status`` (:data:`IDENTIFIED`, :data:`FIXED_BY_YOU` or
         :data:`NOT_IDENTIFIABLE`) and ``combination``: for a parameter fixed as not identifiable,
         the directions the poses do not fix in which it has a share (unit vectors in scaled
-        units, :attr:`~calstudy.papers.selfcal.design.BaseParameters.unidentified`).
+        units, :attr:`~calstudy.selfcal.design.BaseParameters.unidentified`).
     notes : list of str
         What the fit fixed and why, and any rank warning (also issued as a
         :class:`~calstudy.core.errors.CalibrationWarning`).
@@ -669,7 +713,7 @@ PARALLEL_SIN = 1e-6
 def parallel_axes_note(start) -> str:
     """A sentence on nominally parallel axes beyond the pair 2-3 (which Hayati's ``beta2``
     models), or "" if there are none: the DH link between them cannot separate the offsets
-    along the two axes, so one of them is fixed (:func:`identify_cell` does so)."""
+    along the two axes, so one of them is fixed (:func:`identify_measurements` does so)."""
     pairs = [
         f"{i} and {j}"
         for (i, j), k in _DH_TWISTS.items()
@@ -705,7 +749,7 @@ def _outlier_round(norm: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return new
 
 
-def identify_cell(
+def identify_measurements(
     meas: Measurements,
     start,
     noise: dict | None = None,
@@ -720,8 +764,8 @@ def identify_cell(
 
     Identifiable parameters: at the start (nominal parameters, all rows) and again at the fit
     (kept rows, with the residual scale), the column-pivoted QR of the scaled Jacobian with a
-    noise-aware rank (:func:`calstudy.papers.selfcal.design.base_parameters`: a direction fixed
-    with a standard deviation above :data:`~calstudy.papers.selfcal.design.STD_LIMIT_MM` is not
+    noise-aware rank (:func:`calstudy.selfcal.design.base_parameters`: a direction fixed
+    with a standard deviation above :data:`~calstudy.selfcal.design.STD_LIMIT_MM` is not
     identified; at the start without declared noise :data:`START_SIGMA_MM` is assumed) gives the
     parameters
     the poses identify; the others stay at their nominal value, named with the combinations
@@ -754,6 +798,8 @@ def identify_cell(
         Fits allowed for the rejection; default ``len(meas) // 4 + 2``.
     pose_ids : array_like, optional
         Ids of the rows for the residual table (default 1..m).
+    model : GlobalModel, optional
+        The model (default the shared one).
     fixed : sequence of str, optional
         Parameters to hold at ``start`` (names of :data:`PARAM_NAMES`), e.g. lengths you know
         from a measurement of the arm.
@@ -768,6 +814,12 @@ def identify_cell(
         fewer than :data:`MIN_IDENTIFIED` directions beyond those you fixed (a pose repeated,
         one joint moving); more than :data:`MAX_OUTLIER_SHARE` of the rows beyond the rejection
         threshold (declared noise too small, or a model that does not fit); LM not converged.
+
+    Returns
+    -------
+    CellFit
+        The fit, its covariance, residuals with the outliers flagged, identifiability and
+        notes.
     """
     model = default_model() if model is None else model
     start = np.asarray(start, float)
@@ -967,7 +1019,29 @@ def check_sensor_columns(meas: Measurements, start, model: GlobalModel | None = 
 def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
     """Per parameter: nominal, identified, change and standard deviation (mm or deg), with the
     ``status`` of :attr:`CellFit.identifiability` and the ``combination`` a parameter fixed as not
-    identifiable enters; the standard deviation of a fixed parameter is NaN (not zero)."""
+    identifiable enters; the standard deviation of a fixed parameter is NaN (not zero).
+
+    Parameters
+    ----------
+    cell_fit : CellFit
+        The identification (:func:`identify_measurements`).
+    start : array_like, shape (30,)
+        The nominal parameters, mm and rad.
+
+    Returns
+    -------
+    pandas.DataFrame
+        30 rows: ``name``, ``unit``, ``nominal``, ``identified``, ``change``, ``std``,
+        ``status``, ``combination``.
+
+    Raises
+    ------
+    CalibrationError
+        A ``start`` that is not 30 numbers.
+    """
+    start = np.asarray(start, float)
+    if start.shape != (N_PARAMS,):
+        raise CalibrationError(f"start has shape {start.shape}; the 30 parameters are needed")
     p = cell_fit.params
     std = np.sqrt(np.clip(np.diag(cell_fit.covariance), 0.0, None))
     std = np.where(cell_fit.free, std, np.nan)
@@ -976,9 +1050,9 @@ def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
         {
             "name": PARAM_NAMES,
             "unit": np.where(IS_LENGTH, "mm", "deg"),
-            "nominal": np.asarray(start) * conv,
+            "nominal": start * conv,
             "identified": p * conv,
-            "change": angle_wrap(p - np.asarray(start)) * conv,
+            "change": angle_wrap(p - start) * conv,
             "std": std * conv,
             "status": cell_fit.identifiability["status"].to_numpy(),
             "combination": cell_fit.identifiability["combination"].to_numpy(),
@@ -999,9 +1073,29 @@ def validation_report(
 ) -> tuple[pd.DataFrame, dict]:
     """Position errors ``|P_i - P_i^n|`` of held-out measurements before and after calibration.
 
-    Returns the per-measurement table (``sphere``, ``before_mm``, ``after_mm``, ``within``) and a
-    summary (count, mean, RMS and largest error before and after, the requirement and whether
-    the largest error after calibration meets it).
+    Parameters
+    ----------
+    meas : Measurements
+        The held-out rows.
+    before, after : array_like, shape (30,)
+        The parameters before (nominal) and after calibration, mm and rad.
+    requirement_mm : float
+        The accuracy required of every held-out row, mm.
+    model : GlobalModel, optional
+        The model (default the shared one).
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        Per row: ``sphere``, ``before_mm``, ``after_mm``, ``within``.
+    summary : dict
+        Count, mean, RMS and largest error before and after, the requirement and
+        ``meets_requirement`` (the largest error after calibration within it).
+
+    Raises
+    ------
+    CalibrationError
+        No rows, or a requirement that is not a positive finite number.
     """
     if len(meas) == 0:
         raise CalibrationError("no validation measurements: mark some rows set = validation")

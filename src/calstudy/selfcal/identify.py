@@ -5,7 +5,7 @@ layout and of each scanned cap, the sphere fit of Eq. 7-8 (:func:`fit_sphere_cap
 Levenberg-Marquardt identification of Eq. 10-11 (:func:`identify`, least squares as in the paper
 or maximum likelihood with :func:`covariance`) and the identifiability of the 30 parameters
 (:func:`identifiability`, :func:`scaled_jacobian`). The model is
-:mod:`calstudy.papers.selfcal.model`; the multi-step routes the paper argues against are in
+:mod:`calstudy.selfcal.model`; the multi-step routes the paper argues against are in
 :mod:`calstudy.papers.selfcal.routes`; nothing here knows the simulated scenario.
 
 Frames: ``part`` is the laser tracker's frame, ``sensor`` the scanner's. Millimetres and radians.
@@ -28,7 +28,7 @@ from calstudy.core.estimation import (
 )
 from calstudy.core.geometry import check_shape
 from calstudy.estimators.fitting import fit_sphere
-from calstudy.papers.selfcal.model import (
+from calstudy.selfcal.model import (
     ANGLE_SCALE_MM,
     GROUPS,
     IS_LENGTH,

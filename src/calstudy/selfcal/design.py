@@ -11,7 +11,7 @@
   parameters and the sphere readings (what is known before measuring).
 
 Nothing here knows the simulation: the inputs are a model, parameters, joint angles and points.
-Millimetres and radians; angles are scaled as in :func:`calstudy.papers.selfcal.identify.
+Millimetres and radians; angles are scaled as in :func:`calstudy.selfcal.identify.
 scaled_jacobian` (1 rad counts as ``ANGLE_SCALE_MM`` mm).
 """
 
@@ -25,8 +25,8 @@ import pandas as pd
 import scipy.linalg
 
 from calstudy.core.errors import CalibrationError
-from calstudy.papers.selfcal.identify import RANK_RTOL, scaled_jacobian
-from calstudy.papers.selfcal.model import (
+from calstudy.selfcal.identify import RANK_RTOL, scaled_jacobian
+from calstudy.selfcal.model import (
     ANGLE_SCALE_MM,
     IS_LENGTH,
     PARAM_NAMES,
@@ -108,6 +108,7 @@ def base_parameters(
     jac : array_like, shape (m, n)
         Identification Jacobian (mm per mm, mm per rad).
     names : sequence of str, length n
+        The parameter of each column (default the 30 of the model).
     is_length : array_like of bool, length n
         Lengths stay as given, angles are multiplied by ``ANGLE_SCALE_MM``.
     rtol : float
@@ -120,6 +121,12 @@ def base_parameters(
         standard deviation within ``std_limit_mm`` (scaled units).
     std_limit_mm : float
         Largest standard deviation of an identified direction (scaled units).
+
+    Returns
+    -------
+    BaseParameters
+        The rank, the base parameters, the per-parameter table and the directions the data do
+        not fix.
 
     Raises
     ------
@@ -295,6 +302,15 @@ def select_poses(blocks, n: int, exchange_rounds: int = 2, ridge: float = 1e-6) 
         Scaled Jacobian blocks of the candidates (:func:`candidate_jacobians`).
     n : int
         Poses to choose, ``3 n >= p`` and ``n <= k``.
+    exchange_rounds : int
+        Rounds of the exchange after the greedy steps.
+    ridge : float
+        Regularisation of the information for the greedy gains, relative to its mean diagonal.
+
+    Returns
+    -------
+    numpy.ndarray of int, shape (n,)
+        Indices of the chosen candidates.
 
     Raises
     ------

@@ -28,7 +28,7 @@ Frames: ``part`` is the laser tracker's frame in which the sphere centres are kn
 is the scanner's frame. Millimetres and radians.
 
 :func:`default_model` is the one instance the rest of the package shares. The identification
-on this model is :mod:`calstudy.papers.selfcal.identify`; neither module knows the simulated
+on this model is :mod:`calstudy.selfcal.identify`; neither module knows the simulated
 scenario, so both serve measured data as well.
 """
 
@@ -42,7 +42,7 @@ import pinocchio as pin
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform, matrix_to_euler_zyx, skew
-from calstudy.models.kinematics import Robot
+from calstudy.models.kinematics import LINK_FIELDS, Robot
 
 # ----------------------------------------------------------------------------------------------
 # the 30 parameters
@@ -260,7 +260,13 @@ def parameters_from_robot(robot: Robot, part2base, sensor2flange) -> np.ndarray:
     Returns
     -------
     numpy.ndarray, shape (30,)
-        In the order of :data:`PARAM_NAMES`.
+        In the order of :data:`PARAM_NAMES`, mm and rad.
+
+    Raises
+    ------
+    CalibrationError
+        A robot that is not six DH links, Hayati ``beta`` on a link other than 2, or ``d2``
+        not zero.
     """
     _check_table(robot)
     links = robot.links
@@ -277,6 +283,62 @@ def parameters_from_robot(robot: Robot, part2base, sensor2flange) -> np.ndarray:
     for link in links[2:5]:
         middle += [link.theta, link.d, link.a, link.alpha]
     return np.concatenate([pose_to_params(base), middle, pose_to_params(sensor)])
+
+
+def _folded_base(robot: Robot) -> np.ndarray:
+    """What :func:`parameters_from_robot` folds into the base pose after ``part2base``: the
+    table's base frame, ``d1`` and ``theta1``."""
+    first = robot.links[0]
+    return (
+        robot.base
+        @ make_transform(np.eye(3), [0.0, 0.0, first.d])
+        @ make_transform(euler_zyx_to_matrix(math.degrees(first.theta), 0.0, 0.0), np.zeros(3))
+    )
+
+
+def cell_from_parameters(robot: Robot, params) -> tuple[Robot, np.ndarray, np.ndarray]:
+    """The robot table, base placement and sensor mounting that the 30 parameters describe.
+
+    The inverse of :func:`parameters_from_robot` for the quantities the model folds together:
+    ``d1``, ``theta1`` and the table's base frame stay those of ``robot`` and the rest of the
+    base pose goes to ``part2base``; link 6 and the table's tool frame stay those of ``robot``
+    and the rest of the sensor pose goes to ``sensor2flange``.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot (six DH links of the form of Eq. 2).
+    params : array_like, shape (30,)
+        Parameters in the order of :data:`PARAM_NAMES`, mm and rad.
+
+    Returns
+    -------
+    robot : Robot
+        ``robot`` with ``a1, alpha1``, link 2's ``theta, a, alpha, beta`` and links 3-5's
+        ``theta, d, a, alpha`` from ``params``.
+    part2base : numpy.ndarray, shape (4, 4)
+        The robot base frame in the part frame, mm.
+    sensor2flange : numpy.ndarray, shape (4, 4)
+        The sensor frame in the flange frame, mm.
+
+    Raises
+    ------
+    CalibrationError
+        A robot that is not a six-joint DH table of the form of Eq. 2, or ``params`` not 30
+        finite numbers.
+    """
+    _check_table(robot)
+    p = np.asarray(params, float)
+    if p.shape != (N_PARAMS,) or not np.isfinite(p).all():
+        raise CalibrationError(f"parameters have shape {p.shape}; 30 finite numbers are needed")
+    table = robot.parameters().reshape(robot.nq, -1)
+    for k, name in enumerate(ROBOT_NAMES):
+        table[int(name[-1]) - 1, LINK_FIELDS.index(name[:-1])] = p[ROBOT][k]
+    identified = robot.with_parameters(table.ravel())
+    part2base = params_to_pose(p[BASE]) @ np.linalg.inv(_folded_base(robot))
+    link6 = robot.links[5].split()[1] @ robot.tool
+    sensor2flange = np.linalg.solve(link6, params_to_pose(p[SENSOR]))
+    return identified, part2base, sensor2flange
 
 
 @cache
