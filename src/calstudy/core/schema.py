@@ -36,9 +36,10 @@ import io
 import math
 import re
 import tomllib
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from functools import cached_property
 from pathlib import Path
-from typing import Annotated, Any, TypeVar, get_args
+from typing import Annotated, Any, Self, TypeVar, get_args
 
 import numpy as np
 from pydantic import (
@@ -73,14 +74,80 @@ MAX_PIXELS = 20000
 Pixels = Annotated[int, Field(ge=1, le=MAX_PIXELS)]
 
 
+class Radians:
+    """A derived attribute of a table: its degree input ``key`` in radians (``tilt =
+    Radians("tilt_deg")``)."""
+
+    def __init__(self, key: str) -> None:
+        self.key = key
+
+    def __get__(self, table: Any, owner: type | None = None) -> Any:
+        return self if table is None else np.deg2rad(getattr(table, self.key))
+
+
 class Schema(BaseModel):
     """Base of every file schema: unknown keys are errors, values are checked strictly (a
     quoted ``"12"`` or ``true`` is not silently a number in a TOML file, ``6.0`` not a count)
     but a float may be written as an int. CSV rows, whose cells are text, are validated with
     the text parsed (:func:`validate_rows`). An array of fixed positions (``tuple[...]``)
-    must be declared with :data:`Row` so that a TOML array passes."""
+    must be declared with :data:`Row` so that a TOML array passes.
 
-    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True, strict=True)
+    A validated file is frozen; what is derived from its inputs (a camera model, an array in
+    radians) is a :class:`functools.cached_property` or a :class:`Radians` of its table, and
+    :meth:`replace` makes a changed copy whose derived values follow its inputs."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        frozen=True,
+        str_strip_whitespace=True,
+        strict=True,
+        ignored_types=(Radians,),
+    )
+
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Self:
+        """pydantic's copy (``update`` not validated), without the derived values cached on
+        ``self``: the copy computes them again from its own inputs."""
+        copied = super().model_copy(update=update, deep=deep)
+        for cls in type(self).__mro__:
+            for name, attr in vars(cls).items():
+                if isinstance(attr, cached_property):
+                    copied.__dict__.pop(name, None)
+        return copied
+
+    def replace(self, changes: Mapping[str, Any]) -> Self:
+        """A copy with the inputs at the dotted keys of ``changes`` set, e.g.
+        ``{"detection.sigma_px": 0.0}``.
+
+        The values are not validated: the copy may hold what a file may not (an oracle's zero
+        bias, a sweep point beyond the plausible range). To check a value as a file's would be,
+        load the file with overrides (:func:`apply_overrides`).
+
+        Raises
+        ------
+        CalibrationError
+            If a key names no field of the table (naming the key).
+        """
+        return self._replaced(changes, "")
+
+    def _replaced(self, changes: Mapping[str, Any], prefix: str) -> Self:
+        """:meth:`replace` of a table whose dotted name in its file is ``prefix``."""
+        nested: dict[str, dict[str, Any]] = {}
+        update: dict[str, Any] = {}
+        for key, value in changes.items():
+            head, _, rest = key.partition(".")
+            table = getattr(self, head, None) if head in type(self).model_fields else None
+            if head not in type(self).model_fields or (rest and not isinstance(table, Schema)):
+                raise CalibrationError(
+                    f"{prefix}{key}: {type(self).__name__} has no input {key.split('.')[0]!r}"
+                    + (" with inputs" if rest and head in type(self).model_fields else "")
+                )
+            if rest:
+                nested.setdefault(head, {})[rest] = value
+            else:
+                update[head] = value
+        for head, sub in nested.items():
+            update[head] = getattr(self, head)._replaced(sub, f"{prefix}{head}.")
+        return self.model_copy(update=update)
 
 
 def _as_tuple(value: Any) -> Any:
@@ -277,6 +344,39 @@ def read_toml(path: str | Path, what: str) -> dict:
 _PARSED: dict[tuple[str, int, int], dict] = {}
 
 
+def apply_overrides(table: dict, overrides: Mapping[str, object] | None) -> dict:
+    """A new table: ``table`` with the inputs at the dotted keys of ``overrides`` replaced,
+    for validation as if the file held them.
+
+    Parameters
+    ----------
+    table : dict
+        A parsed TOML table (left unchanged).
+    overrides : mapping of str to object, or None
+        Dotted TOML key (``"survey.marker_sigma_px"``) -> the value to put there.
+
+    Returns
+    -------
+    dict
+        A deep copy of ``table`` with the values replaced.
+
+    Raises
+    ------
+    CalibrationError
+        If a key names no input of ``table`` (a missing key, a table, a ledger entry), naming it.
+    """
+    out = copy.deepcopy(table)
+    for key, value in (overrides or {}).items():
+        *heads, name = key.split(".")
+        node: Any = out
+        for head in heads:
+            node = node.get(head) if isinstance(node, dict) and head != PROVENANCE else None
+        if not isinstance(node, dict) or name not in node or isinstance(node[name], dict):
+            raise CalibrationError(f"override {key!r}: the scenario has no input {key!r}")
+        node[name] = value
+    return out
+
+
 def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
     """The TOML table of ``path`` (the ``what``, for messages) after validating it against
     ``model``: for loaders that go on reading the dict (the numbers stay the bytes of the file).
@@ -331,10 +431,14 @@ def check_principal_point(cx: float, cy: float, width: int, height: int) -> None
         )
 
 
-def load_toml(path: str | Path, model: type[M], what: str) -> M:
-    """Read the TOML file ``path`` (the ``what``, for messages) and validate it against
-    ``model``."""
-    return validate(model, read_toml(path, what), path, study=is_study_file(path))
+def load_toml(
+    path: str | Path, model: type[M], what: str, overrides: Mapping[str, object] | None = None
+) -> M:
+    """Read the TOML file ``path`` (the ``what``, for messages), replace the inputs of
+    ``overrides`` (:func:`apply_overrides`) and validate it against ``model``: a replaced value
+    is checked as if the file held it."""
+    table = apply_overrides(read_toml(path, what), overrides)
+    return validate(model, table, path, study=is_study_file(path))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -459,6 +563,7 @@ def validate_rows(
 
 __all__ = [
     "Degrees",
+    "Radians",
     "Documented",
     "Finite",
     "Fraction",
@@ -472,6 +577,7 @@ __all__ = [
     "Schema",
     "Vec2",
     "Vec3",
+    "apply_overrides",
     "check_toml",
     "file_key",
     "format_errors",

@@ -22,11 +22,13 @@ all three files and the robot's table: :func:`calstudy.papers.binocular.scenario
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Annotated, Any
 
 import numpy as np
 from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
+from calstudy.core import geometry as geo
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
     Degrees,
@@ -41,6 +43,7 @@ from calstudy.core.schema import (
     rotation_problem,
 )
 from calstudy.estimators.binocular import layout_problem
+from calstudy.models.sensors import PinholeCamera
 
 #: largest ``|R^T R - I|`` of a rotation printed to 4 decimals (the paper's Table 1 and Table 4
 #: give about 1e-4); the loader then projects it onto SO(3)
@@ -152,6 +155,18 @@ class Camera(Inputs):
                 raise ValueError(f"{name} = {dist[i]} (entry #{i + 1}): must be within +-{limit}")
         return dist
 
+    def pinhole(self, image: Image) -> PinholeCamera:
+        """The camera of this table with the sensor of ``image``."""
+        return PinholeCamera(
+            fx=self.fx,
+            fy=self.fy,
+            cx=self.cx,
+            cy=self.cy,
+            width=image.width,
+            height=image.height,
+            dist=tuple(self.dist),
+        )
+
 
 class Extrinsic(Inputs):
     """The ``[extrinsic]`` table of data/binocular/sensor.toml: left2right, mm."""
@@ -172,6 +187,12 @@ class Extrinsic(Inputs):
             raise ValueError("the cameras coincide (baseline 0); stereo needs a baseline")
         _metres(t, "the baseline's largest coordinate")
         return t
+
+    @cached_property
+    def left2right(self) -> np.ndarray:
+        """``(4, 4)``: the rotation projected onto SO(3) (it is printed to 4 decimals)."""
+        rotation = geo.project_to_so3(np.array(self.rotation, dtype=float))
+        return geo.make_transform(rotation, np.array(self.translation_mm, dtype=float))
 
 
 class Optics(Inputs):
