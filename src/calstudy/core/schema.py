@@ -43,6 +43,7 @@ from typing import Annotated, Any, Self, TypeVar, get_args
 
 import numpy as np
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -422,6 +423,25 @@ def rotation_problem(matrix, tol: float = 1e-4) -> str:
     return ""
 
 
+def _rigid(matrix: list, rotation_tol: float) -> list:
+    m = np.array(matrix, dtype=float)
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
+    problem = rotation_problem(m, rotation_tol)
+    if problem:
+        raise ValueError(f"its 3 x 3 block is not a rotation: {problem}")
+    return matrix
+
+
+def rigid_transform(rotation_tol: float = 1e-4):
+    """The type of a rigid transform written as its 4 rows of 4 numbers: the last row
+    ``[0, 0, 0, 1]``, the upper-left 3 x 3 block a rotation within ``rotation_tol``
+    (:func:`rotation_problem`; a matrix printed to 4 decimals needs about 2e-3)."""
+    row = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+    check = AfterValidator(lambda matrix: _rigid(matrix, rotation_tol))
+    return Annotated[list[row], Field(min_length=4, max_length=4), check]
+
+
 def check_principal_point(cx: float, cy: float, width: int, height: int) -> None:
     """For a camera schema's validator: raise ValueError unless the principal point ``(cx, cy)``
     lies inside the ``width`` x ``height`` px image."""
@@ -588,6 +608,7 @@ __all__ = [
     "read_csv_table",
     "read_toml",
     "require_columns",
+    "rigid_transform",
     "rotation_problem",
     "validate",
     "validate_rows",

@@ -40,6 +40,7 @@ from calstudy.core.schema import (
     Schema,
     Vec3,
     check_principal_point,
+    rigid_transform,
     rotation_problem,
 )
 from calstudy.estimators.binocular import layout_problem
@@ -53,7 +54,6 @@ Row3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
 Matrix3 = Annotated[list[Row3], Field(min_length=3, max_length=3)]
 Matrix34 = Annotated[list[Row4], Field(min_length=3, max_length=3)]
-Matrix44 = Annotated[list[Row4], Field(min_length=4, max_length=4)]
 #: a count of OpenCV distortion coefficients (k1 k2 p1 p2 [k3 ...])
 DIST_LENGTHS = (4, 5, 8, 12, 14)
 #: the seven standard distances to P7 (P1P7 ... P6P7, P8P7)
@@ -374,16 +374,12 @@ class CalibratorFile(Ledgered):
 class HandEye(Inputs):
     """The ``[handeye]`` table of data/binocular/station.toml: sensor2flange, mm."""
 
-    matrix: Matrix44
+    matrix: rigid_transform(ROTATION_TOL)
 
     @field_validator("matrix")
     @classmethod
-    def _rigid(cls, matrix: list) -> list:
-        m = np.array(matrix, dtype=float)
-        if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-            raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
-        _rotation(m[:3, :3], "its 3 x 3 block")
-        _metres(m[:3, 3], "its translation's largest coordinate")
+    def _in_mm(cls, matrix: list) -> list:
+        _metres(np.array(matrix, dtype=float)[:3, 3], "its translation's largest coordinate")
         return matrix
 
 
