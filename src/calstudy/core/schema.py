@@ -151,6 +151,13 @@ class Schema(BaseModel):
         return self.model_copy(update=update)
 
 
+class Texts(Schema):
+    """A table of texts only (a file's ``[source]`` notes): any key, every value a string."""
+
+    model_config = ConfigDict(extra="allow", frozen=True, str_strip_whitespace=True)
+    __pydantic_extra__: dict[str, str]
+
+
 def _as_tuple(value: Any) -> Any:
     return tuple(value) if isinstance(value, list) else value
 
@@ -595,6 +602,7 @@ __all__ = [
     "Pixels",
     "Row",
     "Schema",
+    "Texts",
     "Vec2",
     "Vec3",
     "apply_overrides",

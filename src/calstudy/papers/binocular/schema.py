@@ -26,7 +26,7 @@ from functools import cached_property
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from calstudy.core import geometry as geo
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
@@ -37,7 +37,7 @@ from calstudy.core.schema import (
     NonNegativeFinite,
     Pixels,
     PositiveFinite,
-    Schema,
+    Texts,
     Vec3,
     check_principal_point,
     rigid_transform,
@@ -104,13 +104,6 @@ def _distinct(names: list, what: str) -> list:
     if dup:
         raise ValueError(f"{what} repeated: {dup}")
     return names
-
-
-class Notes(Schema):
-    """A table of texts only (``[source]``): any key, every value a string."""
-
-    model_config = ConfigDict(extra="allow", frozen=True, str_strip_whitespace=True)
-    __pydantic_extra__: dict[str, str]
 
 
 def _rotation(matrix: list, what: str) -> None:
@@ -270,7 +263,7 @@ class Detection(Inputs):
 class SensorFile(Ledgered):
     """``data/binocular/sensor.toml``."""
 
-    source: Notes = Notes()
+    source: Texts = Texts()
     image: Image
     left: Camera
     right: Camera
@@ -360,7 +353,7 @@ class CalibratorPublished(Documented):
 class CalibratorFile(Ledgered):
     """``data/binocular/calibrator.toml``."""
 
-    source: Notes = Notes()
+    source: Texts = Texts()
     standard: Standard
     cmm: Cmm
     sbr: Sbr
@@ -495,7 +488,7 @@ class StationPublished(Documented):
 class StationFile(Ledgered):
     """``data/binocular/station.toml``."""
 
-    source: Notes = Notes()
+    source: Texts = Texts()
     handeye: HandEye
     calibrator: CalibratorPlace
     poses: Poses

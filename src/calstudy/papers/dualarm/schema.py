@@ -26,7 +26,7 @@ from functools import cached_property
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import ConfigDict, Field, PrivateAttr, field_validator, model_validator
+from pydantic import Field, PrivateAttr, field_validator, model_validator
 
 from calstudy.core import geometry as geo
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
@@ -39,7 +39,7 @@ from calstudy.core.schema import (
     PositiveFinite,
     Radians,
     Row,
-    Schema,
+    Texts,
     Vec3,
     check_principal_point,
 )
@@ -514,13 +514,6 @@ Group = Annotated[int, Field(ge=0)]
 
 def _pose(rotvec, translation) -> np.ndarray:
     return geo.make_transform(geo.rotvec_to_matrix(rotvec), translation)
-
-
-class Texts(Schema):
-    """A table of texts only (``[nuisance_targets]``): any key, every value a string."""
-
-    model_config = ConfigDict(extra="allow", frozen=True, str_strip_whitespace=True)
-    __pydantic_extra__: dict[str, str]
 
 
 def _one_row_each(rows: list, what: str) -> list:
