@@ -47,7 +47,7 @@ from calstudy.papers.dualarm.schema import ARMS, Scenario
 
 
 def handeye_data(scn: Scenario, arm: int, rng: np.random.Generator):
-    """Arm ``arm`` images the plate from ``handeye_poses`` poses; returns ``(reported
+    """Arm ``arm`` images the plate from ``handeye.n_poses`` poses; returns ``(reported
     flange2base, plate2cam by PnP)``, each ``(n, 4, 4)``."""
     reported, uvs = sim.handeye_images(scn, arm, rng)
     points, k = scn.handeye.plate_points, scn.rig.left.K
@@ -197,7 +197,7 @@ def plate_base_to_base(
     scn: Scenario, cam2flange_est, rng: np.random.Generator, sigma_px: float | None = None
 ) -> np.ndarray:
     """Baseline: a circle plate halfway between the arms (overlapping field), each arm images it
-    from ``calibration_poses`` poses from its own side, circle centres to ``sigma_px``;
+    from ``global_test.calibration_poses`` poses from its own side, circle centres to ``sigma_px``;
     RANSAC-PnP poses; Eq. 11. The plate draws from its own stream of ``rng``."""
     flanges, plate2cams = [], []
     (plate_rng,) = streams(rng, "plate")

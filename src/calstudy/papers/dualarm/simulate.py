@@ -99,7 +99,7 @@ def mid_point(scn: Scenario) -> np.ndarray:
 
 def plate_place(scn: Scenario) -> np.ndarray:
     """Centre ``(3,)`` of Table 3's circular plate (world): on the table (z = 0),
-    ``plate_offset_mm`` (x, y) from the point between the marker groups."""
+    ``circular_plate.offset_mm`` (x, y) from the point between the marker groups."""
     mid = mid_point(scn)
     dx, dy = scn.circular_plate.offset_mm
     return np.array([mid[0] + dx, mid[1] + dy, 0.0])
@@ -118,8 +118,9 @@ def _bias(camera_k, points_cam, normal_cam, radius: float) -> np.ndarray:
 
 def observe_markers(scn: Scenario, world2cam, rng: np.random.Generator) -> View:
     """Markers detected in one stereo pair: visible in both images and facing the camera, each
-    lost with probability ``loss_rate``; each centre is the centre of the marker circle's image
-    ellipse (perspective bias for ``marker_radius_mm``) with ``sigma_px`` noise."""
+    lost with probability ``detection.loss_rate``; each centre is the centre of the marker
+    circle's image ellipse (perspective bias for ``detection.marker_radius_mm``) with
+    ``detection.sigma_px`` noise."""
     w2c = np.asarray(world2cam)
     pl = geo.apply(w2c, scn.markers.xyz)
     pr = geo.apply(scn.rig.left2right, pl)
@@ -153,10 +154,9 @@ def plate_images(
 ) -> np.ndarray:
     """Circle centres ``(n, N, 2)`` (px) of the plate at ``plate2world`` in the left image of
     each of the ``n`` cameras ``cam2world``: the centres of the circles' image ellipses
-    (perspective bias for ``circle_radius_mm``), with ``sigma_px`` noise (the scenario's unless
-    given); with ``outliers``, a
-    fraction ``plate_outlier_rate`` of them moved by ``plate_outlier_px`` in a random direction
-    (gross detection errors)."""
+    (perspective bias for ``handeye.circle_radius_mm``), with ``sigma_px`` noise (the scenario's
+    unless given); with ``outliers``, a fraction ``circular_plate.outlier_rate`` of them moved by
+    ``circular_plate.outlier_px`` in a random direction (gross detection errors)."""
     uvs = np.empty((len(cam2world), len(scn.handeye.plate_points), 2))
     for k, c2w in enumerate(cam2world):
         true = geo.invert(c2w) @ plate2world
@@ -176,8 +176,8 @@ def plate_images(
 
 
 def handeye_images(scn: Scenario, arm: int, rng: np.random.Generator):
-    """Arm ``arm`` images the plate (at its marker group) from ``handeye_poses`` poses: ``(reported
-    flange2base (n, 4, 4), circle centres (n, N, 2))``."""
+    """Arm ``arm`` images the plate (at its marker group) from ``handeye.n_poses`` poses:
+    ``(reported flange2base (n, 4, 4), circle centres (n, N, 2))``."""
     plate2world = geo.make_transform(np.eye(3), scn.markers.group_centre(arm))
     cam2world = view_poses(
         rng,
@@ -195,10 +195,10 @@ def circular_plate_images(
     scn: Scenario, rng: np.random.Generator, sigma_px: float | None = None
 ) -> list:
     """Table 3's comparison: a circle plate in the overlapping field, on the table beside the
-    sphere stand (``plate_offset_mm`` from the point between the marker groups), each
-    arm images it from ``calibration_poses`` poses from its own side, with gross detection
-    errors and circle centres good to ``sigma_px`` (calibrated to the paper's plate figure,
-    rule 11; the scenario's marker noise unless given). Per arm ``(reported flange2base
+    sphere stand (``circular_plate.offset_mm`` from the point between the marker groups), each
+    arm images it from ``global_test.calibration_poses`` poses from its own side, with gross
+    detection errors and circle centres good to ``sigma_px`` (calibrated to the paper's plate
+    figure, rule 11; the scenario's marker noise unless given). Per arm ``(reported flange2base
     (n, 4, 4), circle centres (n, N, 2))``."""
     plate2world = geo.make_transform(np.eye(3), plate_place(scn))
     out = []
@@ -219,11 +219,11 @@ def circular_plate_images(
 
 
 def survey_views(scn: Scenario, rng: np.random.Generator, bridges: bool = True) -> list[View]:
-    """The scanner's unordered stereo images of the markers: ``survey_views_per_group`` of each
-    group and ``survey_bridge_views`` of both (none with ``bridges=False``), the linking images
+    """The scanner's unordered stereo images of the markers: ``survey.views_per_group`` of each
+    group and ``survey.bridge_views`` of both (none with ``bridges=False``), the linking images
     held with the short side of the image along the line of the groups (world y, across the stereo
     baseline: at 1000 mm the two images of a rig converging at 500 mm overlap little along the
-    baseline), turned by at most ``survey_bridge_roll`` about the optical axis."""
+    baseline), turned by at most ``survey.bridge_roll_deg`` about the optical axis."""
     poses = [
         view_poses(
             rng,
@@ -251,7 +251,7 @@ def survey_views(scn: Scenario, rng: np.random.Generator, bridges: bool = True) 
 
 
 def arm_world_views(scn: Scenario, arm: int, rng: np.random.Generator, exact: bool = False):
-    """Arm ``arm`` sees its marker group from ``calibration_poses`` poses: ``(reported
+    """Arm ``arm`` sees its marker group from ``global_test.calibration_poses`` poses: ``(reported
     flange2base, views)``; with ``exact`` also ``(true flange2base, views without noise, bias or
     losses)`` of the same poses (the per-arm location switched off in the error budget)."""
     cam2world = view_poses(
@@ -278,7 +278,7 @@ def arm_world_views(scn: Scenario, arm: int, rng: np.random.Generator, exact: bo
 
 def scan_sphere(scn: Scenario, centre_world, radius: float, cam2world, rng) -> np.ndarray:
     """Points ``(points_per_scan, 3)`` of the sphere cap the left camera at ``cam2world`` sees,
-    in the left camera frame, with ``point_sigma_mm`` noise per coordinate."""
+    in the left camera frame, with ``sensor.point_sigma_mm`` noise per coordinate."""
     c = np.asarray(centre_world, dtype=float)
     eye = np.asarray(cam2world)[:3, 3]
     n_draw = 4 * scn.sensor.points_per_scan
@@ -309,7 +309,7 @@ def sphere_scans(
 
 
 def sphere_place(scn: Scenario, arm: int, radius: float) -> np.ndarray:
-    """Where arm ``arm``'s multi-view test sphere stands (world): ``icp_sphere_offset_mm`` beside
+    """Where arm ``arm``'s multi-view test sphere stands (world): ``icp.sphere_offset_mm`` beside
     its marker group, on the stand."""
     g = scn.markers.group_centre(arm)
     return np.array(
