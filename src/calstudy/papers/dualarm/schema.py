@@ -452,14 +452,8 @@ class Scenario(Ledgered, Inputs):
                 f"distance between {math.tan(math.radians(lo)):.3g} and "
                 f"{math.tan(math.radians(hi)):.3g})"
             )
-        cal = self.calibration
-        world2base = [geo.pose_from_vector([*self.layout.world2base1_mm,
-                                            *self.layout.world2base1_rotvec])]
-        base2_to_base1 = geo.pose_from_vector([*cal.base2_to_base1_mm, *cal.base2_to_base1_rotvec])
-        world2base.append(geo.invert(base2_to_base1) @ world2base[0])
-        markers = np.array(self.markers.xyz_mm, dtype=float)
-        groups = np.array([n.split("-")[0] for n in self.markers.names])
-        centres = [markers[groups == g].mean(axis=0) for g in self.markers.groups]
+        world2base = self.world2base
+        centres = [self.markers.group_centre(arm) for arm in ARMS]
         middle = 0.5 * (centres[0] + centres[1])
         radius_a = 0.5 * self.spheres.diameter_a_mm
         lift = self.global_test.stand_height_mm + radius_a
@@ -489,7 +483,7 @@ class Scenario(Ledgered, Inputs):
                     centre,
                 )
             )
-        offsets = (cal.cam2flange_1_mm, cal.cam2flange_2_mm)
+        offsets = (self.calibration.cam2flange_1_mm, self.calibration.cam2flange_2_mm)
         for key, value, what, point in places:
             for arm in range(2):
                 reach = ARM_ENVELOPE_MM + float(np.linalg.norm(offsets[arm]))
