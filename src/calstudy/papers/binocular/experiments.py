@@ -324,8 +324,11 @@ def field_trial(setup: Setup, rng) -> dict:
 # factories of the notebook's experiments
 
 
-def _scenario(scenario_dir: str) -> Scenario:
-    return load_scenario(scenario_dir or None)
+def _scenario(scenario_dir: str, f_number: float | None = None) -> Scenario:
+    """The station of ``scenario_dir`` (default the paper's) with ``f_number`` (None: the
+    file's) read in place of ``sensor.toml [optics] f_number`` and validated as the file's."""
+    overrides = None if f_number is None else {"sensor.optics.f_number": float(f_number)}
+    return load_scenario(scenario_dir or None, overrides)
 
 
 def scenario_key(setup: Setup) -> str:
@@ -359,7 +362,7 @@ def binocular_experiment(
     if n_trials < 1:
         raise CalibrationError(f"n_trials is {n_trials}; need at least 1")
     setup = Setup(
-        with_optics(_scenario(scenario_dir), f_number=f_number),
+        _scenario(scenario_dir, f_number),
         tuple(float(r) for r in robot_scales),
         tuple(float(c) for c in calibration_scales),
     )
@@ -372,7 +375,7 @@ def field_experiment(
     scenario_dir: str = "", n_trials: int = 30, f_number: float | None = None
 ) -> Experiment:
     """The Monte Carlo of Table 5 (:func:`field_trial`)."""
-    setup = Setup(with_optics(_scenario(scenario_dir), f_number=f_number), (), ())
+    setup = Setup(_scenario(scenario_dir, f_number), (), ())
     return Experiment("field", field_trial, setup, int(n_trials), scenario_key=scenario_key(setup))
 
 
@@ -516,7 +519,7 @@ def optics_experiment(
     scenario's value, with ``f_number`` if given)."""
     if n_trials < 1 or not points:
         raise CalibrationError(f"an optics sweep needs points and n_trials >= 1 ({n_trials})")
-    setup = Setup(with_optics(_scenario(scenario_dir), f_number=f_number), (), ())
+    setup = Setup(_scenario(scenario_dir, f_number), (), ())
     full = [{k: float(p.get(k, 0.0)) for k in OPTICS_KEYS} for p in points]
     return Experiment(
         name, optics_trial, setup, int(n_trials), points=full, scenario_key=scenario_key(setup)
