@@ -136,12 +136,10 @@ class Schema(BaseModel):
         update: dict[str, Any] = {}
         for key, value in changes.items():
             head, _, rest = key.partition(".")
-            table = getattr(self, head, None) if head in type(self).model_fields else None
-            if head not in type(self).model_fields or (rest and not isinstance(table, Schema)):
-                raise CalibrationError(
-                    f"{prefix}{key}: {type(self).__name__} has no input {key.split('.')[0]!r}"
-                    + (" with inputs" if rest and head in type(self).model_fields else "")
-                )
+            if head not in type(self).model_fields or (
+                rest and not isinstance(getattr(self, head), Schema)
+            ):
+                raise CalibrationError(f"{prefix}{key}: no such input in {type(self).__name__}")
             if rest:
                 nested.setdefault(head, {})[rest] = value
             else:
@@ -590,7 +588,6 @@ def validate_rows(
 
 __all__ = [
     "Degrees",
-    "Radians",
     "Documented",
     "Finite",
     "Fraction",
@@ -600,6 +597,7 @@ __all__ = [
     "PositiveFinite",
     "PositiveInt",
     "Pixels",
+    "Radians",
     "Row",
     "Schema",
     "Texts",

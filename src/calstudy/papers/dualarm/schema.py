@@ -13,7 +13,7 @@ Checked on load (:func:`calstudy.core.schema.load_toml`): every key read must be
 type and range (lengths mm, angles degrees where the key says ``_deg``, rotation vectors rad),
 unknown keys are refused, and the cross-field rules below hold (one position per marker name,
 every marker in a declared group, a principal point inside the image, an outlier range that is
-a range), and the station can exist (:meth:`ScenarioFile.plausibility`: stereo cameras that
+a range), and the station can exist (:meth:`Scenario.plausibility`: stereo cameras that
 converge at a workable angle, spheres and markers within the arms' reach, noise levels below the
 physical bounds of :data:`NOISE_BOUNDS`, counts below their size bounds, checked before anything
 is allocated). A message names the file, the key, the value and the allowed range.
@@ -110,7 +110,7 @@ class Camera(Inputs):
 
     @cached_property
     def pinhole(self) -> PinholeCamera:
-        """Each camera of the head (distortion-free)."""
+        """The model of each of the head's two equal cameras (no lens distortion)."""
         return PinholeCamera(
             fx=self.fx_px,
             fy=self.fy_px,
