@@ -9,10 +9,13 @@ row and column), the value found and the allowed range::
     data/robots/my_robot.toml: link #2.a_mm = 68000.0: must be <= 10000.0
     my_handeye.csv: row 7, column 'sz': '12,5' is not a number (decimal comma? write 12.5)
 
-:func:`load_toml` reads and validates a TOML file in one call; :func:`read_csv_table` reads a CSV
-the way a spreadsheet writes it (byte-order mark, ``;`` as separator, ``#`` comment lines) and
-:func:`validate_rows` checks its rows. The range types (:data:`Finite`, :data:`PositiveFinite`,
-...) are the building blocks of the schemas.
+:func:`load_toml` reads and validates a TOML file in one call, with :func:`apply_overrides`
+replacing some of its inputs first (checked as if the file held them); the validated model is
+then the scenario itself, frozen, its derived values cached on it (:meth:`Schema.replace` makes a
+changed copy). :func:`read_csv_table` reads a CSV the way a spreadsheet writes it (byte-order
+mark, ``;`` as separator, ``#`` comment lines) and :func:`validate_rows` checks its rows. The
+range types (:data:`Finite`, :data:`PositiveFinite`, ...), :func:`rigid_transform`,
+:class:`Radians` and :class:`Texts` are the building blocks of the schemas.
 
 A paper's ``scenario.py`` uses it as::
 
@@ -25,7 +28,7 @@ A paper's ``scenario.py`` uses it as::
         station: Station
         robot: str
 
-    raw = load_toml(path, ScenarioFile, "hybrid scenario")   # CalibrationError naming key
+    scenario = load_toml(path, ScenarioFile, "hybrid scenario")  # CalibrationError naming key
 """
 
 from __future__ import annotations
