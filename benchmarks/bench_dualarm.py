@@ -31,10 +31,10 @@ REPEATS = 5
 def icp_timings(scn) -> dict[str, tuple[float, float]]:
     """Median ms and mean correspondence updates per alignment, with and without the noise
     test."""
-    r = scn.sphere_radius["A"]
+    r = scn.spheres.radius["A"]
     rng = np.random.default_rng(2)
     clouds, _ = ex.scans_in_base(
-        scn, 1, sim.sphere_place(scn, 1, r), r, scn.icp_views, rng, scn.cam2flange[0]
+        scn, 1, sim.sphere_place(scn, 1, r), r, scn.icp.n_views, rng, scn.calibration.cam2flange[0]
     )
     tree = cKDTree(clouds[0])
     out = {}
@@ -55,14 +55,14 @@ def bundle_timings(scn) -> dict[str, float]:
     used = [views[j] for j in recon.used_views]
     w2c, pts = mk.splice_clusters(recon.clusters)
     poses = np.stack([w2c[j] for j in range(len(used))])
-    points = np.full((len(scn.markers), 3), np.nan)
+    points = np.full((len(scn.markers.xyz), 3), np.nan)
     for i, p in pts.items():
         points[i] = p
     kw = dict(
         fixed_view=recon.reference_view,
-        sigma_px=scn.sigma_px,
-        sigma_mm=scn.marker_sigma_mm,
-        depth_ref_mm=scn.working_distance_mm,
+        sigma_px=scn.detection.sigma_px,
+        sigma_mm=scn.detection.marker_sigma_mm,
+        depth_ref_mm=scn.sensor.working_distance_mm,
     )
     return {
         "bundle adjustment, analytic sparse Jacobian": best_seconds(

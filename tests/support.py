@@ -55,11 +55,9 @@ def disk_image(size=41, radius=9.0, centre=(20.3, 19.6), blur=0.0):
 
 def binocular_rig():
     """The binocular sensor of Table 1 (``data/binocular/sensor.toml``) as a StereoRig."""
-    from calstudy.core.config import read_toml
-    from calstudy.core.paths import data_path
-    from calstudy.models.stereo import StereoRig
+    from calstudy.papers.binocular.scenario import load_scenario
 
-    return StereoRig.from_table(read_toml(data_path("binocular", "sensor.toml"), "sensor"))
+    return load_scenario().rig
 
 
 def run(path: Path, parameters: dict, tmp_path: Path) -> Path:

@@ -152,12 +152,10 @@ def _arc(deg, n=20, radius=100.0, noise=0.0, seed=2):
     return pts + np.random.default_rng(seed).normal(0.0, noise, pts.shape)
 
 
-def _stereo_table(rotation):
-    from calstudy.core.config import read_toml
-    from calstudy.core.paths import data_path
-
-    table = read_toml(data_path("binocular", "sensor.toml"), "stereo sensor")
-    return table | {"extrinsic": table["extrinsic"] | {"rotation": rotation}}
+def _stereo_rig(rotation, translation=(-200.0, 0.0, 0.0)):
+    """The cameras of :data:`RIG` with the extrinsic ``left2right`` of ``rotation`` (3, 3) and
+    ``translation`` (3,) mm."""
+    return StereoRig.from_left2right(RIG.left, RIG.right, geo.make_transform(rotation, translation))
 
 
 def _raise_refused(forms):
@@ -539,8 +537,8 @@ CASES = [
     ("expose-nan_radiance", lambda p: exposure.expose(DOT * np.nan, 100.0, 1.3, 0.06, 1.5, 40.0, np.random.default_rng(0)), E, r"radiance holds 1600 NaN or inf pixel"),
     ("expose-bits", lambda p: exposure.expose(DOT, 100.0, 1.3, 0.06, 1.5, 40.0, np.random.default_rng(0), bits=24), E, r"bits = 24 must be an integer from 1 to 16"),
     ("expose_and_fuse-negative_time", lambda p: exposure.expose_and_fuse(DOT, [100.0, -10.0], 1.3, 0.06, 1.5, 40.0, np.random.default_rng(0)), E, r"exposure_ms = -10\.0"),
-    ("stereorig.from_table-scaled_rotation", lambda p: StereoRig.from_table(_stereo_table((2 * np.eye(3)).tolist())), E, r"extrinsic\.rotation is not orthonormal \(max \|R\^T R - I\| = 3"),
-    ("stereorig.from_table-reflection", lambda p: StereoRig.from_table(_stereo_table(np.diag([1.0, 1.0, -1.0]).tolist())), E, r"extrinsic\.rotation is a reflection"),
+    ("stereorig.from_left2right-scaled_rotation", lambda p: _stereo_rig(2 * np.eye(3)), E, r"left2right rotation is not orthonormal \(max \|R\^T R - I\| = 3"),
+    ("stereorig.from_left2right-reflection", lambda p: _stereo_rig(np.diag([1.0, 1.0, -1.0])), E, r"left2right rotation is a reflection"),
     ("sphere_handeye-camera_in_metres", lambda p: he.sphere_handeye(TRANS, CENTRES[:4] * 1e-3, ROT, CENTRES[4:] * 1e-3), E, r"sphere centre moves 0\.001\d* times as far .*metres give 0\.001"),
     ("opencv_handeye-pure_translations", lambda p: he.opencv_handeye(_degenerate("translations"), _camera_poses(_degenerate("translations")), "Tsai"), E, r"no pair of the 6 poses rotates by 0\.01 deg or more \(largest 0 deg\): pure translations"),
     ("opencv_handeye-one_axis", lambda p: he.opencv_handeye(_degenerate("one_axis"), _camera_poses(_degenerate("one_axis")), "Daniilidis"), E, r"6 poses turn about one axis \(axes within [0-9.e-]+ deg, minimum 0\.01 deg\).*translation along it are undetermined"),
@@ -640,7 +638,7 @@ def test_misfit_is_flagged_by_default():
 #   models.reach       reach_bound, ReachBound.excess, margin_mm, unreachable .... robot
 #   models.optics      coc_radius_mm, coc_radius_far_mm, coc_radius_px ..... circle_of_confusion
 #   models.exposure    expose, fuse_exposures .............................. exposure, fusion
-#   models.stereo      StereoRig.from_table ................................ stereo_table
+#   models.stereo      StereoRig.from_left2right ........................... stereo_rig
 #   estimators.fitting fit_rigid, fit_rotation, fit_sphere .................. point_fitters
 #                      fit_homography, homography_to_pose, solve_pnp ........ homography_and_pnp
 #   estimators.handeye sphere_handeye, sphere_handeye_ml, sphere_handeye_crb  sphere_handeye
@@ -832,13 +830,11 @@ def test_property_compensation(data):
 
 @PROFILE
 @given(_arrays((3, 3)), _arrays((3,)))
-def test_property_stereo_table(rotation, translation):
-    """A stereo table with any finite extrinsic gives a rig of finite rigid transforms, or is
+def test_property_stereo_rig(rotation, translation):
+    """A stereo rig with any finite extrinsic is one of finite rigid transforms, or is
     refused."""
-    table = _stereo_table(rotation.tolist())
-    table["extrinsic"] = table["extrinsic"] | {"translation_mm": translation.tolist()}
     try:
-        rig = StereoRig.from_table(table)
+        rig = _stereo_rig(rotation, translation)
     except CalibrationError:
         return
     geo.check_transform("left2right", rig.left2right)

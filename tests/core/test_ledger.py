@@ -97,7 +97,7 @@ def test_value_outside_its_range_is_refused_zero_noise_is_not(tmp_path):
     ):
         load_dualarm(_own(tmp_path, text))
     text = DUALARM.replace("sigma_px = 0.1", "sigma_px = 0.0", 1)  # an oracle
-    assert load_dualarm(_own(tmp_path, text, "oracle.toml")).sigma_px == 0.0
+    assert load_dualarm(_own(tmp_path, text, "oracle.toml")).detection.sigma_px == 0.0
     text = DUALARM.replace("baseline_mm = 200.0", "baseline_mm = 0.0", 1)  # not a noise level
     with pytest.raises(CalibrationError, match=r"stereo\.baseline_mm = 0\.0: must be > 0"):
         load_dualarm(_own(tmp_path, text, "zero.toml"))

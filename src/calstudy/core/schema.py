@@ -9,10 +9,13 @@ row and column), the value found and the allowed range::
     data/robots/my_robot.toml: link #2.a_mm = 68000.0: must be <= 10000.0
     my_handeye.csv: row 7, column 'sz': '12,5' is not a number (decimal comma? write 12.5)
 
-:func:`load_toml` reads and validates a TOML file in one call; :func:`read_csv_table` reads a CSV
-the way a spreadsheet writes it (byte-order mark, ``;`` as separator, ``#`` comment lines) and
-:func:`validate_rows` checks its rows. The range types (:data:`Finite`, :data:`PositiveFinite`,
-...) are the building blocks of the schemas.
+:func:`load_toml` reads and validates a TOML file in one call, with :func:`apply_overrides`
+replacing some of its inputs first (checked as if the file held them); the validated model is
+then the scenario itself, frozen, its derived values cached on it (:meth:`Schema.replace` makes a
+changed copy). :func:`read_csv_table` reads a CSV the way a spreadsheet writes it (byte-order
+mark, ``;`` as separator, ``#`` comment lines) and :func:`validate_rows` checks its rows. The
+range types (:data:`Finite`, :data:`PositiveFinite`, ...), :func:`rigid_transform`,
+:class:`Radians` and :class:`Texts` are the building blocks of the schemas.
 
 A paper's ``scenario.py`` uses it as::
 
@@ -25,7 +28,7 @@ A paper's ``scenario.py`` uses it as::
         station: Station
         robot: str
 
-    raw = load_toml(path, ScenarioFile, "hybrid scenario")   # CalibrationError naming key
+    scenario = load_toml(path, ScenarioFile, "hybrid scenario")  # CalibrationError naming key
 """
 
 from __future__ import annotations
@@ -36,12 +39,14 @@ import io
 import math
 import re
 import tomllib
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from functools import cached_property
 from pathlib import Path
-from typing import Annotated, Any, TypeVar, get_args
+from typing import Annotated, Any, Self, TypeVar, get_args
 
 import numpy as np
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -73,14 +78,85 @@ MAX_PIXELS = 20000
 Pixels = Annotated[int, Field(ge=1, le=MAX_PIXELS)]
 
 
+class Radians:
+    """A derived attribute of a table: its degree input ``key`` in radians (``tilt =
+    Radians("tilt_deg")``)."""
+
+    def __init__(self, key: str) -> None:
+        self.key = key
+
+    def __get__(self, table: Any, owner: type | None = None) -> Any:
+        return self if table is None else np.deg2rad(getattr(table, self.key))
+
+
 class Schema(BaseModel):
     """Base of every file schema: unknown keys are errors, values are checked strictly (a
     quoted ``"12"`` or ``true`` is not silently a number in a TOML file, ``6.0`` not a count)
     but a float may be written as an int. CSV rows, whose cells are text, are validated with
     the text parsed (:func:`validate_rows`). An array of fixed positions (``tuple[...]``)
-    must be declared with :data:`Row` so that a TOML array passes."""
+    must be declared with :data:`Row` so that a TOML array passes.
 
-    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True, strict=True)
+    A validated file is frozen; what is derived from its inputs (a camera model, an array in
+    radians) is a :class:`functools.cached_property` or a :class:`Radians` of its table, and
+    :meth:`replace` makes a changed copy whose derived values follow its inputs."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        frozen=True,
+        str_strip_whitespace=True,
+        strict=True,
+        ignored_types=(Radians,),
+    )
+
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Self:
+        """pydantic's copy (``update`` not validated), without the derived values cached on
+        ``self``: the copy computes them again from its own inputs."""
+        copied = super().model_copy(update=update, deep=deep)
+        for cls in type(self).__mro__:
+            for name, attr in vars(cls).items():
+                if isinstance(attr, cached_property):
+                    copied.__dict__.pop(name, None)
+        return copied
+
+    def replace(self, changes: Mapping[str, Any]) -> Self:
+        """A copy with the inputs at the dotted keys of ``changes`` set, e.g.
+        ``{"detection.sigma_px": 0.0}``.
+
+        The values are not validated: the copy may hold what a file may not (an oracle's zero
+        bias, a sweep point beyond the plausible range). To check a value as a file's would be,
+        load the file with overrides (:func:`apply_overrides`).
+
+        Raises
+        ------
+        CalibrationError
+            If a key names no field of the table (naming the key).
+        """
+        return self._replaced(changes, "")
+
+    def _replaced(self, changes: Mapping[str, Any], prefix: str) -> Self:
+        """:meth:`replace` of a table whose dotted name in its file is ``prefix``."""
+        nested: dict[str, dict[str, Any]] = {}
+        update: dict[str, Any] = {}
+        for key, value in changes.items():
+            head, _, rest = key.partition(".")
+            if head not in type(self).model_fields or (
+                rest and not isinstance(getattr(self, head), Schema)
+            ):
+                raise CalibrationError(f"{prefix}{key}: no such input in {type(self).__name__}")
+            if rest:
+                nested.setdefault(head, {})[rest] = value
+            else:
+                update[head] = value
+        for head, sub in nested.items():
+            update[head] = getattr(self, head)._replaced(sub, f"{prefix}{head}.")
+        return self.model_copy(update=update)
+
+
+class Texts(Schema):
+    """A table of texts only (a file's ``[source]`` notes): any key, every value a string."""
+
+    model_config = ConfigDict(extra="allow", frozen=True, str_strip_whitespace=True)
+    __pydantic_extra__: dict[str, str]
 
 
 def _as_tuple(value: Any) -> Any:
@@ -277,6 +353,39 @@ def read_toml(path: str | Path, what: str) -> dict:
 _PARSED: dict[tuple[str, int, int], dict] = {}
 
 
+def apply_overrides(table: dict, overrides: Mapping[str, object] | None) -> dict:
+    """A new table: ``table`` with the inputs at the dotted keys of ``overrides`` replaced,
+    for validation as if the file held them.
+
+    Parameters
+    ----------
+    table : dict
+        A parsed TOML table (left unchanged).
+    overrides : mapping of str to object, or None
+        Dotted TOML key (``"survey.marker_sigma_px"``) -> the value to put there.
+
+    Returns
+    -------
+    dict
+        A deep copy of ``table`` with the values replaced.
+
+    Raises
+    ------
+    CalibrationError
+        If a key names no input of ``table`` (a missing key, a table, a ledger entry), naming it.
+    """
+    out = copy.deepcopy(table)
+    for key, value in (overrides or {}).items():
+        *heads, name = key.split(".")
+        node: Any = out
+        for head in heads:
+            node = node.get(head) if isinstance(node, dict) and head != PROVENANCE else None
+        if not isinstance(node, dict) or name not in node or isinstance(node[name], dict):
+            raise CalibrationError(f"override {key!r}: the scenario has no input {key!r}")
+        node[name] = value
+    return out
+
+
 def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
     """The TOML table of ``path`` (the ``what``, for messages) after validating it against
     ``model``: for loaders that go on reading the dict (the numbers stay the bytes of the file).
@@ -322,6 +431,25 @@ def rotation_problem(matrix, tol: float = 1e-4) -> str:
     return ""
 
 
+def _rigid(matrix: list, rotation_tol: float) -> list:
+    m = np.array(matrix, dtype=float)
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
+    problem = rotation_problem(m, rotation_tol)
+    if problem:
+        raise ValueError(f"its 3 x 3 block is not a rotation: {problem}")
+    return matrix
+
+
+def rigid_transform(rotation_tol: float = 1e-4):
+    """The type of a rigid transform written as its 4 rows of 4 numbers: the last row
+    ``[0, 0, 0, 1]``, the upper-left 3 x 3 block a rotation within ``rotation_tol``
+    (:func:`rotation_problem`; a matrix printed to 4 decimals needs about 2e-3)."""
+    row = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+    check = AfterValidator(lambda matrix: _rigid(matrix, rotation_tol))
+    return Annotated[list[row], Field(min_length=4, max_length=4), check]
+
+
 def check_principal_point(cx: float, cy: float, width: int, height: int) -> None:
     """For a camera schema's validator: raise ValueError unless the principal point ``(cx, cy)``
     lies inside the ``width`` x ``height`` px image."""
@@ -331,10 +459,14 @@ def check_principal_point(cx: float, cy: float, width: int, height: int) -> None
         )
 
 
-def load_toml(path: str | Path, model: type[M], what: str) -> M:
-    """Read the TOML file ``path`` (the ``what``, for messages) and validate it against
-    ``model``."""
-    return validate(model, read_toml(path, what), path, study=is_study_file(path))
+def load_toml(
+    path: str | Path, model: type[M], what: str, overrides: Mapping[str, object] | None = None
+) -> M:
+    """Read the TOML file ``path`` (the ``what``, for messages), replace the inputs of
+    ``overrides`` (:func:`apply_overrides`) and validate it against ``model``: a replaced value
+    is checked as if the file held it."""
+    table = apply_overrides(read_toml(path, what), overrides)
+    return validate(model, table, path, study=is_study_file(path))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -468,10 +600,13 @@ __all__ = [
     "PositiveFinite",
     "PositiveInt",
     "Pixels",
+    "Radians",
     "Row",
     "Schema",
+    "Texts",
     "Vec2",
     "Vec3",
+    "apply_overrides",
     "check_toml",
     "file_key",
     "format_errors",
@@ -482,6 +617,7 @@ __all__ = [
     "read_csv_table",
     "read_toml",
     "require_columns",
+    "rigid_transform",
     "rotation_problem",
     "validate",
     "validate_rows",

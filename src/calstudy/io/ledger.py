@@ -34,7 +34,7 @@ SCENARIO_FILES = {
         ("calibrator.toml", binocular.CalibratorFile),
         ("station.toml", binocular.StationFile),
     ),
-    "dualarm": (("scenario.toml", dualarm.ScenarioFile),),
+    "dualarm": (("scenario.toml", dualarm.Scenario),),
 }
 
 #: paper -> the heading of its section

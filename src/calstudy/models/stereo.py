@@ -1,7 +1,7 @@
 """A binocular (stereo) sensor: two pinhole cameras and the rigid transform between them.
 
 One rig serves both papers with a stereo sensor: ``binocular`` (two cameras with OpenCV lens
-distortion and the extrinsic of its Table 1, :meth:`StereoRig.from_table`) and ``dualarm`` (two
+distortion and the extrinsic of its Table 1, :meth:`StereoRig.from_left2right`) and ``dualarm`` (two
 equal ideal cameras converging on a point, :func:`stereo_rig`).
 
 Frames: the sensor frame is the left camera frame. ``right2left`` is the pose of the right camera
@@ -17,16 +17,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from calstudy.core import geometry as geo
-from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError
 from calstudy.models.sensors import PinholeCamera
 
 #: Largest ``|left2right @ right2left - I|`` accepted when both transforms are given.
 INVERSE_TOL = 1e-9
-#: Largest ``|R^T R - I|`` (per entry) of the extrinsic rotation of a stereo table: a rotation
-#: printed to 4 decimals (the binocular paper's Table 1 is within 1e-4); the table's matrix is
-#: then projected onto SO(3).
-TABLE_ROTATION_TOL = 2e-3
 
 
 #: the standard deviations :meth:`StereoRig.perturbed` draws with
@@ -85,49 +80,6 @@ class StereoRig:
         """A rig from the extrinsic ``left2right`` ``(4, 4)`` of a stereo calibration."""
         l2r = geo.check_transform("left2right", left2right)
         return cls(left, right, geo.invert(l2r), l2r)
-
-    @classmethod
-    def from_table(cls, table: dict, source: str = "the stereo sensor table") -> StereoRig:
-        """The rig of a stereo calibration table (``data/binocular/sensor.toml``, Table 1).
-
-        ``table`` holds ``[image] width height``, ``[left]`` and ``[right]`` with ``fx fy cx cy``
-        (px) and ``dist`` (OpenCV ``k1 k2 p1 p2``), and ``[extrinsic] rotation`` (3 x 3, re-
-        orthonormalised) and ``translation_mm`` of ``left2right``. ``source`` names the table in
-        the message of a missing key.
-
-        Raises
-        ------
-        CalibrationError
-            On a missing key, a camera outside its domain (:class:`PinholeCamera`), a rotation
-            that is not one within :data:`TABLE_ROTATION_TOL` (``|R^T R - I|`` per entry; a
-            reflection or a scaled matrix is refused, never projected), or a translation that
-            is not 3 finite numbers.
-        """
-
-        def camera(side: str) -> PinholeCamera:
-            return PinholeCamera(
-                fx=require(table, f"{side}.fx", source),
-                fy=require(table, f"{side}.fy", source),
-                cx=require(table, f"{side}.cx", source),
-                cy=require(table, f"{side}.cy", source),
-                width=int(require(table, "image.width", source)),
-                height=int(require(table, "image.height", source)),
-                dist=tuple(require(table, f"{side}.dist", source)),
-            )
-
-        try:
-            rotation = np.array(require(table, "extrinsic.rotation", source), dtype=float)
-            translation = np.array(require(table, "extrinsic.translation_mm", source), dtype=float)
-        except (TypeError, ValueError) as exc:
-            if isinstance(exc, CalibrationError):
-                raise
-            raise CalibrationError(
-                f"{source}: extrinsic rotation or translation_mm: {exc}"
-            ) from None
-        geo.check_rotation(f"{source}: extrinsic.rotation", rotation, TABLE_ROTATION_TOL)
-        geo.check_shape(f"{source}: extrinsic.translation_mm", translation, (3,))
-        left2right = geo.make_transform(geo.project_to_so3(rotation), translation)
-        return cls.from_left2right(camera("left"), camera("right"), left2right)
 
     @property
     def rotation(self) -> np.ndarray:

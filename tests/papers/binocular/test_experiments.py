@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import data_path
 from calstudy.estimators import binocular as bino
 from calstudy.papers.binocular import experiments as ex
 from calstudy.papers.binocular.scenario import load_scenario
@@ -47,9 +48,9 @@ def test_optics_trial_oracle_removes_the_defocus_error(scenario):
 
 def test_with_optics_replaces_values_and_rejects_unknown_or_bad_ones(scenario):
     s = ex.with_optics(scenario, f_number=4.0, dot_diameter_mm=3.0)
-    assert s.config["sensor"]["optics"]["f_number"] == 4.0
+    assert s.sensor.optics.f_number == 4.0
     assert s.dot_radius_mm == 1.5
-    assert scenario.config["sensor"]["optics"]["f_number"] == 8.0  # the original is untouched
+    assert scenario.sensor.optics.f_number == 8.0  # the original is untouched
     with pytest.raises(CalibrationError, match="unknown optics inputs"):
         ex.with_optics(scenario, aperture=4.0)
     with pytest.raises(CalibrationError, match="must be a positive number"):
@@ -129,25 +130,26 @@ def test_factories_rebuild_the_same_experiment():
         ex.binocular_experiment(n_trials=0)
 
 
-def test_a_scenario_without_the_lens_rim_is_refused_by_name(scenario):
-    import copy
-    import dataclasses
-
-    config = copy.deepcopy(scenario.config)
-    del config["sensor"]["optics"]["rim_radius_mm"]
-    bare = dataclasses.replace(scenario, config=config)
-    with pytest.raises(CalibrationError, match=r"sensor.toml: missing key 'optics.rim_radius_mm'"):
-        ex.defocus_shift(bare, [800.0], tilts_deg=(0.0,))
+def test_a_scenario_without_the_lens_rim_is_refused_by_name(tmp_path):
+    for name in ("sensor", "calibrator", "station"):
+        text = data_path("binocular", f"{name}.toml").read_text()
+        if name == "sensor":
+            assert "\nrim_radius_mm = " in text
+            text = text.replace("\nrim_radius_mm = ", "\n# rim_radius_mm = ", 1)
+        (tmp_path / f"{name}.toml").write_text(text)
+    with pytest.raises(
+        CalibrationError, match=r"sensor.toml: optics.rim_radius_mm: missing \(required\)"
+    ):
+        load_scenario(tmp_path)
 
 
 def _perfect_robot(scenario):
     """The scenario with a robot whose true model is its nominal one (tolerances 0)."""
     import copy
-    import dataclasses
 
     robot = copy.copy(scenario.robot)
     robot.tolerances = {k: 0.0 for k in scenario.robot.tolerances}
-    return dataclasses.replace(scenario, robot=robot)
+    return scenario.model_copy(update={"robot": robot})
 
 
 def _chain(scenario, imaging, seed=7):

@@ -52,5 +52,22 @@ def test_scenario_derived_values():
 def test_published_numbers_come_from_data():
     assert scn.published("station", "fig13_rmse") == [0.192, 0.080]
     assert scn.published("calibrator", "table2_rmse") == [0.049, 0.041]
-    with pytest.raises(CalibrationError, match="missing key 'published.nothing'"):
+    with pytest.raises(
+        CalibrationError, match=r"binocular/station\.toml: no value 'published\.nothing'"
+    ):
         scn.published("station", "nothing")
+
+
+def test_overrides_name_the_file_first_and_are_validated():
+    s = scn.load_scenario(
+        overrides={"sensor.optics.f_number": 5.6, "calibrator.sbr.dot_diameter_mm": 4.0}
+    )
+    assert s.sensor.optics.f_number == 5.6 and s.dot_radius_mm == 2.0
+    with pytest.raises(
+        CalibrationError,
+        match=r"sensor\.toml: optics\.f_number = 2\.0: outside its plausible range",
+    ):
+        scn.load_scenario(overrides={"sensor.optics.f_number": 2.0})
+    for key in ("optics.f_number", "sensor.optics.f_numbr", "sensor"):
+        with pytest.raises(CalibrationError, match=rf"override '{key}': the scenario has no input"):
+            scn.load_scenario(overrides={key: 5.6})

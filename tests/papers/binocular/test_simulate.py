@@ -3,7 +3,6 @@ the paper's estimators; the random world scales as documented."""
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 
@@ -33,7 +32,7 @@ def exact_views(scenario, n=6, seed=3):
 
 def test_noise_free_pipeline_returns_the_standard_distances(scenario):
     """Exact sub-pixel centres through distortion, undistortion and triangulation: 1e-6 mm."""
-    sensor = scenario.sensor
+    sensor = scenario.rig
     _, points = exact_views(scenario)
     want = bino.distances_to_p7(scenario.layout)
     for p in points:
@@ -84,7 +83,7 @@ def test_correction_recovers_a_perturbed_matrix(scenario):
 def test_calibration_scale_scales_the_camera_errors_only(scenario):
     world = sim.draw_world(scenario, np.random.default_rng(4))
     zero, one, two = (world.model(scenario, s) for s in (0.0, 1.0, 2.0))
-    nominal = scenario.sensor
+    nominal = scenario.rig
 
     def errors(sensor):
         out = {}
@@ -119,18 +118,18 @@ def _ray_traced_spot(scenario, point_cam, n=401):
     L in front of the pupil) is followed to the sensor (at the lens-to-sensor distance
     ``fx * pitch``). Returns the landing points minus the chief ray's, in image px (u along the
     camera's x, v along y: the sensor image is inverted), and the geometric blur radius, px."""
-    opt = scenario.config["sensor"]["optics"]
-    pitch = scenario.config["sensor"]["image"]["pixel_pitch_mm"]
+    opt = scenario.sensor.optics
+    pitch = scenario.sensor.image.pixel_pitch_mm
     f = scenario.focal_mm
-    a = f / (2.0 * opt["f_number"])
-    v = scenario.sensor.left.fx * pitch
+    a = f / (2.0 * opt.f_number)
+    v = scenario.rig.left.fx * pitch
     x, y, z = point_cam
     g = np.linspace(-a, a, n)
     px, py = np.meshgrid(g, g)
     inside = px**2 + py**2 <= a**2
-    lam = opt["rim_distance_mm"] / z  # the ray from the point to the pupil at the rim's plane
+    lam = opt.rim_distance_mm / z  # the ray from the point to the pupil at the rim's plane
     rim_x, rim_y = px + (x - px) * lam, py + (y - py) * lam
-    passes = inside & (rim_x**2 + rim_y**2 <= opt["rim_radius_mm"] ** 2)
+    passes = inside & (rim_x**2 + rim_y**2 <= opt.rim_radius_mm ** 2)
     v_img = 1.0 / (1.0 / f - 1.0 / z)  # where the point is imaged sharply
     land_x = px + (-x * v_img / z - px) * v / v_img
     land_y = py + (-y * v_img / z - py) * v / v_img
@@ -152,8 +151,7 @@ def test_blur_spot_agrees_with_a_thin_lens_ray_trace(scenario, depth, f_number, 
     rim's footprint, a 4 % effect here, is checked in the optics tests)."""
     from calstudy.models import optics
 
-    sc = dataclasses.replace(scenario, config=copy.deepcopy(scenario.config))
-    sc.config["sensor"]["optics"]["f_number"] = f_number
+    sc = scenario.replace({"sensor.optics.f_number": f_number})
     field = math.tan(math.radians(field_deg)) * np.array([0.8, 0.6])
     point = depth * np.array([field[0], field[1], 1.0])
     offsets, radius = _ray_traced_spot(sc, point)
@@ -171,7 +169,7 @@ def test_blur_spot_agrees_with_a_thin_lens_ray_trace(scenario, depth, f_number, 
     assert np.linalg.norm(traced) > 0.1 * radius  # the rim does cut the spot
     assert np.linalg.norm(model - traced) < 0.15 * np.linalg.norm(traced)
     outward = traced @ field
-    assert (outward > 0) == (depth < sc.config["sensor"]["optics"]["focus_distance_mm"])
+    assert (outward > 0) == (depth < sc.sensor.optics.focus_distance_mm)
 
 
 def test_world_builds_each_robot_once_and_replace_starts_afresh(scenario):

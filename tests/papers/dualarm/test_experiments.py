@@ -25,20 +25,20 @@ def test_noise_free_base_to_base_is_exact(quiet):
     cam2flange, recon, ours = ex.coded_marker_chain(quiet, rng)
     b2b = {"coded markers": ours, "circular plate": ex.plate_base_to_base(quiet, cam2flange, rng)}
     for a in range(2):
-        assert geo.rotation_error(cam2flange[a], quiet.cam2flange[a]) < 1e-9
-        assert geo.translation_error(cam2flange[a], quiet.cam2flange[a]) < 1e-6
+        assert geo.rotation_error(cam2flange[a], quiet.calibration.cam2flange[a]) < 1e-9
+        assert geo.translation_error(cam2flange[a], quiet.calibration.cam2flange[a]) < 1e-6
     assert recon.bundle.rms_px < 1e-6
     assert ex.marker_error(quiet, recon.bundle.points) < 1e-8
     for name, t in b2b.items():
-        assert geo.translation_error(t, quiet.base2_to_base1) < 1e-6, name
-        assert geo.rotation_error(t, quiet.base2_to_base1) < 1e-9, name
+        assert geo.translation_error(t, quiet.calibration.base2_to_base1) < 1e-6, name
+        assert geo.rotation_error(t, quiet.calibration.base2_to_base1) < 1e-9, name
 
 
 def test_noise_free_world_location_is_exact(quiet):
     rng = np.random.default_rng(4)
-    cam2world = sim.view_poses(rng, quiet.group_centre(1), 500.0, 1, 0.3)[0]
+    cam2world = sim.view_poses(rng, quiet.markers.group_centre(1), 500.0, 1, 0.3)[0]
     view = sim.observe_markers(quiet, geo.invert(cam2world), rng)
-    w2c = ex.locate_world(quiet, view, quiet.markers)
+    w2c = ex.locate_world(quiet, view, quiet.markers.xyz)
     assert geo.translation_error(geo.invert(w2c), cam2world) < 1e-8
     assert geo.rotation_error(w2c, geo.invert(cam2world)) < 1e-11
 
@@ -47,8 +47,8 @@ def test_tsai_recovers_the_hand_eye_of_table_a2(quiet):
     rng = np.random.default_rng(6)
     flange, plate2cam = ex.handeye_data(quiet, 2, rng)
     x = he.opencv_handeye(flange, plate2cam, "Tsai", he.MIN_PAIR_ROTATION)
-    assert geo.rotation_error(x, quiet.cam2flange[1]) < 1e-9
-    assert geo.translation_error(x, quiet.cam2flange[1]) < 1e-6
+    assert geo.rotation_error(x, quiet.calibration.cam2flange[1]) < 1e-9
+    assert geo.translation_error(x, quiet.calibration.cam2flange[1]) < 1e-6
 
 
 def test_tsai_needs_three_poses(quiet):
@@ -66,11 +66,12 @@ def test_tsai_accepts_a_pair_without_rotation(quiet):
     # pose 3 = pose 2 moved by a pure translation of the flange
     shift = geo.make_transform(np.eye(3), [20.0, 0.0, 0.0])
     flange[3] = flange[2] @ shift
-    plate2cam[3] = geo.invert(quiet.cam2flange[0]) @ geo.invert(shift) @ quiet.cam2flange[0]
+    c2f = quiet.calibration.cam2flange[0]
+    plate2cam[3] = geo.invert(c2f) @ geo.invert(shift) @ c2f
     plate2cam[3] = plate2cam[3] @ plate2cam[2]
     x = he.opencv_handeye(flange, plate2cam, "Tsai", he.MIN_PAIR_ROTATION)
-    assert geo.rotation_error(x, quiet.cam2flange[0]) < 1e-9
-    assert geo.translation_error(x, quiet.cam2flange[0]) < 1e-6
+    assert geo.rotation_error(x, quiet.calibration.cam2flange[0]) < 1e-9
+    assert geo.translation_error(x, quiet.calibration.cam2flange[0]) < 1e-6
 
 
 def test_triangulation_matches_opencv(scenario):
@@ -108,7 +109,7 @@ def test_arm_without_four_markers_raises(quiet):
     view = make_view([0, 1, 2], np.zeros((3, 2)), np.zeros((3, 2)))
     data = [(np.eye(4)[None], [view]), (np.eye(4)[None], [view])]
     with pytest.raises(CalibrationError, match=r"at least 4 markers; arm 1's views show \[3\]"):
-        ex.marker_base_to_base(quiet, quiet.cam2flange, quiet.markers, data)
+        ex.marker_base_to_base(quiet, quiet.calibration.cam2flange, quiet.markers.xyz, data)
 
 
 def spliced(scn, rng):
@@ -118,7 +119,7 @@ def spliced(scn, rng):
     w2c, pts = mk.splice_clusters(clusters)
     ref = next(iter(w2c))
     poses = np.stack([w2c[j] for j in range(len(views))])
-    points = np.full((len(scn.markers), 3), np.nan)
+    points = np.full((len(scn.markers.xyz), 3), np.nan)
     for i, p in pts.items():
         points[i] = p
     return views, poses, points, ref
@@ -173,16 +174,17 @@ def test_ransac_pnp_rejects_gross_errors(scenario):
     rng = np.random.default_rng(13)
     c2w = sim.view_poses(rng, [0.0, 0.0, 0.0], 500.0, 1, 0.6, axis=(0, 0.57, 0.82))[0]
     true = geo.invert(c2w)
-    uv = scenario.rig.left.observe(true, scenario.plate_points, 0.0, rng)
+    uv = scenario.rig.left.observe(true, scenario.handeye.plate_points, 0.0, rng)
     uv[::7] += 15.0
-    est = solve_pnp_ransac(scenario.plate_points, uv, scenario.rig.left.K, 1.0)
+    est = solve_pnp_ransac(scenario.handeye.plate_points, uv, scenario.rig.left.K, 1.0)
     assert geo.translation_error(est, true) < 1e-6
     assert geo.rotation_error(est, true) < 1e-9
 
 
 def test_icp_experiment_lowers_the_errors(scenario):
-    df = pd.DataFrame(ex.icp_rows(scenario, scenario.cam2flange, np.random.default_rng(17)))
-    assert len(df) == 2 * 2 * (scenario.icp_views - 1)
+    rows = ex.icp_rows(scenario, scenario.calibration.cam2flange, np.random.default_rng(17))
+    df = pd.DataFrame(rows)
+    assert len(df) == 2 * 2 * (scenario.icp.n_views - 1)
     assert df["after_mm"].mean() < 0.5 * df["before_mm"].mean()
     # the oracle (true poses and hand-eye) leaves only the sphere-fit noise
     assert df["oracle_mm"].mean() < 0.2 * df["after_mm"].mean()
@@ -192,7 +194,7 @@ def test_the_global_test_floor_lies_far_below_the_claim(scenario):
     """With every calibrated transform true, the Tables 1-2 test measures a
     few hundredths of a millimetre, far below the claimed 0.100 mm."""
     rng = np.random.default_rng(21)
-    rows = pd.DataFrame(ex.global_rows(scenario, scenario.cam2flange, {}, rng))
+    rows = pd.DataFrame(ex.global_rows(scenario, scenario.calibration.cam2flange, {}, rng))
     assert (rows["method"] == "true calibration").all() and len(rows) == 9
     assert rows["euclid_mm"].mean() < 0.03
 
@@ -210,8 +212,11 @@ def test_split_survey_error_keeps_one_part_each(scenario):
         ex.link_error_deg(scenario, split["link"]), ex.link_error_deg(scenario, pts), rtol=1e-9
     )
     for g in (0, 1):
-        m = scenario.marker_group == g
-        sub = scenario.replace(markers=scenario.markers[m], marker_group=scenario.marker_group[m])
+        m = scenario.markers.group_index == g
+        names = [n for n, keep in zip(scenario.markers.names, m, strict=True) if keep]
+        sub = scenario.replace(
+            {"markers.names": names, "markers.xyz_mm": scenario.markers.xyz[m].tolist()}
+        )
         assert ex.marker_error(sub, split["link"][m]) < 1e-9
         np.testing.assert_allclose(
             ex.marker_error(sub, split["shape"][m]), ex.marker_error(sub, pts[m]), rtol=1e-9
@@ -243,17 +248,17 @@ def test_camera_pose_refinement_matches_finite_differences(scenario):
     from calstudy.estimators import bundle as bd
 
     rng = np.random.default_rng(21)
-    cam2world = sim.view_poses(rng, scenario.group_centre(1), 500.0, 1, 0.3)[0]
+    cam2world = sim.view_poses(rng, scenario.markers.group_centre(1), 500.0, 1, 0.3)[0]
     view = sim.observe_markers(scenario, geo.invert(cam2world), rng)
     start = geo.perturb(geo.invert(cam2world), 0.01, 2.0, rng)
     kw = dict(sigma_px=0.1, sigma_mm=0.05, depth_ref_mm=500.0)
-    got = bd.refine_camera_pose(scenario.rig, view, scenario.markers, start, **kw)
+    got = bd.refine_camera_pose(scenario.rig, view, scenario.markers.xyz, start, **kw)
     vi, mi, ul, ur, pc = bd._observations(scenario.rig, [view])
     so = bd._euclid_sigma(pc, 0.05, 500.0)[:, None]
 
     def fun(x):
         rot = Rotation.from_rotvec(x[None, :3]).as_matrix()
-        rp, eu = bd._residual_blocks(scenario.rig, rot, x[None, 3:], scenario.markers, vi, mi,
+        rp, eu = bd._residual_blocks(scenario.rig, rot, x[None, 3:], scenario.markers.xyz, vi, mi,
                                      ul, ur, pc)
         return np.concatenate([rp.ravel() / 0.1, (eu / so).ravel()])
 

@@ -14,15 +14,20 @@ def test_base_to_base_is_eq11(quiet):
     rng = np.random.default_rng(5)
     flange, w2c = [], []
     for arm in (1, 2):
-        cam2world = sim.view_poses(rng, quiet.group_centre(arm), 500.0, 2 + arm, 0.4)
+        cam2world = sim.view_poses(rng, quiet.markers.group_centre(arm), 500.0, 2 + arm, 0.4)
         true, reported = sim.arm_poses(quiet, arm, cam2world, rng, drift=False)
         np.testing.assert_allclose(true, reported, atol=1e-12)
         flange.append(reported)
         w2c.append(geo.invert(cam2world))
     t = he.base_to_base(
-        flange[0], quiet.cam2flange[0], w2c[0], flange[1], quiet.cam2flange[1], w2c[1]
+        flange[0],
+        quiet.calibration.cam2flange[0],
+        w2c[0],
+        flange[1],
+        quiet.calibration.cam2flange[1],
+        w2c[1],
     )
-    np.testing.assert_allclose(t, quiet.base2_to_base1, atol=1e-9)
+    np.testing.assert_allclose(t, quiet.calibration.base2_to_base1, atol=1e-9)
 
 
 def test_handeye_views_rotate_enough_but_never_near_half_a_turn(scenario):
@@ -36,7 +41,7 @@ def test_handeye_views_rotate_enough_but_never_near_half_a_turn(scenario):
         rel = np.swapaxes(flange[i, :3, :3], 1, 2) @ flange[j, :3, :3]
         largest.append(np.degrees(geo.rotation_angle(rel)).max())
     assert 60.0 < max(largest) < 150.0
-    random_roll = scenario.replace(handeye_roll=None)
+    random_roll = scenario.replace({"handeye.roll_deg": 180.0})  # any turn
     flange, _ = sim.handeye_images(random_roll, 1, np.random.default_rng(0))
     i, j = np.triu_indices(len(flange), 1)
     rel = np.swapaxes(flange[i, :3, :3], 1, 2) @ flange[j, :3, :3]

@@ -16,8 +16,6 @@ how defocus moves a detected centre, against depth and tilt.
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 import hashlib
 import json
 import math
@@ -145,7 +143,7 @@ def distance_figures(world: World, cal: Views, val: Views, sharp: Views, model, 
         "t3_holdout_without": rmse(hold[:, 0] - std[:6]),
         "t3_holdout_with": rmse(hold[:, 1] - std[:6]),
     }
-    names = paper_table("calibrator")["standard"]["names"]
+    names = paper_table("calibrator").standard.names
     for label, d in (("raw", d_raw), ("rect", d_rect), ("mod", d_mod)):
         row.update({f"err_{label}_{n}": float(e) for n, e in zip(names, d - std, strict=True)})
     _, vrect = val.points(model, tol)
@@ -188,8 +186,8 @@ def transformation_figures(scenario, state, flange, vflange, p7_standard: float)
 
 
 def _views(scenario, world, rng, imaging, model1):
-    n_cal = scenario.config["station"]["poses"]["n_calibration"]
-    n_val = scenario.config["station"]["poses"]["n_validation"]
+    n_cal = scenario.station.poses.n_calibration
+    n_val = scenario.station.poses.n_validation
     cal_rng, val_rng = streams(rng, "calibration views", "validation views")
     cal = view_calibrator(scenario, world, n_cal, cal_rng, imaging, model1)
     val = view_calibrator(scenario, world, n_val, val_rng, imaging, model1)
@@ -219,7 +217,7 @@ def binocular_trial(setup: Setup, rng, defocus: bool = True) -> list[dict]:
     imaging = Imaging(defocus=defocus)
     world = draw_world(scenario, child_rng(rng, "world"), imaging)
     model1 = world.model(scenario, 1.0)
-    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    tol = scenario.sensor.detection.ray_tolerance_mm
     cal, val = _views(scenario, world, rng, imaging, model1)
     p7_standard = tracker_p7_distance(scenario, child_rng(rng, "tracker"), imaging)
     sharp_rng = child_rng(rng, "sharp images")
@@ -281,8 +279,8 @@ def _calibration_views(scenario, rng):
     world_rng, cal_rng = streams(rng, "world", "calibration views")
     world = draw_world(scenario, world_rng, imaging)
     model = world.model(scenario, 1.0)
-    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
-    n_cal = scenario.config["station"]["poses"]["n_calibration"]
+    tol = scenario.sensor.detection.ray_tolerance_mm
+    n_cal = scenario.station.poses.n_calibration
     cal = view_calibrator(scenario, world, n_cal, cal_rng, imaging, model)
     return imaging, world, model, tol, cal
 
@@ -326,8 +324,11 @@ def field_trial(setup: Setup, rng) -> dict:
 # factories of the notebook's experiments
 
 
-def _scenario(scenario_dir: str) -> Scenario:
-    return load_scenario(scenario_dir or None)
+def _scenario(scenario_dir: str, f_number: float | None = None) -> Scenario:
+    """The station of ``scenario_dir`` (default the paper's) with ``f_number`` (None: the
+    file's) read in place of ``sensor.toml [optics] f_number`` and validated as the file's."""
+    overrides = None if f_number is None else {"sensor.optics.f_number": float(f_number)}
+    return load_scenario(scenario_dir or None, overrides)
 
 
 def scenario_key(setup: Setup) -> str:
@@ -337,7 +338,7 @@ def scenario_key(setup: Setup) -> str:
     sc = setup.scenario
     robot = sc.robot
     parts = [
-        json.dumps(sc.config, sort_keys=True, default=str).encode(),
+        sc.model_dump_json(exclude={"robot"}).encode(),
         json.dumps(robot.tolerances, sort_keys=True).encode(),
         np.ascontiguousarray(robot.parameters()).tobytes(),
         np.ascontiguousarray(robot.base).tobytes(),
@@ -361,7 +362,7 @@ def binocular_experiment(
     if n_trials < 1:
         raise CalibrationError(f"n_trials is {n_trials}; need at least 1")
     setup = Setup(
-        with_optics(_scenario(scenario_dir), f_number=f_number),
+        _scenario(scenario_dir, f_number),
         tuple(float(r) for r in robot_scales),
         tuple(float(c) for c in calibration_scales),
     )
@@ -374,7 +375,7 @@ def field_experiment(
     scenario_dir: str = "", n_trials: int = 30, f_number: float | None = None
 ) -> Experiment:
     """The Monte Carlo of Table 5 (:func:`field_trial`)."""
-    setup = Setup(with_optics(_scenario(scenario_dir), f_number=f_number), (), ())
+    setup = Setup(_scenario(scenario_dir, f_number), (), ())
     return Experiment("field", field_trial, setup, int(n_trials), scenario_key=scenario_key(setup))
 
 
@@ -383,15 +384,15 @@ def field_experiment(
 
 #: The optics a sweep point may change: key of the trial, table and key in the scenario files.
 OPTICS_KEYS = {
-    "f_number": ("sensor", "optics", "f_number"),
-    "focus_distance_mm": ("sensor", "optics", "focus_distance_mm"),
-    "dot_diameter_mm": ("calibrator", "sbr", "dot_diameter_mm"),
+    "f_number": "sensor.optics.f_number",
+    "focus_distance_mm": "sensor.optics.focus_distance_mm",
+    "dot_diameter_mm": "calibrator.sbr.dot_diameter_mm",
 }
 
 
 def with_optics(scenario: Scenario, **values) -> Scenario:
     """A copy of ``scenario`` with some of :data:`OPTICS_KEYS` replaced (None keeps the file's
-    value); the layout, robot and frames are shared."""
+    value); the robot is shared."""
     values = {k: v for k, v in values.items() if v is not None}
     unknown = set(values) - set(OPTICS_KEYS)
     if unknown:
@@ -400,13 +401,10 @@ def with_optics(scenario: Scenario, **values) -> Scenario:
         )
     if not values:
         return scenario
-    config = copy.deepcopy(scenario.config)
     for key, value in values.items():
-        table, section, name = OPTICS_KEYS[key]
         if not (math.isfinite(float(value)) and float(value) > 0):
             raise CalibrationError(f"{key} is {value}; it must be a positive number")
-        config[table][section][name] = float(value)
-    return dataclasses.replace(scenario, config=config)
+    return scenario.replace({OPTICS_KEYS[key]: float(value) for key, value in values.items()})
 
 
 @one_opencv_thread()
@@ -466,7 +464,7 @@ def handeye_chain(scenario, world: World, cal: Views, sharp: Views, model, tol: 
     for s2b, obs, pts in zip(cal.sensor2base, cal.observations, raw, strict=True):
         base2sensor = geo.invert(s2b)
         truth = geo.apply(base2sensor, dots)
-        for c, (camera, s2c) in enumerate(scenario.sensor.cameras()):
+        for c, (camera, s2c) in enumerate(scenario.rig.cameras()):
             in_cam = geo.apply(s2c, truth)
             depths.append(in_cam[:, 2])
             shifts.append(np.linalg.norm(obs.uv_raw[c] - camera.project(in_cam), axis=1))
@@ -500,7 +498,7 @@ def handeye_chain(scenario, world: World, cal: Views, sharp: Views, model, tol: 
     for label, h in matrices.items():
         row[f"trans_err_{label}_mm"] = float(geo.translation_error(h, true))
         row[f"rot_err_{label}_mrad"] = 1e3 * float(geo.rotation_error(h, true))
-    n_val = scenario.config["station"]["poses"]["n_validation"]
+    n_val = scenario.station.poses.n_validation
     q, vflange = viewpoints(scenario, scenario.calibrator2base, n_val, rng)
     true_robot = world.robot(scenario, 1.0)
     p7_base = geo.apply(scenario.calibrator2base, scenario.layout[6])
@@ -521,7 +519,7 @@ def optics_experiment(
     scenario's value, with ``f_number`` if given)."""
     if n_trials < 1 or not points:
         raise CalibrationError(f"an optics sweep needs points and n_trials >= 1 ({n_trials})")
-    setup = Setup(with_optics(_scenario(scenario_dir), f_number=f_number), (), ())
+    setup = Setup(_scenario(scenario_dir, f_number), (), ())
     full = [{k: float(p.get(k, 0.0)) for k in OPTICS_KEYS} for p in points]
     return Experiment(
         name, optics_trial, setup, int(n_trials), points=full, scenario_key=scenario_key(setup)
@@ -547,7 +545,7 @@ def defocus_shift(
     field direction (``radial``, > 0 away from the image centre). The row at the focused
     distance gives the in-focus shift (perspective and pixel sampling alone).
     """
-    camera = scenario.sensor.left
+    camera = scenario.rig.left
     rng = np.random.default_rng(0)  # unused: no noise
     direction = np.array([0.8, 0.6])
     field = math.tan(math.radians(field_deg)) * direction

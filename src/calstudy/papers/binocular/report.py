@@ -93,7 +93,7 @@ def _ratio(text_pub) -> tuple[float, str]:
 def layout_table(scenario: Scenario) -> pd.DataFrame:
     """The solved calibrator layout (calibrator frame, mm) with each target's distance to P7,
     the Table 2 standard and the residual."""
-    std = scenario.config["calibrator"]["standard"]["distance_mm"]
+    std = scenario.calibrator.standard.distance_mm
     d = bino.distances_to_p7(scenario.layout)
     rows = []
     for i, name in enumerate(bino.TARGET_NAMES):
@@ -115,9 +115,9 @@ def distance_table(trials: pd.DataFrame, which: str) -> pd.DataFrame:
     without / with modification): per distance to P7, the median error over the default trials
     beside the paper's error (its value minus its CMM standard), mm."""
     cal = paper_table("calibrator")
-    names = cal["standard"]["names"]
-    std = np.array(cal["standard"]["distance_mm"])
-    pub = cal["published"]
+    names = cal.standard.names
+    std = np.array(cal.standard.distance_mm)
+    pub = cal.published
     a, b = ("raw", "rect") if which == "table2" else ("rect", "mod")
     d = default(trials)
     return pd.DataFrame(
@@ -129,8 +129,8 @@ def distance_table(trials: pd.DataFrame, which: str) -> pd.DataFrame:
                 float(np.sqrt((d[f"err_{a}_{n}"] ** 2).mean())) for n in names
             ],
             "rms_error_with_mm": [float(np.sqrt((d[f"err_{b}_{n}"] ** 2).mean())) for n in names],
-            "published_error_without_mm": np.array(pub[f"{which}_control"]) - std,
-            "published_error_with_mm": np.array(pub[f"{which}_experimental"]) - std,
+            "published_error_without_mm": np.array(getattr(pub, f"{which}_control")) - std,
+            "published_error_with_mm": np.array(getattr(pub, f"{which}_experimental")) - std,
         }
     )
 
@@ -177,7 +177,7 @@ def field_table(field: pd.DataFrame) -> pd.DataFrame:
     """Table 5 per region: median RMSE over the field trials with each matrix, flange and base
     frame, beside the paper's RMSEs."""
     t5 = np.array(published("station", "table5_rmse"))
-    regions = paper_table("station")["field"]["regions"]
+    regions = paper_table("station").field.regions
     rows = []
     for k, region in enumerate(regions):
         row = {"region": region}
@@ -412,9 +412,9 @@ def shift_figure(table: pd.DataFrame, scenario: Scenario):
             label=f"tilt {tilt:g}°, rectified",
         )
     ax.axhline(0.0, color="grey", lw=0.8)
-    opt = scenario.config["sensor"]["optics"]
+    opt = scenario.sensor.optics
     ax.set_xlabel(
-        f"dot depth (mm); focused at {opt['focus_distance_mm']:g} mm, f/{opt['f_number']:.2g}"
+        f"dot depth (mm); focused at {opt.focus_distance_mm:g} mm, f/{opt.f_number:.2g}"
     )
     ax.set_ylabel("centre shift along the field (px)")
     ax.set_title("Defocus shift of a detected dot centre, 15° off axis (noise-free)", fontsize=10)
@@ -459,7 +459,7 @@ def sweep_figure(sweep: pd.DataFrame, x: str, series, paper, xlabel: str, ylabel
 
 def robot_sweep_figure(sweep: pd.DataFrame, scenario: Scenario):
     """Fig. 13 RMSEs against the robot error scale."""
-    model = scenario.config["station"]["robot"]["model"]
+    model = scenario.station.robot.model
     fig13 = published("station", "fig13_rmse")
     curves = (
         ("fig13_preliminary", "preliminary"),

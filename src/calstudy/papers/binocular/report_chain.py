@@ -65,7 +65,7 @@ def chain_text(table: pd.DataFrame, trials_default: pd.DataFrame, f_number: floa
     fig13 = published("station", "fig13_rmse")[0]
     t2 = published("calibrator", "table2_rmse")[0]
     d = trials_default
-    distance = paper_table("station")["poses"]["observation_distance_mm"]
+    distance = paper_table("station").poses.observation_distance_mm
     text = (
         f"At f/{near['f_number']:g}, the swept F-number nearest the calibrated one, the "
         f"calibration views hold the dots between {near['depth_min_mm']:.0f} and "

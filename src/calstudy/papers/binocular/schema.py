@@ -22,11 +22,13 @@ all three files and the robot's table: :func:`calstudy.papers.binocular.scenario
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
+from calstudy.core import geometry as geo
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
     Degrees,
@@ -35,12 +37,14 @@ from calstudy.core.schema import (
     NonNegativeFinite,
     Pixels,
     PositiveFinite,
-    Schema,
+    Texts,
     Vec3,
     check_principal_point,
+    rigid_transform,
     rotation_problem,
 )
 from calstudy.estimators.binocular import layout_problem
+from calstudy.models.sensors import PinholeCamera
 
 #: largest ``|R^T R - I|`` of a rotation printed to 4 decimals (the paper's Table 1 and Table 4
 #: give about 1e-4); the loader then projects it onto SO(3)
@@ -50,7 +54,6 @@ Row3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
 Matrix3 = Annotated[list[Row3], Field(min_length=3, max_length=3)]
 Matrix34 = Annotated[list[Row4], Field(min_length=3, max_length=3)]
-Matrix44 = Annotated[list[Row4], Field(min_length=4, max_length=4)]
 #: a count of OpenCV distortion coefficients (k1 k2 p1 p2 [k3 ...])
 DIST_LENGTHS = (4, 5, 8, 12, 14)
 #: the seven standard distances to P7 (P1P7 ... P6P7, P8P7)
@@ -103,13 +106,6 @@ def _distinct(names: list, what: str) -> list:
     return names
 
 
-class Notes(Schema):
-    """A table of texts only (``[source]``): any key, every value a string."""
-
-    model_config = ConfigDict(extra="allow", frozen=True, str_strip_whitespace=True)
-    __pydantic_extra__: dict[str, str]
-
-
 def _rotation(matrix: list, what: str) -> None:
     problem = rotation_problem(np.array(matrix, dtype=float), ROTATION_TOL)
     if problem:
@@ -152,6 +148,18 @@ class Camera(Inputs):
                 raise ValueError(f"{name} = {dist[i]} (entry #{i + 1}): must be within +-{limit}")
         return dist
 
+    def pinhole(self, image: Image) -> PinholeCamera:
+        """The camera of this table with the sensor of ``image``."""
+        return PinholeCamera(
+            fx=self.fx,
+            fy=self.fy,
+            cx=self.cx,
+            cy=self.cy,
+            width=image.width,
+            height=image.height,
+            dist=tuple(self.dist),
+        )
+
 
 class Extrinsic(Inputs):
     """The ``[extrinsic]`` table of data/binocular/sensor.toml: left2right, mm."""
@@ -172,6 +180,12 @@ class Extrinsic(Inputs):
             raise ValueError("the cameras coincide (baseline 0); stereo needs a baseline")
         _metres(t, "the baseline's largest coordinate")
         return t
+
+    @cached_property
+    def left2right(self) -> np.ndarray:
+        """``(4, 4)``: the rotation projected onto SO(3) (it is printed to 4 decimals)."""
+        rotation = geo.project_to_so3(np.array(self.rotation, dtype=float))
+        return geo.make_transform(rotation, np.array(self.translation_mm, dtype=float))
 
 
 class Optics(Inputs):
@@ -249,7 +263,7 @@ class Detection(Inputs):
 class SensorFile(Ledgered):
     """``data/binocular/sensor.toml``."""
 
-    source: Notes = Notes()
+    source: Texts = Texts()
     image: Image
     left: Camera
     right: Camera
@@ -339,7 +353,7 @@ class CalibratorPublished(Documented):
 class CalibratorFile(Ledgered):
     """``data/binocular/calibrator.toml``."""
 
-    source: Notes = Notes()
+    source: Texts = Texts()
     standard: Standard
     cmm: Cmm
     sbr: Sbr
@@ -353,16 +367,12 @@ class CalibratorFile(Ledgered):
 class HandEye(Inputs):
     """The ``[handeye]`` table of data/binocular/station.toml: sensor2flange, mm."""
 
-    matrix: Matrix44
+    matrix: rigid_transform(ROTATION_TOL)
 
     @field_validator("matrix")
     @classmethod
-    def _rigid(cls, matrix: list) -> list:
-        m = np.array(matrix, dtype=float)
-        if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-            raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
-        _rotation(m[:3, :3], "its 3 x 3 block")
-        _metres(m[:3, 3], "its translation's largest coordinate")
+    def _in_mm(cls, matrix: list) -> list:
+        _metres(np.array(matrix, dtype=float)[:3, 3], "its translation's largest coordinate")
         return matrix
 
 
@@ -478,7 +488,7 @@ class StationPublished(Documented):
 class StationFile(Ledgered):
     """``data/binocular/station.toml``."""
 
-    source: Notes = Notes()
+    source: Texts = Texts()
     handeye: HandEye
     calibrator: CalibratorPlace
     poses: Poses

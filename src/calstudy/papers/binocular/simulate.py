@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calstudy.core import geometry as geo
-from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import child_rng, streams
 from calstudy.estimators import binocular as bino
@@ -34,6 +33,7 @@ from calstudy.models.robots import perturb_robot
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig
 from calstudy.papers.binocular.scenario import Scenario, plate_frame
+from calstudy.papers.binocular.schema import Cmm, Tracker
 
 #: Viewpoints drawn per requested pose before :func:`viewpoints` gives up (unreachable target).
 MAX_VIEW_TRIES = 20
@@ -60,17 +60,17 @@ def _ik_any(robot: Robot, flange2base: np.ndarray) -> np.ndarray:
 
 def _draw_sensor_pose(scenario: Scenario, target2base: np.ndarray, rng) -> np.ndarray:
     """One ``sensor2base`` viewing the target: direction in the cone, roll, distance."""
-    cfg = scenario.config["station"]["poses"]
+    cfg = scenario.station.poses
     t = target2base
-    cone = math.radians(cfg["cone_deg"]) * math.sqrt(rng.uniform())
+    cone = math.radians(cfg.cone_deg) * math.sqrt(rng.uniform())
     phi = rng.uniform(0, 2 * math.pi)
-    roll = math.radians(rng.uniform(-cfg["roll_deg"], cfg["roll_deg"]))
-    dist = cfg["observation_distance_mm"] + rng.uniform(-1, 1) * cfg["distance_spread_mm"]
+    roll = math.radians(rng.uniform(-cfg.roll_deg, cfg.roll_deg))
+    dist = cfg.observation_distance_mm + rng.uniform(-1, 1) * cfg.distance_spread_mm
     local = np.array(
         [math.sin(cone) * math.cos(phi), math.sin(cone) * math.sin(phi), math.cos(cone)]
     )
     view = t[:3, :3] @ local  # from the target towards the sensor
-    aim = scenario.sensor.aim_point(dist)
+    aim = scenario.rig.aim_point(dist)
     look = geo.look_at(np.zeros(3), -view)[:3, :3]  # camera z along -view
     ref = geo.look_at(np.zeros(3), aim)[:3, :3]  # sensor frame: z along aim
     rot = look @ geo.rotvec_to_matrix(np.array([0.0, 0.0, roll])) @ ref.T
@@ -140,22 +140,17 @@ def blur_spots(scenario: Scenario, centres_cam) -> tuple[np.ndarray, np.ndarray,
     radius in pupil radii.
     """
     c = np.asarray(centres_cam, dtype=float).reshape(-1, 3)
-    opt = scenario.config["sensor"]["optics"]
+    opt = scenario.sensor.optics
     deltas = np.asarray(scenario.coc_radius_px(c[:, 2]), dtype=float).reshape(-1)
-    sides = np.where(c[:, 2] >= opt["focus_distance_mm"], 1.0, -1.0)
+    sides = np.where(c[:, 2] >= opt.focus_distance_mm, 1.0, -1.0)
     centres, radii = optics.rim_shadow(c[:, :2] / c[:, 2:3], *_rim_inputs(scenario), c[:, 2])
     return deltas, sides, np.column_stack([centres, radii])
 
 
 def _rim_inputs(scenario: Scenario) -> tuple[float, float, float, float]:
     """F-number, focal length, rim radius and rim distance of ``sensor.toml [optics]``."""
-    sensor = scenario.config["sensor"]
-    return (
-        sensor["optics"]["f_number"],
-        scenario.focal_mm,
-        require(sensor, "optics.rim_radius_mm", "sensor.toml"),
-        require(sensor, "optics.rim_distance_mm", "sensor.toml"),
-    )
+    opt = scenario.sensor.optics
+    return (opt.f_number, scenario.focal_mm, opt.rim_radius_mm, opt.rim_distance_mm)
 
 
 def blur(scenario: Scenario, sharp, deltas, sides, rims) -> list:
@@ -193,19 +188,19 @@ def expose_and_fuse(
     scenario: Scenario, blurred, rng, read_noise_dn: float, electrons_per_dn: float
 ) -> np.ndarray:
     """The exposures of ``sensor.toml [exposure]`` of a blurred ROI, fused (Eq. 3)."""
-    exp = scenario.config["sensor"]["exposure"]
+    exp = scenario.sensor.exposure
     return optics.expose_and_fuse(
         blurred,
-        exp["times_ms"],
-        exp["dot_peak_at_100ms"],
-        exp["background_at_100ms"],
+        exp.times_ms,
+        exp.dot_peak_at_100ms,
+        exp.background_at_100ms,
         read_noise_dn,
         electrons_per_dn,
         rng,
-        exp["bits"],
-        exp["weight_contrast"],
-        exp["weight_exposure"],
-        exp["well_exposed_sigma"],
+        exp.bits,
+        exp.weight_contrast,
+        exp.weight_exposure,
+        exp.well_exposed_sigma,
     )
 
 
@@ -276,9 +271,9 @@ def image_dots(
     blurred = blur(scenario, sharp, deltas, sides, rims)
     if not imaging.noise:
         return blurred, origins, deltas, rendered
-    noise = scenario.config["sensor"]["noise"]
+    noise = scenario.sensor.noise
     fused = [
-        expose_and_fuse(scenario, b, rng, noise["read_noise_dn"], noise["electrons_per_dn"])
+        expose_and_fuse(scenario, b, rng, noise.read_noise_dn, noise.electrons_per_dn)
         for b in blurred
     ]
     return fused, origins, deltas, rendered
@@ -314,7 +309,7 @@ def observe(
 ) -> Observation:
     """Image the dots ``(m, 3)`` (base frame, one plate normal) from a true sensor pose.
 
-    The physical cameras are those of Table 1 (``scenario.sensor``); the calibrated ``model``
+    The physical cameras are those of Table 1 (``scenario.rig``); the calibrated ``model``
     differs from them by the calibration errors of the trial. The rectification uses the CoC
     radius (Eq. 4) at the depth of the unrectified triangulation with ``model``, as a real
     system would. ``rendered`` (the ``Observation.rendered`` of an earlier call at the same
@@ -322,13 +317,13 @@ def observe(
     """
     rois = []
     if rendered:
-        for c, (camera, _) in enumerate(scenario.sensor.cameras()):
+        for c, (camera, _) in enumerate(scenario.rig.cameras()):
             rois.append(image_dots(scenario, camera, None, None, rng, imaging, rendered[c]))
     else:
         base2sensor = geo.invert(sensor2base)
         dots_s = geo.apply(base2sensor, dots_base)
         normal_s = base2sensor[:3, :3] @ normal_base
-        for camera, s2c in scenario.sensor.cameras():
+        for camera, s2c in scenario.rig.cameras():
             n = np.tile(s2c[:3, :3] @ normal_s, (len(dots_s), 1))
             rois.append(image_dots(scenario, camera, geo.apply(s2c, dots_s), n, rng, imaging))
     kept = tuple(r[3] for r in rois)
@@ -342,7 +337,7 @@ def observe(
     )
     if not imaging.defocus:
         return Observation(uv_raw, uv_raw, kept)
-    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    tol = scenario.sensor.detection.ray_tolerance_mm
     raw = bino.triangulate(model, uv_raw[0], uv_raw[1], tol)
     uv_rect = uv_raw.copy()  # below 1/3 px the image is used as it is (rectified_centre)
     for c, (_, s2c) in enumerate(model.cameras()):
@@ -366,10 +361,10 @@ def uniform_disc(rng, n: int, radius: float) -> np.ndarray:
     return np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(n)])
 
 
-def sigma_distance_mm(table: dict, length_mm) -> np.ndarray:
+def sigma_distance_mm(table: Cmm | Tracker, length_mm) -> np.ndarray:
     """Standard deviation (mm) of a distance measured by an instrument with ``sigma_um`` +
     ``sigma_um_per_m`` (``[cmm]``, ``[laser_tracker]``)."""
-    return 1e-3 * (table["sigma_um"] + table["sigma_um_per_m"] * np.asarray(length_mm) / 1000.0)
+    return 1e-3 * (table.sigma_um + table.sigma_um_per_m * np.asarray(length_mm) / 1000.0)
 
 
 @dataclass
@@ -406,9 +401,9 @@ class World:
         [calibration_uncertainty]`` times ``scale`` (0: the calibration is exact)."""
         if scale < 0:
             raise CalibrationError(f"calibration scale is {scale}; it must be >= 0")
-        sigmas = scenario.config["sensor"]["calibration_uncertainty"]
-        sigmas = {k: v * scale for k, v in sigmas.items()}
-        return scenario.sensor.perturbed(sigmas, np.random.default_rng(self.camera_seed))
+        table = scenario.sensor.calibration_uncertainty.model_dump(exclude={"provenance"})
+        sigmas = {k: v * scale for k, v in table.items()}
+        return scenario.rig.perturbed(sigmas, np.random.default_rng(self.camera_seed))
 
 
 def draw_world(scenario: Scenario, rng, imaging: Imaging | None = None) -> World:
@@ -417,13 +412,13 @@ def draw_world(scenario: Scenario, rng, imaging: Imaging | None = None) -> World
     repeatability exact (the robot and the cameras keep their errors: pass scale 0)."""
     imaging = imaging or Imaging()
     seeds = rng.integers(0, 2**63, size=2)
-    sbr = scenario.config["calibrator"]["sbr"]
-    offsets = uniform_disc(rng, 6, 1e-3 * sbr["dot_centring_um"] * imaging.noise)
+    sbr = scenario.calibrator.sbr
+    offsets = uniform_disc(rng, 6, 1e-3 * sbr.dot_centring_um * imaging.noise)
     pairs = bino.all_pairs(8)
     lengths = np.linalg.norm(scenario.layout[pairs[:, 0]] - scenario.layout[pairs[:, 1]], axis=1)
-    sigma = sigma_distance_mm(scenario.config["calibrator"]["cmm"], lengths) * imaging.noise
+    sigma = sigma_distance_mm(scenario.calibrator.cmm, lengths) * imaging.noise
     standard = lengths + sigma * rng.standard_normal(len(lengths))
-    repeat = scenario.config["station"]["robot"]["repeatability_mm"] / 3.0 * imaging.noise
+    repeat = scenario.station.robot.repeatability_mm / 3.0 * imaging.noise
     return World(int(seeds[0]), int(seeds[1]), offsets, pairs, standard, repeat)
 
 
@@ -541,7 +536,7 @@ def reimage(scenario, views: Views, rng, imaging, model) -> Views:
 def tracker_p7_distance(scenario: Scenario, rng, imaging: Imaging) -> float:
     """The laser tracker's distance from P7 to the base origin (Section 4.2), mm, with its
     error: the tracker measures the sphere centres (SMRs in the nests), not the dots."""
-    lt = scenario.config["station"]["laser_tracker"]
+    lt = scenario.station.laser_tracker
     p7_standard = float(np.linalg.norm(geo.apply(scenario.calibrator2base, scenario.layout[6])))
     p7_standard += float(sigma_distance_mm(lt, p7_standard) * rng.standard_normal()) * imaging.noise
     return p7_standard
@@ -574,12 +569,12 @@ class FieldRegion:
 
 def observe_field_region(scenario, world, k: int, rng, imaging, model) -> FieldRegion:
     """Draw field region ``k`` (``station.toml [field]``) and measure it from its poses."""
-    cfg = scenario.config["station"]["field"]
-    centre = np.array(cfg["centres_mm"][k], dtype=float)
-    normal = np.array(cfg["faces_point_mm"], dtype=float) - centre
+    cfg = scenario.station.field
+    centre = np.array(cfg.centres_mm[k], dtype=float)
+    normal = np.array(cfg.faces_point_mm, dtype=float) - centre
     region2base = plate_frame(centre, normal)
-    layout = region_layout(cfg["standard_mm"][k]) + uniform_disc(
-        rng, 6, 1e-3 * scenario.config["calibrator"]["sbr"]["dot_centring_um"] * imaging.noise
+    layout = region_layout(cfg.standard_mm[k]) + uniform_disc(
+        rng, 6, 1e-3 * scenario.calibrator.sbr.dot_centring_um * imaging.noise
     )
     dots = geo.apply(region2base, layout)
     views = view_target(
@@ -588,14 +583,14 @@ def observe_field_region(scenario, world, k: int, rng, imaging, model) -> FieldR
         region2base,
         dots,
         region2base[:3, 2],
-        cfg["n_poses"],
+        cfg.n_poses,
         rng,
         imaging,
         model,
     )
-    tol = scenario.config["sensor"]["detection"]["ray_tolerance_mm"]
+    tol = scenario.sensor.detection.ray_tolerance_mm
     _, pts = views.points(model, tol)  # (poses, 6, 3), rectified
-    lt = scenario.config["station"]["laser_tracker"]
+    lt = scenario.station.laser_tracker
     true_d = np.linalg.norm(layout[:5] - layout[5], axis=1)
     standard = true_d + sigma_distance_mm(lt, true_d) * rng.standard_normal(5) * imaging.noise
-    return FieldRegion(cfg["regions"][k], cfg["names"][k], views.flange2base, pts, standard)
+    return FieldRegion(cfg.regions[k], cfg.names[k], views.flange2base, pts, standard)

@@ -39,17 +39,19 @@ from calstudy.estimators.handeye import MIN_PAIR_ROTATION, base_to_base, opencv_
 from calstudy.estimators.icp import weighted_icp
 from calstudy.estimators.stereo_views import View
 from calstudy.papers.dualarm import simulate as sim
-from calstudy.papers.dualarm.scenario import ARMS, SPHERES, Scenario, load_scenario
+from calstudy.papers.dualarm.scenario import SPHERES, load_scenario
+from calstudy.papers.dualarm.schema import ARMS, Scenario
 
 # ----------------------------------------------------------------------------------------------
 # 1. hand-eye by Tsai-Lenz (Eq. 1-2)
 
 
 def handeye_data(scn: Scenario, arm: int, rng: np.random.Generator):
-    """Arm ``arm`` images the plate from ``handeye_poses`` poses; returns ``(reported
+    """Arm ``arm`` images the plate from ``handeye.n_poses`` poses; returns ``(reported
     flange2base, plate2cam by PnP)``, each ``(n, 4, 4)``."""
     reported, uvs = sim.handeye_images(scn, arm, rng)
-    return reported, np.stack([solve_pnp(scn.plate_points, uv, scn.rig.left.K) for uv in uvs])
+    points, k = scn.handeye.plate_points, scn.rig.left.K
+    return reported, np.stack([solve_pnp(points, uv, k) for uv in uvs])
 
 
 def hand_eyes(scn: Scenario, rng: np.random.Generator) -> np.ndarray:
@@ -76,12 +78,12 @@ def survey_markers(scn: Scenario, views: list[View], max_nfev: int = 200):
     return mk.reconstruct_markers(
         scn.rig,
         views,
-        len(scn.markers),
-        alpha=scn.min_shared_markers,
-        sigma_px=max(scn.sigma_px, 1e-3),
-        sigma_mm=max(scn.marker_sigma_mm, 1e-3),
+        len(scn.markers.xyz),
+        alpha=scn.survey.min_shared_markers,
+        sigma_px=max(scn.detection.sigma_px, 1e-3),
+        sigma_mm=max(scn.detection.marker_sigma_mm, 1e-3),
         max_nfev=max_nfev,
-        depth_ref_mm=scn.working_distance_mm,
+        depth_ref_mm=scn.sensor.working_distance_mm,
     )
 
 
@@ -94,9 +96,9 @@ def locate_world(scn: Scenario, view: View, points) -> np.ndarray:
         view,
         points,
         init,
-        sigma_px=max(scn.sigma_px, 1e-3),
-        sigma_mm=max(scn.marker_sigma_mm, 1e-3),
-        depth_ref_mm=scn.working_distance_mm,
+        sigma_px=max(scn.detection.sigma_px, 1e-3),
+        sigma_mm=max(scn.detection.marker_sigma_mm, 1e-3),
+        depth_ref_mm=scn.sensor.working_distance_mm,
     )
 
 
@@ -153,8 +155,8 @@ def group_fits(scn: Scenario, points) -> list[np.ndarray]:
     p = np.asarray(points)
     out = []
     for g in (0, 1):
-        ok = (scn.marker_group == g) & np.all(np.isfinite(p), axis=1)
-        out.append(fit_rigid(scn.markers[ok], p[ok]))
+        ok = (scn.markers.group_index == g) & np.all(np.isfinite(p), axis=1)
+        out.append(fit_rigid(scn.markers.xyz[ok], p[ok]))
     return out
 
 
@@ -173,8 +175,8 @@ def split_survey_error(scn: Scenario, points) -> dict[str, np.ndarray]:
     p = np.asarray(points)
     link, shape = p.copy(), p.copy()
     for g, t in zip((0, 1), group_fits(scn, p), strict=True):
-        m = scn.marker_group == g
-        link[m] = geo.apply(t, scn.markers[m])
+        m = scn.markers.group_index == g
+        link[m] = geo.apply(t, scn.markers.xyz[m])
         shape[m] = geo.apply(geo.invert(t), p[m])
     return {"link": link, "shape": shape}
 
@@ -183,8 +185,8 @@ def marker_error(scn: Scenario, points) -> float:
     """RMS distance (mm) of reconstructed markers from Table A1 after the best rigid fit."""
     p = np.asarray(points)
     ok = np.all(np.isfinite(p), axis=1)
-    fitted = geo.apply(fit_rigid(p[ok], scn.markers[ok]), p[ok])
-    return float(np.sqrt(np.mean(np.sum((fitted - scn.markers[ok]) ** 2, axis=1))))
+    fitted = geo.apply(fit_rigid(p[ok], scn.markers.xyz[ok]), p[ok])
+    return float(np.sqrt(np.mean(np.sum((fitted - scn.markers.xyz[ok]) ** 2, axis=1))))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -195,13 +197,13 @@ def plate_base_to_base(
     scn: Scenario, cam2flange_est, rng: np.random.Generator, sigma_px: float | None = None
 ) -> np.ndarray:
     """Baseline: a circle plate halfway between the arms (overlapping field), each arm images it
-    from ``calibration_poses`` poses from its own side, circle centres to ``sigma_px``;
+    from ``global_test.calibration_poses`` poses from its own side, circle centres to ``sigma_px``;
     RANSAC-PnP poses; Eq. 11. The plate draws from its own stream of ``rng``."""
     flanges, plate2cams = [], []
     (plate_rng,) = streams(rng, "plate")
     for reported, uvs in sim.circular_plate_images(scn, plate_rng, sigma_px):
-        k = scn.rig.left.K
-        p2c = [solve_pnp_ransac(scn.plate_points, uv, k, scn.ransac_threshold_px) for uv in uvs]
+        k, threshold = scn.rig.left.K, scn.circular_plate.ransac_threshold_px
+        p2c = [solve_pnp_ransac(scn.handeye.plate_points, uv, k, threshold) for uv in uvs]
         flanges.append(reported)
         plate2cams.append(np.stack(p2c))
     return base_to_base(
@@ -219,9 +221,10 @@ def scans_in_base(scn, arm, centre_world, radius, n_views, rng, cam2flange_est, 
     the true hand-eye)``, each a list of ``(N, 3)`` arrays. ``drift``: the poses of a multi-view
     scan drift."""
     reported, true, clouds = sim.sphere_scans(scn, arm, centre_world, radius, n_views, rng, drift)
+    true_c2f = scn.calibration.cam2flange[arm - 1]
     return (
         [geo.apply(g @ cam2flange_est, p) for g, p in zip(reported, clouds, strict=True)],
-        [geo.apply(g @ scn.cam2flange[arm - 1], p) for g, p in zip(true, clouds, strict=True)],
+        [geo.apply(g @ true_c2f, p) for g, p in zip(true, clouds, strict=True)],
     )
 
 
@@ -229,10 +232,10 @@ def icp_options(scn: Scenario) -> dict:
     """The scenario's weighted-ICP settings (Eq. 4), as keywords of
     :func:`calstudy.estimators.icp.weighted_icp`."""
     return {
-        "z_weight": scn.icp_z_weight,
-        "z_threshold_mm": scn.icp_z_threshold_mm,
-        "max_iterations": scn.icp_max_iterations,
-        "max_pair_mm": scn.icp_max_pair_mm,
+        "z_weight": scn.icp.z_weight,
+        "z_threshold_mm": scn.icp.z_threshold_mm,
+        "max_iterations": scn.icp.max_iterations,
+        "max_pair_mm": scn.icp.max_pair_distance_mm,
     }
 
 
@@ -263,11 +266,11 @@ def icp_rows(scn: Scenario, cam2flange_est, rng: np.random.Generator, icp: bool 
     scan_rngs = iter(streams(rng, *names))
     for arm in ARMS:
         for s in SPHERES:
-            r = scn.sphere_radius[s]
+            r = scn.spheres.radius[s]
             place = sim.sphere_place(scn, arm, r)
             scan_rng = next(scan_rngs)
             clouds, exact = scans_in_base(
-                scn, arm, place, r, scn.icp_views, scan_rng, cam2flange_est[arm - 1]
+                scn, arm, place, r, scn.icp.n_views, scan_rng, cam2flange_est[arm - 1]
             )
             before = centre_errors(clouds)
             after = centre_errors(icp_correct(scn, clouds)) if icp else before * np.nan
@@ -335,10 +338,10 @@ def global_rows(scn: Scenario, cam2flange_est, b2b1: dict, rng, oracle: bool = T
     ``cam2flange_est``). With ``oracle``, also the method ``true calibration``: the same scans
     with every calibrated transform true and the poses exact (the test's measurement floor).
     Each arm's scans of each placement draw from their own stream of ``rng``."""
-    r = scn.sphere_radius["A"]
+    r = scn.spheres.radius["A"]
     rows = []
     (scans_rng,) = streams(rng, "global scans")
-    for g, off in enumerate(scn.placement_offsets_mm[: scn.global_groups]):
+    for g, off in enumerate(scn.global_test.placement_offsets_mm[: scn.global_test.n_groups]):
         centre = sim.global_sphere_place(scn, off, r)
         truth = geo.apply(scn.world2base[1], centre)
         scans = [
@@ -347,7 +350,7 @@ def global_rows(scn: Scenario, cam2flange_est, b2b1: dict, rng, oracle: bool = T
                 arm,
                 centre,
                 r,
-                scn.global_poses,
+                scn.global_test.n_poses,
                 child_rng(scans_rng, f"placement {g + 1} arm {arm}"),
                 drift=False,
             )
@@ -361,8 +364,8 @@ def global_rows(scn: Scenario, cam2flange_est, b2b1: dict, rng, oracle: bool = T
             rows += _centre_rows(name, g + 1, geo.apply(geo.invert(t), c1), ref, truth)
         if oracle:
             # no calibration error anywhere: true hand-eyes and base-to-base, exact poses
-            ref0, c0 = _fitted_centres(scans, scn.cam2flange, centres, exact=True)
-            c0 = geo.apply(geo.invert(scn.base2_to_base1), c0)
+            ref0, c0 = _fitted_centres(scans, scn.calibration.cam2flange, centres, exact=True)
+            c0 = geo.apply(geo.invert(scn.calibration.base2_to_base1), c0)
             rows += _centre_rows("true calibration", g + 1, c0, ref0, truth)
     return rows
 
@@ -381,11 +384,7 @@ def _transform_error(quantity: str, estimate, truth) -> dict:
 
 
 def _scenario(scenario_toml: str, drift_scale: float = 1.0) -> Scenario:
-    scn = load_scenario(scenario_toml or None)
-    return scn.replace(
-        drift_step_mm=scn.drift_step_mm * drift_scale,
-        drift_step_rad=scn.drift_step_rad * drift_scale,
-    )
+    return load_scenario(scenario_toml or None).with_drift_scale(drift_scale)
 
 
 #: the error sources of the coded-marker chain, each switched on alone in the error budget
@@ -400,12 +399,12 @@ def budget_b2b1(scn: Scenario, cam2flange_est, points, noisy, exact) -> dict:
     noise, bias and losses of its calibration views and its reported poses), every other input
     true. The sphere test adds its own floor to each."""
     split = split_survey_error(scn, points)
-    true_c2f = scn.cam2flange
+    true_c2f = scn.calibration.cam2flange
     cases = {
         "survey link": (true_c2f, split["link"], exact),
         "survey shape": (true_c2f, split["shape"], exact),
-        "hand-eye": (np.asarray(cam2flange_est), scn.markers, exact),
-        "per-arm location": (true_c2f, scn.markers, noisy),
+        "hand-eye": (np.asarray(cam2flange_est), scn.markers.xyz, exact),
+        "per-arm location": (true_c2f, scn.markers.xyz, noisy),
     }
     return {
         f"budget: {name}": (marker_base_to_base(scn, c2f, pts, data), c2f)
@@ -427,11 +426,11 @@ def station_trial(scn: Scenario, rng: np.random.Generator, plate_sigma_px: float
         "no calibration": np.eye(4),
     }
     rows = [
-        _transform_error(f"hand-eye arm {a}", cam2flange[a - 1], scn.cam2flange[a - 1])
+        _transform_error(f"hand-eye arm {a}", cam2flange[a - 1], scn.calibration.cam2flange[a - 1])
         for a in ARMS
     ]
     rows += [
-        _transform_error(f"base-to-base, {name}", b2b1[name], scn.base2_to_base1)
+        _transform_error(f"base-to-base, {name}", b2b1[name], scn.calibration.base2_to_base1)
         for name in ("coded markers", "circular plate")
     ]
     rows.append(
@@ -469,10 +468,7 @@ def drift_trial(scn: Scenario, rng: np.random.Generator, drift_scale: float) -> 
     """The before-ICP error of the multi-view scans with the drift steps scaled by
     ``drift_scale``, with hand-eyes calibrated as in the station trial: mean over arms, spheres
     and views, and per arm and sphere."""
-    sc = scn.replace(
-        drift_step_mm=scn.drift_step_mm * drift_scale,
-        drift_step_rad=scn.drift_step_rad * drift_scale,
-    )
+    sc = scn.with_drift_scale(drift_scale)
     df = pd.DataFrame(icp_rows(sc, hand_eyes(sc, rng), rng, icp=False))
     per = df.groupby(["arm", "sphere"])["before_mm"].mean()
     return {
@@ -516,9 +512,11 @@ def survey_trial(
     ``bridge_tilt_deg`` and ``calibration_poses`` poses per arm: its mean Euclidean sphere-centre
     error, the link error of the survey and the markers' RMS error."""
     sc = scn.replace(
-        survey_bridge_views=int(bridge_views),
-        survey_bridge_tilt=np.deg2rad(bridge_tilt_deg),
-        calibration_poses=int(calibration_poses),
+        {
+            "survey.bridge_views": int(bridge_views),
+            "survey.bridge_tilt_deg": bridge_tilt_deg,
+            "global_test.calibration_poses": int(calibration_poses),
+        }
     )
     cam2flange, recon, ours = coded_marker_chain(sc, rng)
     df = pd.DataFrame(global_rows(sc, cam2flange, {"coded markers": ours}, rng, oracle=False))
@@ -534,9 +532,9 @@ def survey_points(scn: Scenario, bridge_views=(4, 16), bridge_tilts_deg=(5.0, 25
     changed to each of the given values (linking images, their tilt, calibration poses per
     arm)."""
     base = {
-        "bridge_views": int(scn.survey_bridge_views),
-        "bridge_tilt_deg": float(round(np.degrees(scn.survey_bridge_tilt), 6)),
-        "calibration_poses": int(scn.calibration_poses),
+        "bridge_views": int(scn.survey.bridge_views),
+        "bridge_tilt_deg": float(round(np.degrees(scn.survey.bridge_tilt), 6)),
+        "calibration_poses": int(scn.global_test.calibration_poses),
     }
     points = [base]
     for key, values in (
@@ -579,7 +577,7 @@ def budget_trial(scn: Scenario, rng: np.random.Generator) -> list:
         **budget_b2b1(scn, cam2flange, recon.bundle.points, noisy, exact),
     }
     # Eq. 9 alone: the Euclidean weight so large that Eq. 10 carries no weight
-    eq9 = survey_markers(scn.replace(marker_sigma_mm=1e9), views).bundle.points
+    eq9 = survey_markers(scn.replace({"detection.marker_sigma_mm": 1e9}), views).bundle.points
     eq10 = {
         "part": "eq10",
         "marker_rms_mm": marker_error(scn, recon.bundle.points),

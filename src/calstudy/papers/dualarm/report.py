@@ -10,7 +10,8 @@ import pandas as pd
 from calstudy.claims import ClaimColumns, claim_row, control_rows, judge_claim
 from calstudy.core.stats import median_and_spread, round_to_uncertainty
 from calstudy.papers.dualarm.experiments import marker_error
-from calstudy.papers.dualarm.scenario import SPHERES, Published, Scenario
+from calstudy.papers.dualarm.scenario import SPHERES
+from calstudy.papers.dualarm.schema import PublishedFile, Scenario
 
 
 def survey_table(scn: Scenario, views: list, recon) -> pd.DataFrame:
@@ -86,10 +87,10 @@ def icp_per_trial(icp: pd.DataFrame) -> pd.DataFrame:
     return icp.groupby(["arm", "sphere", "trial"], as_index=False)[cols].mean()
 
 
-def icp_summary(icp: pd.DataFrame, published: Published) -> pd.DataFrame:
+def icp_summary(icp: pd.DataFrame, published: PublishedFile) -> pd.DataFrame:
     """Figs. 5-6 in numbers: per arm and sphere, the mean error before and after ICP (mean of
     the per-trial means, 95 % interval over trials), their ratio, and the paper's values."""
-    pub = {(int(a), s): (b, c) for a, s, b, c in published.icp_rows}
+    pub = {(int(a), s): (b, c) for a, s, b, c in published.icp.rows}
     rows = []
     for (arm, sphere), g in icp_per_trial(icp).groupby(["arm", "sphere"]):
         ratio = g["after_mm"] / g["before_mm"]
@@ -114,12 +115,12 @@ def icp_summary(icp: pd.DataFrame, published: Published) -> pd.DataFrame:
 
 
 def table1(
-    global_df: pd.DataFrame, published: Published, method: str = "coded markers"
+    global_df: pd.DataFrame, published: PublishedFile, method: str = "coded markers"
 ) -> pd.DataFrame:
     """Table 1: mean absolute per-axis centre errors per group and over all groups."""
     g = global_df[global_df["method"] == method]
     g = g.astype({"group": int})
-    pub = {int(r[0]): r[1:] for r in published.table1_rows}
+    pub = {int(r[0]): r[1:] for r in published.table1.rows}
     rows = []
     for group, part in [*g.groupby("group"), (0, g)]:
         p = pub.get(int(group), [np.nan] * 3)
@@ -138,12 +139,12 @@ def table1(
 
 
 def table2(
-    global_df: pd.DataFrame, published: Published, method: str = "coded markers"
+    global_df: pd.DataFrame, published: PublishedFile, method: str = "coded markers"
 ) -> pd.DataFrame:
     """Table 2: mean Euclidean centre errors per group (rows) and arm-1 pose (columns), against
     arm 2's reference centre as in the paper; ``mean_vs_true_centre_mm`` against the true one."""
     g = global_df[global_df["method"] == method].astype({"group": int, "pose": int})
-    pub = {int(r[0]): r[1:] for r in published.table2_rows}
+    pub = {int(r[0]): r[1:] for r in published.table2.rows}
     rows = []
     for group, part in [*g.groupby("group"), (0, g)]:
         row = {"group": "all" if group == 0 else str(group)}
@@ -158,10 +159,10 @@ def table2(
     return pd.DataFrame(rows)
 
 
-def table3(global_df: pd.DataFrame, published: Published) -> pd.DataFrame:
+def table3(global_df: pd.DataFrame, published: PublishedFile) -> pd.DataFrame:
     """Table 3: sphere-A centre errors by global calibration method, reproduced where testable."""
     rows = []
-    for name, pub in zip(published.table3_methods, published.table3_rows, strict=True):
+    for name, pub in zip(published.table3.methods, published.table3.rows, strict=True):
         part = global_df[global_df["method"] == name]
         testable = len(part) > 0
         row = {"method": name, "testable": "yes" if testable else "not testable"}
@@ -290,15 +291,15 @@ def claim_samples(trials: pd.DataFrame) -> dict[str, np.ndarray]:
     }
 
 
-def published_figures(published: Published) -> dict[str, float]:
+def published_figures(published: PublishedFile) -> dict[str, float]:
     """The paper's figures the claims are judged against."""
-    pub = np.array([r[2:] for r in published.icp_rows], dtype=float)
-    t3 = dict(zip(published.table3_methods, published.table3_rows, strict=True))
+    pub = np.array([r[2:] for r in published.icp.rows], dtype=float)
+    t3 = dict(zip(published.table3.methods, published.table3.rows, strict=True))
     return {
         "icp_before": float(pub[:, 0].mean()),
         "icp_after": float(pub[:, 1].mean()),
         "icp_ratio": float(pub[:, 1].mean() / pub[:, 0].mean()),
-        "global": float(published.table2_overall),
+        "global": float(published.table2.overall),
         "global_reference": float(min(t3["rotary table"][3], t3["handheld scanner"][3])),
         "plate": float(t3["circular plate"][3]),
         "vs_ratio": float(t3["coded markers"][3] / t3["circular plate"][3]),
@@ -331,7 +332,7 @@ CLAIMS = {
 }
 
 
-def claim_figures(published: Published) -> dict[str, dict[str, float]]:
+def claim_figures(published: PublishedFile) -> dict[str, dict[str, float]]:
     """Per claim, the paper's figure and the stated reference it is judged against."""
     f = published_figures(published)
     return {
@@ -341,7 +342,7 @@ def claim_figures(published: Published) -> dict[str, dict[str, float]]:
     }
 
 
-def dualarm_verdicts(trials: pd.DataFrame, published: Published) -> dict:
+def dualarm_verdicts(trials: pd.DataFrame, published: PublishedFile) -> dict:
     """The three claims by the v2 rule with their null and oracle controls, on the same trials:
     claim id -> :class:`calstudy.claims.Judged` (verdict after the oracle gate, null control,
     oracle control)."""
@@ -350,7 +351,7 @@ def dualarm_verdicts(trials: pd.DataFrame, published: Published) -> dict:
     return {cid: judge_claim(cid, x, CLAIMS[cid], **figures[cid]) for cid in CLAIMS}
 
 
-def dualarm_claims(trials: pd.DataFrame, published: Published, notebook: str):
+def dualarm_claims(trials: pd.DataFrame, published: PublishedFile, notebook: str):
     """``(claim rows, control rows)`` of the three claims (v2 rule, controls on the same
     trials)."""
     f = published_figures(published)

@@ -20,7 +20,7 @@ from calstudy.models.targets import circle_centre_bias
 from calstudy.papers.dualarm import simulate as sim
 from calstudy.papers.dualarm.experiments import BUDGET_SOURCES
 from calstudy.papers.dualarm.report import claim_figures, part, published_figures
-from calstudy.papers.dualarm.scenario import Published, Scenario
+from calstudy.papers.dualarm.schema import PublishedFile, Scenario
 
 #: the three inputs of the survey sweeps: column -> words
 SWEEPS = {
@@ -30,7 +30,7 @@ SWEEPS = {
 }
 
 
-def sweep_table(sweep: pd.DataFrame, published: Published) -> pd.DataFrame:
+def sweep_table(sweep: pd.DataFrame, published: PublishedFile) -> pd.DataFrame:
     """Per sweep point: the coded-marker route's mean Euclidean sphere-centre error (median over
     trials with its 95 % interval), the survey's link error, and the verdict ``dualarm.global``
     would get at that point by the v2 rule."""
@@ -62,9 +62,9 @@ def sweep_table(sweep: pd.DataFrame, published: Published) -> pd.DataFrame:
 
 def _base_point(scn: Scenario) -> dict:
     return {
-        "bridge_views": int(scn.survey_bridge_views),
-        "bridge_tilt_deg": float(round(np.degrees(scn.survey_bridge_tilt), 6)),
-        "calibration_poses": int(scn.calibration_poses),
+        "bridge_views": int(scn.survey.bridge_views),
+        "bridge_tilt_deg": float(round(np.degrees(scn.survey.bridge_tilt), 6)),
+        "calibration_poses": int(scn.global_test.calibration_poses),
     }
 
 
@@ -112,7 +112,7 @@ def sweep_sentences(table: pd.DataFrame, scn: Scenario) -> str:
     return " ".join(out)
 
 
-def sweep_figure(table: pd.DataFrame, scn: Scenario, published: Published):
+def sweep_figure(table: pd.DataFrame, scn: Scenario, published: PublishedFile):
     """Three panels, one per sweep: median sphere-centre error of the coded-marker route with its
     95 % interval, the paper's 0.100 mm and the best other method of Table 3."""
     import matplotlib.pyplot as plt
@@ -219,24 +219,24 @@ def detection_table(scn: Scenario, rng: np.random.Generator, n_views: int = 20) 
     mid = sim.mid_point(scn)
     plate = geo.make_transform(np.eye(3), sim.plate_place(scn))
     cases = []
-    he_place = geo.make_transform(np.eye(3), scn.group_centre(1))
+    he_place = geo.make_transform(np.eye(3), scn.markers.group_centre(1))
     cam = sim.view_poses(
-        rng, he_place[:3, 3], scn.working_distance_mm, n_views, scn.handeye_tilt, roll=0.0
+        rng, he_place[:3, 3], scn.sensor.working_distance_mm, n_views, scn.handeye.tilt, roll=0.0
     )
-    cases.append(("plate circles, hand-eye views", cam, he_place, scn.circle_radius_mm))
-    axis = (0.0, np.sin(scn.plate_tilt), np.cos(scn.plate_tilt))
+    cases.append(("plate circles, hand-eye views", cam, he_place, scn.handeye.circle_radius_mm))
+    axis = (0.0, np.sin(scn.circular_plate.tilt), np.cos(scn.circular_plate.tilt))
     cam = sim.view_poses(
-        rng, plate[:3, 3], scn.working_distance_mm, n_views, scn.plate_jitter, axis
+        rng, plate[:3, 3], scn.sensor.working_distance_mm, n_views, scn.circular_plate.jitter, axis
     )
-    cases.append(("plate circles, Table 3 plate", cam, plate, scn.circle_radius_mm))
+    cases.append(("plate circles, Table 3 plate", cam, plate, scn.handeye.circle_radius_mm))
     cam = sim.view_poses(
-        rng, scn.group_centre(1), scn.working_distance_mm, n_views, scn.survey_tilt
+        rng, scn.markers.group_centre(1), scn.sensor.working_distance_mm, n_views, scn.survey.tilt
     )
-    cases.append(("coded markers, views of one group", cam, None, scn.marker_radius_mm))
+    cases.append(("coded markers, views of one group", cam, None, scn.detection.marker_radius_mm))
     cam = sim.view_poses(
-        rng, mid, scn.survey_bridge_distance_mm, n_views, scn.survey_bridge_tilt, up=(0, 1, 0)
+        rng, mid, scn.survey.bridge_distance_mm, n_views, scn.survey.bridge_tilt, up=(0, 1, 0)
     )
-    cases.append(("coded markers, linking images", cam, None, scn.marker_radius_mm))
+    cases.append(("coded markers, linking images", cam, None, scn.detection.marker_radius_mm))
     k = scn.rig.left.K
     rows = []
     for name, cams, target, radius in cases:
@@ -244,10 +244,10 @@ def detection_table(scn: Scenario, rng: np.random.Generator, n_views: int = 20) 
         for c2w in cams:
             w2c = geo.invert(c2w)
             if target is None:
-                pts, normal = geo.apply(w2c, scn.markers), w2c[:3, :3] @ [0.0, 0.0, 1.0]
+                pts, normal = geo.apply(w2c, scn.markers.xyz), w2c[:3, :3] @ [0.0, 0.0, 1.0]
             else:
                 t2c = w2c @ target
-                pts, normal = geo.apply(t2c, scn.plate_points), t2c[:3, 2]
+                pts, normal = geo.apply(t2c, scn.handeye.plate_points), t2c[:3, 2]
             normals = np.broadcast_to(normal, pts.shape)
             biases.append(np.linalg.norm(circle_centre_bias(k, pts, normals, radius), axis=1))
         b = np.concatenate(biases)

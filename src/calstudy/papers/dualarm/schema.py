@@ -1,24 +1,32 @@
-"""Schema of the dualarm paper's ``scenario.toml`` (the station of notebook 05, or a copy
-describing yours).
+"""The dual-arm scanning station of the ``dualarm`` paper (notebook 05), as validated from its
+``scenario.toml`` (or a copy describing yours): :class:`Scenario`, and the paper's numbers,
+:class:`PublishedFile`.
 
-Checked on load (:func:`calstudy.core.schema.check_toml`): every key read must be there with its
+The validated file is the station: each table keeps its inputs as the file gives them (lengths
+mm, angles degrees where the key says ``_deg``, rotation vectors rad), each input's provenance
+beside it (:mod:`calstudy.core.ledger`), and derives what the simulation uses: the stereo rig,
+the markers and transforms as arrays, angles in radians. Frames follow the study's naming:
+``cam2flange`` maps left-camera points to the flange, ``world2base`` the marker (world) frame to
+a robot base, ``base2_to_base1`` base 2 to base 1.
+
+Checked on load (:func:`calstudy.core.schema.load_toml`): every key read must be there with its
 type and range (lengths mm, angles degrees where the key says ``_deg``, rotation vectors rad),
 unknown keys are refused, and the cross-field rules below hold (one position per marker name,
 every marker in a declared group, a principal point inside the image, an outlier range that is
-a range), and the station can exist (:meth:`ScenarioFile.plausibility`: stereo cameras that
+a range), and the station can exist (:meth:`Scenario.plausibility`: stereo cameras that
 converge at a workable angle, spheres and markers within the arms' reach, noise levels below the
 physical bounds of :data:`NOISE_BOUNDS`, counts below their size bounds, checked before anything
-is allocated). Every input carries its provenance beside it (:mod:`calstudy.core.ledger`). A
-message names the file, the key, the value and the allowed range.
+is allocated). A message names the file, the key, the value and the allowed range.
 """
 
 from __future__ import annotations
 
 import math
+from functools import cached_property
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, PrivateAttr, field_validator, model_validator
 
 from calstudy.core import geometry as geo
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
@@ -29,11 +37,17 @@ from calstudy.core.schema import (
     NonNegativeFinite,
     Pixels,
     PositiveFinite,
+    Radians,
     Row,
-    Schema,
+    Texts,
     Vec3,
     check_principal_point,
 )
+from calstudy.models.sensors import PinholeCamera
+from calstudy.models.stereo import StereoRig, stereo_rig
+
+#: the two arms, numbered as in the paper
+ARMS = (1, 2)
 
 #: an angle from a direction (a tilt, an incidence, a viewing angle), degrees
 Tilt = Annotated[float, Field(ge=0, le=90, allow_inf_nan=False)]
@@ -94,6 +108,18 @@ class Camera(Inputs):
         check_principal_point(self.cx_px, self.cy_px, self.width, self.height)
         return self
 
+    @cached_property
+    def pinhole(self) -> PinholeCamera:
+        """The model of each of the head's two equal cameras (no lens distortion)."""
+        return PinholeCamera(
+            fx=self.fx_px,
+            fy=self.fy_px,
+            cx=self.cx_px,
+            cy=self.cy_px,
+            width=self.width,
+            height=self.height,
+        )
+
 
 class Stereo(Inputs):
     """The ``[stereo]`` table of data/dualarm/scenario.toml."""
@@ -111,6 +137,8 @@ class Sensor(Inputs):
     max_incidence_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
     working_distance_mm: PositiveFinite
 
+    max_incidence = Radians("max_incidence_deg")
+
 
 class Detection(Inputs):
     """The ``[detection]`` table of data/dualarm/scenario.toml."""
@@ -122,6 +150,8 @@ class Detection(Inputs):
     #: the probability that a visible marker is lost in an image
     loss_rate: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
     max_view_angle_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
+
+    max_view_angle = Radians("max_view_angle_deg")
 
 
 class Markers(Inputs):
@@ -147,6 +177,20 @@ class Markers(Inputs):
             )
         return self
 
+    @cached_property
+    def xyz(self) -> np.ndarray:
+        """Table A1: the markers ``(N, 3)``, world frame, mm."""
+        return np.asarray(self.xyz_mm, dtype=float)
+
+    @cached_property
+    def group_index(self) -> np.ndarray:
+        """The group of each marker ``(N,)``: 0 or 1, the index in ``groups``."""
+        return np.array([self.groups.index(n.split("-")[0]) for n in self.names])
+
+    def group_centre(self, arm: int) -> np.ndarray:
+        """Centroid ``(3,)`` of the marker group arm ``arm`` (1 or 2) sees, world frame."""
+        return self.xyz[self.group_index == arm - 1].mean(axis=0)
+
 
 class Calibration(Inputs):
     """The ``[calibration]`` table of data/dualarm/scenario.toml."""
@@ -157,6 +201,17 @@ class Calibration(Inputs):
     cam2flange_2_mm: Vec3
     base2_to_base1_rotvec: RotVec
     base2_to_base1_mm: Vec3
+
+    @cached_property
+    def cam2flange(self) -> np.ndarray:
+        """Table A2: the true hand-eyes ``(2, 4, 4)``, arm ``a`` at index ``a - 1``."""
+        return np.stack([_pose(getattr(self, f"cam2flange_{a}_rotvec"),
+                               getattr(self, f"cam2flange_{a}_mm")) for a in ARMS])
+
+    @cached_property
+    def base2_to_base1(self) -> np.ndarray:
+        """Table A2: the true base of arm 2 in the base of arm 1 ``(4, 4)``."""
+        return _pose(self.base2_to_base1_rotvec, self.base2_to_base1_mm)
 
 
 class Layout(Inputs):
@@ -174,12 +229,38 @@ class Robot(Inputs):
     drift_step_sigma_mm: _noise("drift_mm")
     drift_step_sigma_deg: _noise("drift_deg")
 
+    repeat_sigma_rad = Radians("repeat_sigma_deg")
+    #: the drift steps (mm, rad) of a sweep point, the file's scaled (:meth:`scaled_drift`)
+    _drift: tuple[float, float] | None = PrivateAttr(None)
+
+    @property
+    def drift_step_mm(self) -> float:
+        """The drift step per move, mm."""
+        return self.drift_step_sigma_mm if self._drift is None else self._drift[0]
+
+    @property
+    def drift_step_rad(self) -> float:
+        """The drift step per move, rad."""
+        return np.deg2rad(self.drift_step_sigma_deg) if self._drift is None else self._drift[1]
+
+    def scaled_drift(self, scale: float) -> Robot:
+        """A copy whose drift steps are these times ``scale`` (a sweep point of the drift, or
+        its calibrated scale)."""
+        copied = self.model_copy()
+        copied._drift = (self.drift_step_mm * scale, self.drift_step_rad * scale)
+        return copied
+
 
 class Spheres(Inputs):
     """The ``[spheres]`` table of data/dualarm/scenario.toml."""
 
     diameter_a_mm: PositiveFinite
     diameter_b_mm: PositiveFinite
+
+    @property
+    def radius(self) -> dict[str, float]:
+        """Sphere -> radius, mm."""
+        return {"A": self.diameter_a_mm / 2, "B": self.diameter_b_mm / 2}
 
 
 class HandEye(Inputs):
@@ -196,6 +277,9 @@ class HandEye(Inputs):
     #: radius of the plate's circles; less than half the pitch (checked below)
     circle_radius_mm: NonNegativeFinite
 
+    tilt = Radians("tilt_deg")
+    roll = Radians("roll_deg")
+
     @model_validator(mode="after")
     def _circles_apart(self) -> HandEye:
         if 2 * self.circle_radius_mm >= self.pitch_mm:
@@ -204,6 +288,15 @@ class HandEye(Inputs):
                 f"pitch_mm = {self.pitch_mm}; below half the pitch"
             )
         return self
+
+    @cached_property
+    def plate_points(self) -> np.ndarray:
+        """Circle centres ``(rows * cols, 3)`` of the calibration plate, plate frame (z = 0)."""
+        rows, cols, pitch = self.grid_rows, self.grid_cols, self.pitch_mm
+        gx, gy = np.meshgrid(
+            (np.arange(cols) - (cols - 1) / 2) * pitch, (np.arange(rows) - (rows - 1) / 2) * pitch
+        )
+        return np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
 
 
 class Survey(Inputs):
@@ -217,6 +310,10 @@ class Survey(Inputs):
     tilt_deg: Tilt
     #: PnP needs at least 3 shared markers
     min_shared_markers: Annotated[int, Field(ge=3, le=MAX_MARKERS)]
+
+    bridge_tilt = Radians("bridge_tilt_deg")
+    bridge_roll = Radians("bridge_roll_deg")
+    tilt = Radians("tilt_deg")
 
 
 class GlobalTest(Inputs):
@@ -249,6 +346,9 @@ class CircularPlate(Inputs):
     offset_mm: Annotated[list[Finite], Field(min_length=2, max_length=2)]
     ransac_threshold_px: PositiveFinite
 
+    tilt = Radians("tilt_deg")
+    jitter = Radians("jitter_deg")
+
     @model_validator(mode="after")
     def _range(self) -> CircularPlate:
         lo, hi = self.outlier_px
@@ -268,9 +368,12 @@ class Icp(Inputs):
     tilt_deg: Tilt
     sphere_offset_mm: Finite
 
+    tilt = Radians("tilt_deg")
 
-class ScenarioFile(Ledgered, Inputs):
-    """``data/dualarm/scenario.toml``."""
+
+class Scenario(Ledgered, Inputs):
+    """The station of ``data/dualarm/scenario.toml``: cameras, markers of Table A1, transforms of
+    Table A2, noise and the experiments' geometry (module docstring)."""
 
     NOT_INPUTS = frozenset({"name"})
 
@@ -289,6 +392,41 @@ class ScenarioFile(Ledgered, Inputs):
     global_test: GlobalTest
     circular_plate: CircularPlate
     icp: Icp
+
+    @cached_property
+    def rig(self) -> StereoRig:
+        """The binocular sensor of ``[camera]`` and ``[stereo]``."""
+        return stereo_rig(
+            self.camera.pinhole, self.stereo.baseline_mm, self.stereo.convergence_distance_mm
+        )
+
+    @cached_property
+    def world2base(self) -> np.ndarray:
+        """The true bases ``(2, 4, 4)``: the marker (world) frame in the base of each arm."""
+        lay = self.layout
+        w2b1 = _pose(lay.world2base1_rotvec, lay.world2base1_mm)
+        return np.stack([w2b1, geo.invert(self.calibration.base2_to_base1) @ w2b1])
+
+    def with_drift_scale(self, scale: float) -> Scenario:
+        """The same station with the robots' drift steps times ``scale``."""
+        return self.model_copy(update={"robot": self.robot.scaled_drift(scale)})
+
+    def noise_free(self) -> Scenario:
+        """The same station with exact detections (no noise, no perspective bias of the circle
+        centres), sensor, robot poses and no marker losses."""
+        quiet = self.replace(
+            {
+                "sensor.point_sigma_mm": 0.0,
+                "detection.sigma_px": 0.0,
+                "detection.marker_radius_mm": 0.0,
+                "detection.loss_rate": 0.0,
+                "handeye.circle_radius_mm": 0.0,
+                "robot.repeat_sigma_mm": 0.0,
+                "robot.repeat_sigma_deg": 0.0,
+                "circular_plate.outlier_rate": 0.0,
+            }
+        )
+        return quiet.with_drift_scale(0.0)
 
     def plausibility(self) -> None:
         """The camera stands outside the spheres it scans; the stereo head converges at an angle
@@ -314,14 +452,8 @@ class ScenarioFile(Ledgered, Inputs):
                 f"distance between {math.tan(math.radians(lo)):.3g} and "
                 f"{math.tan(math.radians(hi)):.3g})"
             )
-        cal = self.calibration
-        world2base = [geo.pose_from_vector([*self.layout.world2base1_mm,
-                                            *self.layout.world2base1_rotvec])]
-        base2_to_base1 = geo.pose_from_vector([*cal.base2_to_base1_mm, *cal.base2_to_base1_rotvec])
-        world2base.append(geo.invert(base2_to_base1) @ world2base[0])
-        markers = np.array(self.markers.xyz_mm, dtype=float)
-        groups = np.array([n.split("-")[0] for n in self.markers.names])
-        centres = [markers[groups == g].mean(axis=0) for g in self.markers.groups]
+        world2base = self.world2base
+        centres = [self.markers.group_centre(arm) for arm in ARMS]
         middle = 0.5 * (centres[0] + centres[1])
         radius_a = 0.5 * self.spheres.diameter_a_mm
         lift = self.global_test.stand_height_mm + radius_a
@@ -351,7 +483,7 @@ class ScenarioFile(Ledgered, Inputs):
                     centre,
                 )
             )
-        offsets = (cal.cam2flange_1_mm, cal.cam2flange_2_mm)
+        offsets = (self.calibration.cam2flange_1_mm, self.calibration.cam2flange_2_mm)
         for key, value, what, point in places:
             for arm in range(2):
                 reach = ARM_ENVELOPE_MM + float(np.linalg.norm(offsets[arm]))
@@ -374,11 +506,8 @@ Mm = NonNegativeFinite
 Group = Annotated[int, Field(ge=0)]
 
 
-class Texts(Schema):
-    """A table of texts only (``[nuisance_targets]``): any key, every value a string."""
-
-    model_config = ConfigDict(extra="allow", frozen=True, str_strip_whitespace=True)
-    __pydantic_extra__: dict[str, str]
+def _pose(rotvec, translation) -> np.ndarray:
+    return geo.make_transform(geo.rotvec_to_matrix(rotvec), translation)
 
 
 def _one_row_each(rows: list, what: str) -> list:
@@ -448,4 +577,4 @@ class PublishedFile(Documented):
         return self
 
 
-__all__ = ["PublishedFile", "ScenarioFile"]
+__all__ = ["ARMS", "PublishedFile", "Scenario"]
