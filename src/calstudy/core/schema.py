@@ -36,12 +36,13 @@ import io
 import math
 import re
 import tomllib
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any, TypeVar, get_args
 
 import numpy as np
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -225,14 +226,20 @@ def format_errors(
 
 
 def validate(
-    model: type[M], data: Any, source: str | Path, prefix: str = "", study: bool = False
+    model: type[M],
+    data: Any,
+    source: str | Path,
+    prefix: str = "",
+    study: bool = False,
+    ranges: bool = True,
 ) -> M:
     """``model`` validated from ``data``; a :class:`CalibrationError` naming ``source``, each bad
     key (with ``prefix`` in front, e.g. ``"station."``), its value and the allowed range.
     ``study`` marks a file of the study's own ``data/`` (its validators see it in the context:
-    :mod:`calstudy.core.ledger` refuses inputs marked ``user`` there)."""
+    :mod:`calstudy.core.ledger` refuses inputs marked ``user`` there); ``ranges=False`` leaves
+    out the ledger's plausible ranges (a sweep goes beyond them on purpose)."""
     try:
-        return model.model_validate(data, context={"study": study})
+        return model.model_validate(data, context={"study": study, "ranges": ranges})
     except ValidationError as exc:
         raise CalibrationError(format_errors(exc, source, prefix, model)) from None
 
@@ -309,6 +316,108 @@ PROVENANCE = "provenance"
 _VALIDATED: set = set()
 
 
+def apply_overrides(table: dict, overrides: Mapping[str, object] | None) -> dict:
+    """A copy of the TOML table ``table`` with some of its inputs replaced.
+
+    Parameters
+    ----------
+    table : dict
+        A parsed TOML file (:func:`read_toml`); left unchanged.
+    overrides : mapping of str to object, or None
+        Dotted keys of the file (``"survey.marker_sigma_px"``) and their new values, in the
+        file's own units.
+
+    Returns
+    -------
+    dict
+        A new table, to be validated as the file would be (so a value outside its type's bounds
+        or its ledger range is refused the same way).
+
+    Raises
+    ------
+    CalibrationError
+        If a key names no entry of the table (or a ``provenance`` entry, which is no input).
+    """
+    out = copy.deepcopy(table)
+    for key, value in (overrides or {}).items():
+        parts = str(key).split(".")
+        node = out
+        for i, part in enumerate(parts):
+            if not isinstance(node, dict) or part not in node or part == PROVENANCE:
+                raise CalibrationError(
+                    f"override {key!r}: {'.'.join(parts[: i + 1])!r} names no input of the "
+                    "scenario file (misspelt?)"
+                )
+            if i < len(parts) - 1:
+                node = node[part]
+        node[parts[-1]] = copy.deepcopy(value)
+    return out
+
+
+def load_model(
+    path: str | Path, model: type[M], what: str, overrides: Mapping[str, object] | None = None
+) -> M:
+    """The TOML file ``path`` (the ``what``, for messages) validated against ``model``, with the
+    dotted ``overrides`` (:func:`apply_overrides`) applied first.
+
+    A file of the study's ``data/`` is validated as one (:func:`is_study_file`). The validated
+    model is kept by (file, modification time, size, model, overrides): a Monte Carlo trial
+    loads the same few files again and again; the model is frozen, so it is shared.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a file.
+    CalibrationError
+        If the file is not TOML, an override names no input, or the table breaks ``model``
+        (the message names the file, the key, the value and the allowed range).
+    """
+    path = Path(path)
+    table = read_toml(path, what)  # FileNotFoundError naming the file first
+    key = (*file_key(path), model, repr(sorted((overrides or {}).items())))
+    if key not in _MODELS:
+        loaded = validate(model, apply_overrides(table, overrides), path, study=is_study_file(path))
+        if len(_MODELS) >= 64:
+            _MODELS.clear()
+        _MODELS[key] = loaded
+    return _MODELS[key]
+
+
+#: validated models of :func:`load_model` by (resolved path, modification time, size, model,
+#: overrides): validating a scenario costs more than the rest of loading it (an edited file has
+#: a new key, so it is checked again)
+_MODELS: dict[tuple, BaseModel] = {}
+
+
+def with_inputs(model: M, changes: Mapping[str, object], ranges: bool = False) -> M:
+    """A copy of the validated ``model`` with the inputs at dotted keys changed, validated
+    again: types, bounds and the rules across keys and tables hold as in a file.
+
+    Parameters
+    ----------
+    model : pydantic.BaseModel
+        A validated scenario (or table).
+    changes : mapping of str to object
+        Dotted keys of ``model`` (``"scanner.sigma_point_mm"``) and their new values.
+    ranges : bool
+        Also hold the values to their ledger ranges (:mod:`calstudy.core.ledger`); off by
+        default, as a sweep goes beyond them on purpose.
+
+    Returns
+    -------
+    pydantic.BaseModel
+        A new model of the same type.
+
+    Raises
+    ------
+    CalibrationError
+        If a key names no input or a value breaks the model (naming the key and the value).
+    """
+    table = apply_overrides(model.model_dump(), changes)
+    source = f"{type(model).__name__} with changed inputs"
+    return validate(type(model), table, source, ranges=ranges)
+
+
 def rotation_problem(matrix, tol: float = 1e-4) -> str:
     """Why the upper-left 3 x 3 block of ``matrix`` is not a rotation (``R^T R = I`` within
     ``tol`` per entry, ``det R = +1``), in words; ``""`` if it is one."""
@@ -329,6 +438,43 @@ def check_principal_point(cx: float, cy: float, width: int, height: int) -> None
         raise ValueError(
             f"principal point ({cx}, {cy}) lies outside the {width} x {height} px image"
         )
+
+
+def _rigid(matrix: list) -> list:
+    m = np.array(matrix, dtype=float)
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
+    problem = rotation_problem(m)
+    if problem:
+        raise ValueError(f"not a rigid transform: {problem}")
+    return matrix
+
+
+#: a rigid 4 x 4 transform written as four rows (last row ``[0, 0, 0, 1]``, an orthonormal
+#: rotation of determinant +1 within :func:`rotation_problem`'s tolerance)
+Rigid4x4 = Annotated[
+    list[Annotated[list[Finite], Field(min_length=4, max_length=4)]],
+    Field(min_length=4, max_length=4),
+    AfterValidator(_rigid),
+]
+
+
+class Pinhole(Schema):
+    """The table of a pinhole camera: focal lengths and principal point (px) inside a
+    ``width`` x ``height`` px image. A scenario's camera table derives from it (with
+    :class:`calstudy.core.ledger.Inputs` for the provenance of each entry)."""
+
+    fx: PositiveFinite
+    fy: PositiveFinite
+    cx: Finite
+    cy: Finite
+    width: Pixels
+    height: Pixels
+
+    @model_validator(mode="after")
+    def _centre_in_image(self) -> Pinhole:
+        check_principal_point(self.cx, self.cy, self.width, self.height)
+        return self
 
 
 def load_toml(path: str | Path, model: type[M], what: str) -> M:
@@ -394,8 +540,7 @@ def read_csv_table(path: str | Path, what: str) -> tuple[list[str], list[tuple[i
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise CalibrationError(
-            f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); save it as "
-            "CSV UTF-8"
+            f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); save it as CSV UTF-8"
         ) from None
     lines = [
         (i, ln)
@@ -466,16 +611,20 @@ __all__ = [
     "NonNegativeFinite",
     "NonNegativeInt",
     "PositiveFinite",
+    "Pinhole",
     "PositiveInt",
     "Pixels",
+    "Rigid4x4",
     "Row",
     "Schema",
     "Vec2",
     "Vec3",
+    "apply_overrides",
     "check_toml",
     "file_key",
     "format_errors",
     "is_study_file",
+    "load_model",
     "load_toml",
     "number_problem",
     "parse_number",
@@ -485,5 +634,6 @@ __all__ = [
     "rotation_problem",
     "validate",
     "validate_rows",
+    "with_inputs",
     "without_provenance",
 ]

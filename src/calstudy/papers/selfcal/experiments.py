@@ -36,6 +36,7 @@ import pandas as pd
 from calstudy.core.config import read_toml, scenario_file
 from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.montecarlo import Experiment, child_rng, streams, trial_rng
+from calstudy.core.schema import with_inputs
 from calstudy.core.verdicts import median_interval
 from calstudy.papers.selfcal.design import (
     candidate_jacobians,
@@ -119,7 +120,7 @@ def scenario_key(scenario_toml: str = "") -> str:
     """
     path = scenario_file("selfcal", "scenario.toml", scenario_toml or None)
     sc = load_scenario(path)
-    robot = sc.robot
+    robot = sc.nominal_robot
     record = {
         "version": TRIAL_VERSION,
         "scenario": Path(path).read_text(),
@@ -147,10 +148,11 @@ def _cell(scenario: Scenario, rng: np.random.Generator, compliance_scale: float)
     """Draw a true cell, its 24 calibration measurements and 10 validation measurements (each
     from its own child stream of ``rng``)."""
     st = draw_station(scenario, child_rng(rng, "station"))
-    views = scenario.views_per_sphere
+    views = scenario.protocol.views_per_sphere
     cal = child_rng(rng, "calibration measurements")
     meas = simulate(scenario, st, st.spheres_base, views, cal, compliance_scale)
-    val_sites = draw_placements(scenario, scenario.n_validation, child_rng(rng, "validation sites"))
+    n_val = scenario.protocol.validation_placements
+    val_sites = draw_placements(scenario, n_val, child_rng(rng, "validation sites"))
     val_rng = child_rng(rng, "validation measurements")
     val = simulate(scenario, st, val_sites, 1, val_rng, compliance_scale)
     return st, meas, val
@@ -250,13 +252,14 @@ def calibration_trial(
     the 18 robot parameters; the alternated row the rounds it ran.
     """
     if noise_scale != 1.0:
-        u0, u1, k = scenario.tracker
-        scenario = scenario.with_(
-            repeatability_mm=scenario.repeatability_mm * noise_scale,
-            sigma_point_mm=scenario.sigma_point_mm * noise_scale,
-            tracker=(u0 * noise_scale, u1 * noise_scale, k),
-        )
-    scale = scenario.compliance_scale if compliance_scale is None else compliance_scale
+        changes = {
+            "repeatability.sigma_mm": scenario.repeatability.sigma_mm * noise_scale,
+            "scanner.sigma_point_mm": scenario.scanner.sigma_point_mm * noise_scale,
+            "tracker.u0_mm": scenario.tracker.u0_mm * noise_scale,
+            "tracker.u1_mm_per_m": scenario.tracker.u1_mm_per_m * noise_scale,
+        }
+        scenario = with_inputs(scenario, changes)
+    scale = scenario.compliance.scale if compliance_scale is None else compliance_scale
     st, meas, val = _cell(scenario, rng, scale)
     good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
     start = poor_start(scenario, st, child_rng(rng, "poor start"))
@@ -266,17 +269,18 @@ def calibration_trial(
         poor = None
     ml = identify(meas, st.nominal_params, weighted=True, max_evaluations=MAX_EVALUATIONS)
     # the three three-step routes begin with the same hand-eye fit: computed once
-    first = hand_eye(meas, scenario.robot, st.nominal_params)
+    robot = scenario.nominal_robot
+    first = hand_eye(meas, robot, st.nominal_params)
     alternated, rounds = three_step_alternated(
-        meas, scenario.robot, st.nominal_params, max_rounds=ALTERNATION_ROUNDS, first=first
+        meas, robot, st.nominal_params, max_rounds=ALTERNATION_ROUNDS, first=first
     )
     params = {
         ONE_STEP: good.params,
         ONE_STEP_ML: ml.params,
-        ROUTES[0]: three_step(meas, scenario.robot, st.nominal_params, first=first),
-        ROUTES[1]: three_step_reordered(meas, scenario.robot, st.nominal_params, first=first),
+        ROUTES[0]: three_step(meas, robot, st.nominal_params, first=first),
+        ROUTES[1]: three_step_reordered(meas, robot, st.nominal_params, first=first),
         ROUTES[2]: alternated,
-        ROUTES[3]: two_step(meas, scenario.robot, st.nominal_params),
+        ROUTES[3]: two_step(meas, robot, st.nominal_params),
         NULL: st.nominal_params,
         ORACLE: _ideal_identification(meas, st),
         TRUTH: st.true_params,
@@ -296,7 +300,7 @@ def compliance_sweep_experiment(scenario_toml: str = "", n_trials: int = 30) -> 
     """:func:`calibration_trial` at each compliance scale of the scenario's ``sweep_scales``
     other than the scenario's own (that point is :func:`calibration_experiment`)."""
     sc = _scenario(scenario_toml)
-    scales = [s for s in sc.compliance_sweep if s != sc.compliance_scale]
+    scales = [s for s in sc.compliance.sweep_scales if s != sc.compliance.scale]
     points = [{"compliance_scale": float(s)} for s in scales]
     return _experiment("compliance_sweep", calibration_trial, scenario_toml, n_trials, points)
 
@@ -323,7 +327,7 @@ def basin_trial(scenario: Scenario, rng: np.random.Generator, start_scale: float
     """
     st = draw_station(scenario, child_rng(rng, "station"))
     cal = child_rng(rng, "calibration measurements")
-    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, cal)
+    meas = simulate(scenario, st, st.spheres_base, scenario.protocol.views_per_sphere, cal)
     good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
     try:
         start = poor_start(scenario, st, child_rng(rng, "poor start"), start_scale)
@@ -342,7 +346,7 @@ def basin_trial(scenario: Scenario, rng: np.random.Generator, start_scale: float
 def basin_experiment(scenario_toml: str = "", n_trials: int = 30) -> Experiment:
     """:func:`basin_trial` at the start scales of the scenario (``poor_start.basin_scales``)."""
     sc = _scenario(scenario_toml)
-    points = [{"start_scale": float(s)} for s in sc.basin_scales]
+    points = [{"start_scale": float(s)} for s in sc.poor_start.basin_scales]
     return _experiment("basin", basin_trial, scenario_toml, n_trials, points)
 
 
@@ -355,7 +359,7 @@ def example_station(scenario: Scenario, seed: int) -> tuple[Station, Measurement
     rng = trial_rng(seed, "calibration", {}, 0)
     st = draw_station(scenario, child_rng(rng, "station"))
     cal = child_rng(rng, "calibration measurements")
-    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, cal)
+    meas = simulate(scenario, st, st.spheres_base, scenario.protocol.views_per_sphere, cal)
     return st, meas
 
 
@@ -381,7 +385,7 @@ def identifiability_designs(scenario: Scenario, meas: Measurements, params) -> d
     dict of DataFrames: ``singular`` and ``parameters`` (with a ``design`` column) and
     ``summary`` (design, rank, condition numbers, the parameters of the null space).
     """
-    one_point = np.tile([0.0, 0.0, scenario.standoff_mm], (len(meas), 1))
+    one_point = np.tile([0.0, 0.0, scenario.scanner.standoff_mm], (len(meas), 1))
     designs = {
         "scanner (sphere anywhere in the field)": meas,
         "one sensor point": replace(meas, C_true=one_point),
@@ -416,12 +420,29 @@ OPTIMISED = "optimised (D-optimal)"
 RANDOM = "random"
 
 
-def candidate_views(scenario: Scenario, spheres_base, per_sphere: int, rng) -> tuple:
+def candidate_views(
+    scenario: Scenario,
+    spheres_base,
+    per_sphere: int,
+    rng,
+    robot=None,
+    sensor2flange=None,
+    scanner=None,
+) -> tuple:
     """Candidate joint angles (k per_sphere, 6) and their sphere index: ``per_sphere`` reachable
-    views of each placement, planned with the nominal robot and sensor (:func:`plan_views`)."""
+    views of each placement, planned with the nominal robot and sensor (:func:`plan_views`;
+    ``robot``, ``sensor2flange`` and ``scanner`` as there)."""
     (views_rng,) = streams(rng, "candidate views")
     views = [
-        plan_views(scenario, c, per_sphere, child_rng(views_rng, str(k)))
+        plan_views(
+            scenario,
+            c,
+            per_sphere,
+            child_rng(views_rng, str(k)),
+            sensor2flange,
+            robot=robot,
+            scanner=scanner,
+        )
         for k, c in enumerate(np.asarray(spheres_base, float))
     ]
     return np.vstack(views), np.repeat(np.arange(len(views)), per_sphere)
@@ -508,7 +529,7 @@ def suggest_poses(
     given = {"standoff_mm": standoff_mm, "field_mm": field_mm, "depth_mm": depth_mm}
     own = cell.sensor_geometry or {}
     sensor = {
-        k: float(v if v is not None else own.get(k, getattr(scenario, k)))
+        k: float(v if v is not None else own.get(k, getattr(scenario.scanner, k)))
         for k, v in given.items()
     }
     for key, value in sensor.items():
@@ -516,11 +537,18 @@ def suggest_poses(
             raise CalibrationError(f"the sensor's {key} = {value} must be a positive length")
     n = len(cell.calibration) if n_poses is None else int(n_poses)
     free = np.ones(N_PARAMS, bool) if free is None else np.asarray(free, bool)
-    plan = scenario.with_(robot=cell.robot, sensor_design=cell.sensor2flange, **sensor)
     used = np.unique(cell.calibration.sphere)
     base2part = np.linalg.inv(cell.part2base)
     spheres_base = cell.spheres[used] @ base2part[:3, :3].T + base2part[:3, 3]
-    cand_q, cand_s = candidate_views(plan, spheres_base, per_sphere, rng)
+    cand_q, cand_s = candidate_views(
+        scenario,
+        spheres_base,
+        per_sphere,
+        rng,
+        robot=cell.robot,
+        sensor2flange=cell.sensor2flange,
+        scanner=scenario.scanner.model_copy(update=sensor),
+    )
     if n > len(cand_q):
         raise CalibrationError(
             f"{n} poses asked for from {len(cand_q)} candidates ({per_sphere} per sphere of "
@@ -670,7 +698,12 @@ def measured_selection_errors(
 
     def error(picks, noise_rng) -> float:
         meas = simulate_cell_rows(
-            truth.params, cand_q[picks], cand_sphere[picks], cell.spheres, sigma, declared,
+            truth.params,
+            cand_q[picks],
+            cand_sphere[picks],
+            cell.spheres,
+            sigma,
+            declared,
             noise_rng,
         )
         try:
@@ -744,7 +777,8 @@ def pose_selection_trial(
     st = draw_station(scenario, child_rng(rng, "station"))
     Q, sphere = candidate_views(scenario, st.spheres_base, per_sphere, child_rng(rng, "candidates"))
     blocks, _ = candidate_jacobians(st.nominal_params, Q, st.spheres_part, sphere)
-    sites = draw_placements(scenario, scenario.n_validation, child_rng(rng, "validation sites"))
+    n_val = scenario.protocol.validation_placements
+    sites = draw_placements(scenario, n_val, child_rng(rng, "validation sites"))
     val = simulate(scenario, st, sites, 1, child_rng(rng, "validation measurements"))
     rows = []
     sizes_n = [int(v) for v in sizes.split()]
@@ -785,7 +819,7 @@ def pose_selection_experiment(
 
 def _example_data(scenario: Scenario, seed: int):
     """Trial 0 of :func:`calibration_experiment`: station, calibration and validation sets."""
-    return _cell(scenario, trial_rng(seed, "calibration", {}, 0), scenario.compliance_scale)
+    return _cell(scenario, trial_rng(seed, "calibration", {}, 0), scenario.compliance.scale)
 
 
 def _as_measured(meas: Measurements, sphere_offset: int = 0) -> Measurements:
@@ -802,7 +836,7 @@ def simulated_cell(scenario: Scenario, seed: int) -> MeasuredCell:
         [meas.P_ref[[np.flatnonzero(meas.sphere == s)[0] for s in range(k)]], val.P_ref]
     )
     return MeasuredCell(
-        scenario.robot,
+        scenario.nominal_robot,
         st.nominal_params,
         _as_measured(meas),
         _as_measured(val, k),
@@ -814,8 +848,8 @@ def simulated_cell(scenario: Scenario, seed: int) -> MeasuredCell:
         },
         None,
         f"the simulated cell (seed {seed})",
-        scenario.base_rough,
-        scenario.sensor_design,
+        scenario.base.rough,
+        scenario.sensor.design,
     )
 
 

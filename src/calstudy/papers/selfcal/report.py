@@ -278,7 +278,7 @@ def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict:
         col(ONE_STEP, "model_rms_mm") / crb,
         col(NULL, "model_rms_mm") / crb,
         col(ORACLE, "model_rms_mm") / crb,
-        bound=scenario.crb_multiple,
+        bound=scenario.protocol.crb_multiple,
         **bound,
     )
     out["selfcal.identification"] = (
@@ -289,7 +289,7 @@ def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict:
 
     iters = poor_start_iterations(one)
     out["selfcal.convergence"] = (
-        judge(iters, bound=float(scenario.published_iterations), **bound),
+        judge(iters, bound=float(scenario.published.convergence_iterations), **bound),
         None,
         None,
     )
@@ -305,7 +305,7 @@ def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict:
         col(ONE_STEP, "val_max_mm"),
         col(NULL, "val_max_mm"),
         col(ORACLE, "val_max_mm"),
-        bound=scenario.requirement_mm,
+        bound=scenario.protocol.requirement_mm,
         **bound,
     )
     out["selfcal.residual"] = (
@@ -330,9 +330,9 @@ def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict:
 def claim_rows(verdicts: dict, scenario: Scenario, notebook: str) -> list[ClaimRow]:
     """The five rows of ``claims.csv``."""
     published = {
-        "selfcal.convergence": f"{scenario.published_iterations:g}",
-        "selfcal.residual": f"{scenario.requirement_mm:g}",
-        "selfcal.identification": f"{scenario.crb_multiple:g}",
+        "selfcal.convergence": f"{scenario.published.convergence_iterations:g}",
+        "selfcal.residual": f"{scenario.protocol.requirement_mm:g}",
+        "selfcal.identification": f"{scenario.protocol.crb_multiple:g}",
     }
     return [
         claim_row(
