@@ -201,6 +201,8 @@ def _value(err: dict) -> str:
     if err.get("type") in ("missing",):
         return ""
     value = err.get("input")
+    if isinstance(value, tuple):  # a TOML array that Row made a tuple: show it as written
+        value = list(value)
     if isinstance(value, dict | list) and len(repr(value)) > 60:
         return ""
     return f" = {value!r}"
@@ -256,12 +258,18 @@ def file_key(path: Path) -> tuple:
     return (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
 
 
-def read_toml(path: str | Path, what: str) -> dict:
-    """The TOML table of ``path``; FileNotFoundError naming the path and ``what`` if missing,
-    CalibrationError with the parser's line and column if it is not valid TOML."""
+def _existing(path: str | Path, what: str) -> Path:
+    """``path`` as a Path; FileNotFoundError naming it and ``what`` if it is not a file."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file (the {what})")
+    return path
+
+
+def read_toml(path: str | Path, what: str) -> dict:
+    """The TOML table of ``path``; FileNotFoundError naming the path and ``what`` if missing,
+    CalibrationError with the parser's line and column if it is not valid TOML."""
+    path = _existing(path, what)
     key = file_key(path)
     if key in _PARSED:
         return copy.deepcopy(_PARSED[key])
@@ -372,11 +380,14 @@ def load_model(
         If the file is not TOML, an override names no input, or the table breaks ``model``
         (the message names the file, the key, the value and the allowed range).
     """
-    path = Path(path)
-    table = read_toml(path, what)  # FileNotFoundError naming the file first
+    path = _existing(path, what)
     key = (*file_key(path), model, repr(sorted((overrides or {}).items())))
     if key not in _MODELS:
-        loaded = validate(model, apply_overrides(table, overrides), path, study=is_study_file(path))
+        try:
+            table = apply_overrides(read_toml(path, what), overrides)
+        except CalibrationError as exc:
+            raise CalibrationError(f"{path}: {exc}") from None
+        loaded = validate(model, table, path, study=is_study_file(path))
         if len(_MODELS) >= 64:
             _MODELS.clear()
         _MODELS[key] = loaded

@@ -34,7 +34,6 @@ from calstudy.papers.hybrid.scenario import (
     Features,
     Scenario,
     load_published,
-    load_station,
 )
 
 #: label of the correlation bin of the coordinates fixed by the frame (r undefined there)
@@ -263,17 +262,21 @@ def features_table(features: Features) -> pd.DataFrame:
 
 def assumptions_table(scenario: Scenario) -> pd.DataFrame:
     """The production assumptions of a scenario with where each comes from."""
-    size_mm = load_station()["workpiece"]["size_mm"]
+    prod, station = scenario.production, scenario.station
     rows = [
-        ("part_sigma_mm", scenario.part_sigma_mm, "assumption: +-2 mm tolerance (4.3), Cp 1.33"),
-        ("feature_sigma_mm", scenario.feature_sigma_mm, "assumption: line-laser feature noise"),
-        ("repeatability_mm", scenario.repeatability_mm, "paper 4.1: +-0.06 mm"),
-        ("drift_sigma_mm", scenario.drift_sigma_mm, "assumption: residual drift over a month"),
-        ("cmm_sigma_mm", scenario.cmm_sigma_mm, "assumption: CMM probing of sheet metal"),
-        ("n_before", scenario.n_before, "paper 4.3: 10 panels (Fig. 6)"),
-        ("n_compensation", scenario.n_compensation, "paper 4.3: usually 10-20 products"),
-        ("n_follow_up", scenario.n_follow_up, "paper 4.3: 30 products over a month"),
-        ("panel_mm", " x ".join(f"{v:g}" for v in size_mm), "paper 4.1"),
+        (
+            "part_sigma_mm",
+            prod.variation.part_sigma_mm,
+            "assumption: +-2 mm tolerance (4.3), Cp 1.33",
+        ),
+        ("feature_sigma_mm", prod.sensors.feature_sigma_mm, "assumption: line-laser feature noise"),
+        ("repeatability_mm", station.robot.repeatability_mm, "paper 4.1: +-0.06 mm"),
+        ("drift_sigma_mm", prod.drift.sigma_mm, "assumption: residual drift over a month"),
+        ("cmm_sigma_mm", prod.cmm.sigma_mm, "assumption: CMM probing of sheet metal"),
+        ("n_before", prod.protocol.n_before, "paper 4.3: 10 panels (Fig. 6)"),
+        ("n_compensation", prod.protocol.n_compensation, "paper 4.3: usually 10-20 products"),
+        ("n_follow_up", prod.protocol.n_follow_up, "paper 4.3: 30 products over a month"),
+        ("panel_mm", " x ".join(f"{v:g}" for v in station.workpiece.size_mm), "paper 4.1"),
     ]
     return pd.DataFrame(rows, columns=["assumption", "value", "source"]).astype({"value": str})
 
@@ -333,14 +336,14 @@ def _n_vectors(sub: pd.DataFrame) -> int:
 def _published_halves() -> tuple:
     """Both halves of the published Table 1: (half, bin labels, counts, shares %); the
     correlation half with the row of the coordinates fixed by the frame (none published)."""
-    pub = load_published()
+    table = load_published().table1
     return (
-        ("deviation", pub.deviation_bins, pub.deviation_counts, pub.deviation_percent),
+        ("deviation", table.deviation_bins, table.deviation_counts, table.deviation_percent),
         (
             "correlation",
-            pub.correlation_bins + (UNDEFINED_BIN,),
-            pub.correlation_counts + (0,),
-            pub.correlation_percent + (0.0,),
+            table.correlation_bins + (UNDEFINED_BIN,),
+            table.correlation_counts + (0,),
+            table.correlation_percent + (0.0,),
         ),
     )
 
@@ -467,7 +470,7 @@ def _verdict_text(make) -> str:
 
 def _systematic_verdict(sub: pd.DataFrame, pub):
     """Both readings of "2-4 mm": per coordinate (judged) and the 3-D length (reported)."""
-    lo_pub, hi_pub = pub.systematic_mm
+    lo_pub, hi_pub = pub.systematic.range_mm
     return tuple(
         judge(
             sub[column],
@@ -503,7 +506,7 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     sub = trials[trials["n_compensation"] == n_compensation]
     pub = load_published()
     v, v3 = _systematic_verdict(sub, pub)
-    lo_pub, hi_pub = pub.systematic_mm
+    lo_pub, hi_pub = pub.systematic.range_mm
     rows = [
         _with_note(
             claim_row(
@@ -524,14 +527,14 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     dev, null, oracle = deviation_controls(sub, pub)
     dev_final = oracle_gate(dev, oracle, "a systematic error that an offset can remove")
     dev_counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy()
-    dist = bin_distance(dev_counts, pub.deviation_percent)
-    chi = chi_square_distance(dev_counts, pub.deviation_percent)
+    dist = bin_distance(dev_counts, pub.table1.deviation_percent)
+    chi = chi_square_distance(dev_counts, pub.table1.deviation_percent)
     rows.append(
         _with_note(
             claim_row(
                 "hybrid.deviation",
                 dev_final,
-                published=f"{pub.within_0p3_percent}",
+                published=f"{pub.table1.within_0p3_percent}",
                 unit="%",
                 notebook=notebook,
                 null=null,
@@ -548,7 +551,7 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     controls = control_rows("hybrid.deviation", null, oracle)
     n_defined = _n_vectors(sub) - int(np.median(sub["n_fixed"]))
     dist_r = bin_distance(
-        sub[[f"correlation_bin{k}" for k in range(5)]].to_numpy(), pub.correlation_percent
+        sub[[f"correlation_bin{k}" for k in range(5)]].to_numpy(), pub.table1.correlation_percent
     )
     bound = kolmogorov_bound(n_defined)
     vr = judge(dist_r, kind="bound", direction="lower", bound=bound)
@@ -557,13 +560,13 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
             claim_row(
                 "hybrid.correlation",
                 vr,
-                published=f"bins {pub.correlation_percent}",
+                published=f"bins {pub.table1.correlation_percent}",
                 unit="Kolmogorov distance",
                 notebook=notebook,
             ),
             f"Kolmogorov distance of the correlation bins to the published ones, {n_defined} "
             f"coordinates where r is defined: {vr.note}; share above 0.7 median "
-            f"{np.median(sub['r_above_0p7']):.3g} % (published {pub.r_above_0p7_percent})",
+            f"{np.median(sub['r_above_0p7']):.3g} % (published {pub.table1.r_above_0p7_percent})",
         )
     )
     return rows, controls
