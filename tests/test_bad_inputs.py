@@ -553,7 +553,7 @@ CASES = [
     ("calibrate_handeye-zero_weights", lambda p: calibrate_handeye(CELL_A, CELL_B, weights=np.zeros(8)), E, r"weights leave 0 of the 8 poses"),
     ("calibrate_handeye-negative_weight", lambda p: calibrate_handeye(CELL_A, CELL_B, weights=np.r_[np.ones(7), -1.0]), E, r"weight 7 is -1"),
     ("handeye_crb-two_weighted_poses", lambda p: hr.handeye_crb(CELL_A, CELL_B, S2F, CELL_Z, 1e-3, 0.1, weights=np.r_[np.zeros(6), 1.0, 1.0]), E, r"weights leave 2 of the 8 poses"),
-    ("production_scenario-huge_count", lambda p: load_production_scenario(overrides={"production.protocol.n_compensation_max": 10**9}), E, r"production\.toml: protocol\.n_compensation_max = 1000000000: must be <= 1000"),
+    ("production_scenario-huge_count", lambda p: load_production_scenario(overrides={"production.protocol.n_compensation_max": 10**9}), E, r"production\.toml: protocol\.n_compensation_max = 1000000000: must be >= 3 and <= 1000"),
     ("production_scenario-fractional_count", lambda p: load_production_scenario(overrides={"production.protocol.n_follow_up": 12.5}), E, r"protocol\.n_follow_up = 12\.5: is not an integer"),
     ("claim_ids-no_id_column", lambda p: claim_ids(_register(p, "name,paper\nx,hybrid\n")), E, r"register\.csv lacks the column\(s\) \['id'\]"),
     ("claim_register-duplicate_id", lambda p: claim_register(_register(p, "id,paper\na.b,x\na.b,y\n")), E, r"id 'a\.b' appears more than once"),
