@@ -49,7 +49,8 @@ def test_overrides_are_validated_as_the_file():
         CalibrationError, match=r"variation\.part_sigma_mm = 1\.0: outside its plausible range"
     ):
         scenario.load_scenario(overrides={"production.variation.part_sigma_mm": 1.0})
-    with pytest.raises(CalibrationError, match=r"production\.toml: override 'variation\.part_sigma': .* names no"):
+    unknown = r"production\.toml: override 'variation\.part_sigma': .* names no"
+    with pytest.raises(CalibrationError, match=unknown):
         scenario.load_scenario(overrides={"production.variation.part_sigma": 0.2})
     with pytest.raises(CalibrationError, match="begins with 'station.' or 'production.'"):
         scenario.load_scenario(overrides={"variation.part_sigma_mm": 0.2})

@@ -1,7 +1,8 @@
 """Schemas of the hybrid paper's files: ``station.toml``, ``production.toml`` and the rows of the
-hybrid and CMM tables of notebook 02.
+hybrid and CMM tables of notebook 02. The validated file is what the simulation reads
+(:mod:`calstudy.papers.hybrid.scenario`), with its derived objects as properties.
 
-Each TOML file is checked on load (:func:`calstudy.core.schema.check_toml`): every key the
+Each TOML file is checked on load (:func:`calstudy.core.schema.load_model`): every key the
 simulation reads must be there, with its type and range (lengths in mm, angles in degrees where
 the key says ``_deg``), unknown keys are refused (a misspelt key is not silently a default), and
 the cross-field rules below hold. A message names the file, the key, the value and the allowed
