@@ -24,7 +24,6 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from calstudy.core.config import scenario_file
-from calstudy.core.errors import CalibrationError
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
@@ -225,6 +224,36 @@ class Scenario(Ledgered, Inputs):
                 f"sphere's radius spheres.radius_mm = {self.spheres.radius_mm}: the scanner "
                 "would sit inside the sphere (standoff_mm must exceed depth_mm + radius_mm)"
             )
+        self._check_reach()
+
+    def _check_reach(self) -> None:
+        """Refuse a sphere envelope that the robot reaches from none of its points.
+
+        A view puts the scanner within ``sqrt((standoff + depth)^2 + 2 field^2)`` of the
+        sphere's centre, and the robot's wrist point within ``|sensor_design^-1 c|`` of the
+        scanner (:class:`~calstudy.models.reach.ReachBound`; the views are planned with the
+        design mount). Every point of the envelope lies at least ``|clip(C) - C| - r`` from the
+        shoulder circle (centre ``C``, radius ``r``); when that exceeds the reach plus both
+        offsets, no placement of a sphere in the envelope can be measured. Microseconds, before
+        any simulation. The message names ``spheres.envelope_min_mm`` and ``envelope_max_mm``,
+        their values and by how much the envelope's nearest point misses the reach.
+        """
+        bound = reach_bound(self.nominal_robot)
+        lo = np.array(self.spheres.envelope_min_mm, float)
+        hi = np.array(self.spheres.envelope_max_mm, float)
+        nearest = np.clip(bound.centre, lo, hi)
+        wrist = np.linalg.inv(self.sensor.design) @ np.append(bound.wrist, 1.0)
+        scanner = self.scanner
+        view = math.hypot(scanner.standoff_mm + scanner.depth_mm, math.sqrt(2) * scanner.field_mm)
+        slack = view + float(np.linalg.norm(wrist[:3]))
+        beyond = float(np.linalg.norm(nearest - bound.centre)) - bound.radius - bound.reach - slack
+        if beyond > bound.margin_mm():
+            raise ValueError(
+                f"spheres.envelope_min_mm = {lo.tolist()}, envelope_max_mm = {hi.tolist()}: from "
+                f"the envelope's nearest point the robot's wrist stays at least {beyond:.0f} mm "
+                "beyond its reach, for every view at the scanner's standoff: no sphere placed "
+                "there can be measured"
+            )
 
 
 def _pose(xyz, zyx_deg) -> np.ndarray:
@@ -261,50 +290,8 @@ def load_scenario(
         the message names the file, the key, the value and the allowed range.
     """
     path = scenario_file("selfcal", "scenario.toml", path)
-    scenario = load_model(path, Scenario, "selfcal scenario", overrides)
-    check_reach(scenario, path)
-    return scenario
+    return load_model(path, Scenario, "selfcal scenario", overrides)
 
 
-def check_reach(scenario: Scenario, source: str | Path = "scenario.toml") -> None:
-    """Refuse a sphere envelope that the robot reaches from none of its points.
 
-    A view puts the scanner within ``sqrt((standoff + depth)^2 + 2 field^2)`` of the sphere's
-    centre, and the robot's wrist point within ``|sensor_design^-1 c|`` of the scanner
-    (:class:`~calstudy.models.reach.ReachBound`; the views are planned with the design mount).
-    Every point of the envelope lies at least ``|clip(C) - C| - r`` from the shoulder circle
-    (centre ``C``, radius ``r``); when that exceeds the reach plus both offsets, no placement
-    of a sphere in the envelope can be measured. Microseconds, before any simulation.
-
-    Parameters
-    ----------
-    scenario : Scenario
-        The validated cell.
-    source : str or Path
-        The scenario file, for the message.
-
-    Raises
-    ------
-    CalibrationError
-        Naming ``spheres.envelope_min_mm`` and ``envelope_max_mm``, their values and by how
-        much the envelope's nearest point misses the reach.
-    """
-    bound = reach_bound(scenario.nominal_robot)
-    lo = np.array(scenario.spheres.envelope_min_mm, float)
-    hi = np.array(scenario.spheres.envelope_max_mm, float)
-    nearest = np.clip(bound.centre, lo, hi)
-    wrist = np.linalg.inv(scenario.sensor.design) @ np.append(bound.wrist, 1.0)
-    scanner = scenario.scanner
-    view = math.hypot(scanner.standoff_mm + scanner.depth_mm, math.sqrt(2) * scanner.field_mm)
-    slack = view + float(np.linalg.norm(wrist[:3]))
-    beyond = float(np.linalg.norm(nearest - bound.centre)) - bound.radius - bound.reach - slack
-    if beyond > bound.margin_mm():
-        raise CalibrationError(
-            f"{source}: spheres.envelope_min_mm = {lo.tolist()}, envelope_max_mm = "
-            f"{hi.tolist()}: from the envelope's nearest point the robot's wrist stays at least "
-            f"{beyond:.0f} mm beyond its reach, for every view at the scanner's standoff: no "
-            "sphere placed there can be measured"
-        )
-
-
-__all__ = ["NOISE_BOUNDS", "Scenario", "check_reach", "load_scenario"]
+__all__ = ["NOISE_BOUNDS", "Scenario", "load_scenario"]
