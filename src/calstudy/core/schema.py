@@ -9,9 +9,10 @@ row and column), the value found and the allowed range::
     data/robots/my_robot.toml: link #2.a_mm = 68000.0: must be <= 10000.0
     my_handeye.csv: row 7, column 'sz': '12,5' is not a number (decimal comma? write 12.5)
 
-:func:`load_toml` reads and validates a TOML file in one call; :func:`read_csv_table` reads a CSV
-the way a spreadsheet writes it (byte-order mark, ``;`` as separator, ``#`` comment lines) and
-:func:`validate_rows` checks its rows. The range types (:data:`Finite`, :data:`PositiveFinite`,
+:func:`load_model` reads and validates a TOML file in one call (with dotted-key overrides,
+:func:`apply_overrides`); :func:`with_inputs` is a changed copy of a validated model, validated
+again; :func:`read_csv_table` reads a CSV the way a spreadsheet writes it (byte-order mark, ``;``
+as separator, ``#`` comment lines) and :func:`validate_rows` checks its rows. The range types (:data:`Finite`, :data:`PositiveFinite`,
 ...) are the building blocks of the schemas.
 
 A paper's ``scenario.py`` uses it as::
@@ -25,7 +26,8 @@ A paper's ``scenario.py`` uses it as::
         station: Station
         robot: str
 
-    raw = load_toml(path, ScenarioFile, "hybrid scenario")   # CalibrationError naming key
+    scenario = load_model(path, ScenarioFile, "hybrid scenario")   # CalibrationError naming key
+    scenario.station.views_per_sphere   # the validated file is the scenario
 """
 
 from __future__ import annotations
@@ -488,12 +490,6 @@ class Pinhole(Schema):
         return self
 
 
-def load_toml(path: str | Path, model: type[M], what: str) -> M:
-    """Read the TOML file ``path`` (the ``what``, for messages) and validate it against
-    ``model``."""
-    return validate(model, read_toml(path, what), path, study=is_study_file(path))
-
-
 # ----------------------------------------------------------------------------------------------
 # CSV files
 
@@ -636,7 +632,6 @@ __all__ = [
     "format_errors",
     "is_study_file",
     "load_model",
-    "load_toml",
     "number_problem",
     "parse_number",
     "read_csv_table",
