@@ -12,8 +12,8 @@ row and column), the value found and the allowed range::
 :func:`load_model` reads and validates a TOML file in one call (with dotted-key overrides,
 :func:`apply_overrides`); :func:`with_inputs` is a changed copy of a validated model, validated
 again; :func:`read_csv_table` reads a CSV the way a spreadsheet writes it (byte-order mark, ``;``
-as separator, ``#`` comment lines) and :func:`validate_rows` checks its rows. The range types (:data:`Finite`, :data:`PositiveFinite`,
-...) are the building blocks of the schemas.
+as separator, ``#`` comment lines) and :func:`validate_rows` checks its rows. The range types
+(:data:`Finite`, :data:`PositiveFinite`, ...) are the building blocks of the schemas.
 
 A paper's ``scenario.py`` uses it as::
 
