@@ -24,6 +24,7 @@ REPEATS = 5
 
 def main() -> None:
     scenario = load_scenario()
+    n_before = scenario.production.protocol.n_before
     rng = np.random.default_rng(0)
     # the first call also writes the robot program (IK, cached)
     ps = experiments.calibrated_station(rng)
@@ -38,10 +39,10 @@ def main() -> None:
         ),
         "Table 1 analysis of one run": best_ms(lambda: compensation.analyse_run(run, 10), REPEATS),
         "before compensation, 168 Lilliefors tests": best_ms(
-            lambda: compensation.before_compensation(run, scenario.n_before), REPEATS
+            lambda: compensation.before_compensation(run, n_before), REPEATS
         ),
     }
-    before = compensation.before_compensation(run, scenario.n_before)
+    before = compensation.before_compensation(run, n_before)
     cols = before["deviations"][:, ~before["fixed"]]
     loop = best_ms(lambda: [lilliefors_test(c) for c in cols.T], REPEATS)
     vec = best_ms(lambda: lilliefors_tests(cols), REPEATS)

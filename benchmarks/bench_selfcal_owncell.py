@@ -30,8 +30,8 @@ SELECT_BUDGET_S = 5.0
 
 def _candidates(scenario, station):
     q, sphere = candidate_views(
-        scenario.robot,
-        scenario.sensor_design,
+        scenario.nominal_robot,
+        scenario.sensor.design,
         view_geometry(scenario),
         station.spheres_base,
         50,

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from calstudy.core.errors import CalibrationWarning
+from calstudy.core.schema import with_inputs
 from calstudy.papers.selfcal.scenario import load_scenario
 from calstudy.papers.selfcal.simulate import draw_station, simulate
 from calstudy.selfcal import measured
@@ -34,7 +35,8 @@ ELLIPSOID95 = float(chi2.ppf(0.95, N_PARAMS))
 def _noise(scenario) -> dict:
     """The cell's declared noise (only used for the rejection scale; the weights are the
     simulated covariance of each measurement)."""
-    return {"sensor_mm": 0.0, "repeatability_mm": scenario.repeatability_mm, "tracker_mm": 0.0}
+    repeatability = scenario.repeatability.sigma_mm
+    return {"sensor_mm": 0.0, "repeatability_mm": repeatability, "tracker_mm": 0.0}
 
 
 def _scores(fit, truth) -> tuple[np.ndarray, bool]:
@@ -46,13 +48,14 @@ def _scores(fit, truth) -> tuple[np.ndarray, bool]:
 
 
 def main(n_cells: int = 200) -> None:
-    scenario = load_scenario().with_(compliance_scale=0.0)
+    scenario = with_inputs(load_scenario(), {"compliance.scale": 0.0})
     rows = {"declared noise": [], "no noise declared": []}
     start = time.perf_counter()
     for i in range(n_cells):
         rng = np.random.default_rng([2026, i])
         station = draw_station(scenario, rng)
-        meas = simulate(scenario, station, station.spheres_base, scenario.views_per_sphere, rng)
+        views = scenario.protocol.views_per_sphere
+        meas = simulate(scenario, station, station.spheres_base, views, rng)
         bare = replace(meas, cov=None, tracker_cov=None, C_true=None, Q_true=None)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", CalibrationWarning)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 from pathlib import Path
 
@@ -85,7 +86,7 @@ def ideal_station(seed=0, robot_errors=False):
         back_points=s.target.back_points(),
         back2front=s.target.back2front(),
     )
-    return simulate.with_overrides(
+    return dataclasses.replace(
         s, target_made=perfect, back2front_cmm=s.target.back2front()
     ), rng
 

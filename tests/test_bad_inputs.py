@@ -46,7 +46,7 @@ from calstudy.models.stereo import StereoRig, stereo_rig
 from calstudy.models.targets import Sphere
 from calstudy.papers.hybrid import compensation
 from calstudy.papers.hybrid import handeye_experiments as hhe
-from calstudy.papers.hybrid.scenario import Scenario as ProductionScenario
+from calstudy.papers.hybrid.scenario import load_scenario as load_production_scenario
 from calstudy.selfcal.identify import identify
 
 # hypothesis keeps a cache folder (.hypothesis/) even without an example database: put it in a
@@ -172,7 +172,6 @@ def _register(tmp_path, text):
     return path
 
 
-PRODUCTION = dict(part_sigma_mm=0.1, feature_sigma_mm=0.02, repeatability_mm=0.03, drift_sigma_mm=0.01, cmm_sigma_mm=0.002, n_before=10, n_compensation=10, n_compensation_max=20, n_follow_up=30)
 NB06 = {"seed": 6, "results_dir": "", "poses_csv": "", "setup": "eye_in_hand", "n_poses": 20, "n_duplicates": 3, "outlier_mm": 68.0, "outlier_deg": 1.8, "sigma_rot_rad": 0.0, "sigma_trans_mm": 0.0, "robust": "cauchy", "tool_point_mm": [0.0, 0.0, 500.0], "n_trials": 200, "n_jobs": None, "scheduler": "", "cache_dir": "", "progress": True}
 
 # ----------------------------------------------------------------------------------------------
@@ -552,8 +551,8 @@ CASES = [
     ("calibrate_handeye-zero_weights", lambda p: calibrate_handeye(CELL_A, CELL_B, weights=np.zeros(8)), E, r"weights leave 0 of the 8 poses"),
     ("calibrate_handeye-negative_weight", lambda p: calibrate_handeye(CELL_A, CELL_B, weights=np.r_[np.ones(7), -1.0]), E, r"weight 7 is -1"),
     ("handeye_crb-two_weighted_poses", lambda p: hr.handeye_crb(CELL_A, CELL_B, S2F, CELL_Z, 1e-3, 0.1, weights=np.r_[np.zeros(6), 1.0, 1.0]), E, r"weights leave 2 of the 8 poses"),
-    ("production_scenario-huge_count", lambda p: ProductionScenario(**PRODUCTION | {"n_compensation_max": 10**9}), E, r"n_compensation_max is 1000000000; expected a whole number of products from 3 to 10000"),
-    ("production_scenario-fractional_count", lambda p: ProductionScenario(**PRODUCTION | {"n_follow_up": 12.5}), E, r"n_follow_up is 12\.5"),
+    ("production_scenario-huge_count", lambda p: load_production_scenario(overrides={"production.protocol.n_compensation_max": 10**9}), E, r"production\.toml: protocol\.n_compensation_max = 1000000000: must be >= 3 and <= 1000"),
+    ("production_scenario-fractional_count", lambda p: load_production_scenario(overrides={"production.protocol.n_follow_up": 12.5}), E, r"protocol\.n_follow_up = 12\.5: is not an integer"),
     ("claim_ids-no_id_column", lambda p: claim_ids(_register(p, "name,paper\nx,hybrid\n")), E, r"register\.csv lacks the column\(s\) \['id'\]"),
     ("claim_register-duplicate_id", lambda p: claim_register(_register(p, "id,paper\na.b,x\na.b,y\n")), E, r"id 'a\.b' appears more than once"),
     ("claim_register-empty_id", lambda p: claim_register(_register(p, "id,paper\na.b,x\n,y\n")), E, r"row 3 has an empty id"),

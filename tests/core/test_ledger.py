@@ -74,7 +74,7 @@ def test_user_accepted_in_a_user_file_refused_in_the_study_file(tmp_path, monkey
     text = SELFCAL.replace(old, 'provenance.standoff_mm = { kind = "user", note = "my cell",')
     text = text.replace("standoff_mm = 300.0", "standoff_mm = 700.0", 1)  # outside the range
     own = _own(tmp_path, text)
-    assert load_selfcal(own).standoff_mm == 700.0
+    assert load_selfcal(own).scanner.standoff_mm == 700.0
     # a whole table of one's own
     start = text.index("[tracker]")
     table = text[start : text.index("[protocol]")]

@@ -1,5 +1,6 @@
 """Reading TOML files: the parsed-table cache never hands out stale or shared tables; inputs
-replaced before validation (overrides) or in a validated model (derived values follow)."""
+replaced before validation (overrides), in a validated model (derived values follow) or in a
+changed copy validated as its file."""
 
 import os
 import re
@@ -9,7 +10,9 @@ import numpy as np
 import pytest
 
 from calstudy import CalibrationError
-from calstudy.core.schema import Radians, Schema, apply_overrides, read_toml
+from calstudy.core.schema import Radians, Schema, apply_overrides, read_toml, with_inputs
+from calstudy.core.trialcache import _scenario_digest
+from calstudy.papers.selfcal.scenario import load_scenario
 
 
 def test_read_toml_rereads_an_edited_file_and_hands_out_copies(tmp_path):
@@ -43,7 +46,7 @@ def test_apply_overrides_replaces_inputs_in_a_new_table_and_names_an_unknown_key
     assert table["survey"]["sigma_px"] == 0.1 and table["n"] == 3  # the table is not changed
     assert apply_overrides(table, None) == table
     for key in ("survey.sigma", "surveys.sigma_px", "survey", "n.m", "survey.provenance.sigma_px"):
-        with pytest.raises(CalibrationError, match=rf"override '{re.escape(key)}': the scenario"):
+        with pytest.raises(CalibrationError, match=rf"override '{re.escape(key)}': .* no input"):
             apply_overrides(table, {key: 1.0})
 
 
@@ -75,3 +78,46 @@ def test_replace_sets_dotted_inputs_and_derived_values_follow():
         head.replace({"lens.focal_mm": 1.0})
     with pytest.raises(CalibrationError, match=r"n\.m: no such input in _Head"):
         head.replace({"n.m": 1.0})
+
+
+def test_apply_overrides_returns_a_new_table_and_names_an_unknown_key():
+    table = {"scanner": {"sigma_point_mm": 0.02, "provenance": {"sigma_point_mm": {}}}}
+    out = apply_overrides(table, {"scanner.sigma_point_mm": 0.05})
+    assert out == {"scanner": {"sigma_point_mm": 0.05, "provenance": {"sigma_point_mm": {}}}}
+    assert table["scanner"]["sigma_point_mm"] == 0.02  # the caller's table is left as it was
+    assert apply_overrides(table, None) == table and apply_overrides(table, None) is not table
+    for key, named in (
+        ("scanner.sigma_point", "'scanner.sigma_point'"),
+        ("scaner.sigma_point_mm", "'scaner'"),
+        ("scanner.sigma_point_mm.x", "'scanner.sigma_point_mm.x'"),
+        ("scanner.provenance", "'scanner.provenance'"),
+    ):
+        with pytest.raises(CalibrationError, match=f"override '{key}': {named} names no input"):
+            apply_overrides(table, {key: 1.0})
+
+
+def test_overrides_are_validated_as_the_file_and_copies_go_beyond_the_ranges():
+    """load_scenario(overrides=...) refuses a value outside its ledger range as the file would;
+    with_inputs validates types and bounds again but lets a sweep leave the range, and builds
+    the derived objects afresh."""
+    scenario = load_scenario(overrides={"scanner.sigma_point_mm": 0.03})
+    assert scenario.scanner.sigma_point_mm == 0.03
+    with pytest.raises(CalibrationError, match=r"scanner\.sigma_point_mm = 0\.9: outside its"):
+        load_scenario(overrides={"scanner.sigma_point_mm": 0.9})
+    wide = with_inputs(scenario, {"scanner.sigma_point_mm": 0.9})
+    assert wide.scanner.sigma_point_mm == 0.9 and scenario.scanner.sigma_point_mm == 0.03
+    with pytest.raises(CalibrationError, match=r"scanner\.sigma_point_mm = 0\.9: outside its"):
+        with_inputs(scenario, {"scanner.sigma_point_mm": 0.9}, ranges=True)
+    with pytest.raises(CalibrationError, match=r"scanner\.sigma_point_mm = 2\.0: must be >= 0"):
+        with_inputs(scenario, {"scanner.sigma_point_mm": 2.0})
+    before = scenario.base.rough
+    moved = with_inputs(scenario, {"base.rough_xyz_mm": [0.0, 0.0, 0.0]})
+    assert np.all(moved.base.rough[:3, 3] == 0.0) and np.any(before[:3, 3] != 0.0)
+
+
+def test_a_models_cache_key_is_its_fields_not_its_cached_properties():
+    fresh = load_scenario(overrides={"scanner.sigma_point_mm": 0.021})
+    digest = _scenario_digest(fresh, "x")
+    assert fresh.nominal_robot.name  # fills a cached property
+    assert _scenario_digest(fresh, "x") == digest
+    assert _scenario_digest(with_inputs(fresh, {"scanner.sigma_point_mm": 0.022}), "x") != digest

@@ -31,7 +31,7 @@ The kinds (:class:`Provenance`):
 A scenario table's schema derives from :class:`Inputs`; the file's schema from
 :class:`Ledgered`, whose validator refuses an input without provenance, an ``assumed`` input
 without a range, a ``user`` input in a study file (validation context ``{"study": True}``, set
-by :func:`calstudy.core.schema.check_toml` for the files of ``data/``) and a value outside its
+by :func:`calstudy.core.schema.load_model` for the files of ``data/``) and a value outside its
 range. A noise level marked :data:`OFF` may also be 0 (an oracle switches its error source off).
 Before the ledger, the file's :meth:`Ledgered.plausibility` checks that the scenario can exist.
 :func:`ledger_rows` lists a validated file's ledger for the book.
@@ -83,6 +83,7 @@ def noise_level(bound: float):
     """The type of a noise level: finite, >= 0 and <= ``bound`` (its physical bound), and 0
     accepted outside its ledger range (:data:`OFF`)."""
     return Annotated[float, Field(ge=0, le=bound, allow_inf_nan=False), OFF]
+
 
 Bound = Annotated[float, Field(allow_inf_nan=False)]
 Interval = Annotated[list[Bound], Field(min_length=2, max_length=2)]
@@ -184,7 +185,7 @@ class Inputs(Documented):
         if isinstance(data, dict) and isinstance(data.get("provenance"), str):
             if data["provenance"] != "user":
                 raise ValueError(
-                    f"provenance = {data['provenance']!r}: a whole table can only be \"user\"; "
+                    f'provenance = {data["provenance"]!r}: a whole table can only be "user"; '
                     "give each input its own provenance.<input> = { kind = ..., ... }"
                 )
             data = {**data, "provenance": {ALL: {"kind": "user"}}}
@@ -274,7 +275,7 @@ def _outside_part(value: Any, part) -> str:
     return ""
 
 
-def ledger_problems(model: BaseModel, study: bool) -> list[str]:
+def ledger_problems(model: BaseModel, study: bool, ranges: bool = True) -> list[str]:
     """Every breach of the ledger rules in a validated scenario file (module docstring).
 
     Parameters
@@ -283,6 +284,9 @@ def ledger_problems(model: BaseModel, study: bool) -> list[str]:
         The validated file.
     study : bool
         True for a file of the study's own ``data/``, where ``user`` is refused.
+    ranges : bool
+        Check each value against its plausible range (False: a sweep's copy, which goes beyond
+        them on purpose).
 
     Returns
     -------
@@ -324,7 +328,7 @@ def ledger_problems(model: BaseModel, study: bool) -> list[str]:
                     "not the study's"
                 )
                 continue
-            if entry.range is None:
+            if entry.range is None or not ranges:
                 continue
             if value == 0 and _off(type(table), name):
                 continue  # an oracle switches this error source off
@@ -332,7 +336,7 @@ def ledger_problems(model: BaseModel, study: bool) -> list[str]:
             if problem:
                 problems.append(
                     f"{prefix}{name} = {_value_text(value)}: {problem} (its {entry.kind} range; "
-                    "in a scenario of your own cell, mark it kind = \"user\")"
+                    'in a scenario of your own cell, mark it kind = "user")'
                 )
     return problems
 
@@ -348,8 +352,8 @@ class Ledgered(Documented):
     @model_validator(mode="after")
     def _ledger(self, info: ValidationInfo) -> Ledgered:
         self.plausibility()
-        study = bool((info.context or {}).get("study", False))
-        problems = ledger_problems(self, study)
+        context = info.context or {}
+        problems = ledger_problems(self, bool(context.get("study")), context.get("ranges", True))
         if len(problems) > MAX_LISTED:
             more = len(problems) - MAX_LISTED
             problems = [*problems[:MAX_LISTED], f"and {more} more"]

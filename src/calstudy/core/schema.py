@@ -9,13 +9,15 @@ row and column), the value found and the allowed range::
     data/robots/my_robot.toml: link #2.a_mm = 68000.0: must be <= 10000.0
     my_handeye.csv: row 7, column 'sz': '12,5' is not a number (decimal comma? write 12.5)
 
-:func:`load_toml` reads and validates a TOML file in one call, with :func:`apply_overrides`
+:func:`load_model` reads and validates a TOML file in one call, with :func:`apply_overrides`
 replacing some of its inputs first (checked as if the file held them); the validated model is
-then the scenario itself, frozen, its derived values cached on it (:meth:`Schema.replace` makes a
-changed copy). :func:`read_csv_table` reads a CSV the way a spreadsheet writes it (byte-order
-mark, ``;`` as separator, ``#`` comment lines) and :func:`validate_rows` checks its rows. The
-range types (:data:`Finite`, :data:`PositiveFinite`, ...), :func:`rigid_transform`,
-:class:`Radians` and :class:`Texts` are the building blocks of the schemas.
+then the scenario itself, frozen, its derived values cached on it. :meth:`Schema.replace` makes a
+changed copy without validation (an oracle, a sweep point beyond the file's ranges),
+:func:`with_inputs` one validated again. :func:`read_csv_table` reads a CSV the way a spreadsheet
+writes it (byte-order mark, ``;`` as separator, ``#`` comment lines) and :func:`validate_rows`
+checks its rows. The range types (:data:`Finite`, :data:`PositiveFinite`, ...),
+:func:`rigid_transform` (:data:`Rigid4x4`), :class:`Pinhole`, :class:`Radians` and :class:`Texts`
+are the building blocks of the schemas.
 
 A paper's ``scenario.py`` uses it as::
 
@@ -28,7 +30,8 @@ A paper's ``scenario.py`` uses it as::
         station: Station
         robot: str
 
-    scenario = load_toml(path, ScenarioFile, "hybrid scenario")  # CalibrationError naming key
+    scenario = load_model(path, ScenarioFile, "hybrid scenario")   # CalibrationError naming key
+    scenario.station.views_per_sphere   # the validated file is the scenario
 """
 
 from __future__ import annotations
@@ -276,6 +279,8 @@ def _value(err: dict) -> str:
     if err.get("type") in ("missing",):
         return ""
     value = err.get("input")
+    if isinstance(value, tuple):  # a TOML array that Row made a tuple: show it as written
+        value = list(value)
     if isinstance(value, dict | list) and len(repr(value)) > 60:
         return ""
     return f" = {value!r}"
@@ -301,14 +306,20 @@ def format_errors(
 
 
 def validate(
-    model: type[M], data: Any, source: str | Path, prefix: str = "", study: bool = False
+    model: type[M],
+    data: Any,
+    source: str | Path,
+    prefix: str = "",
+    study: bool = False,
+    ranges: bool = True,
 ) -> M:
     """``model`` validated from ``data``; a :class:`CalibrationError` naming ``source``, each bad
     key (with ``prefix`` in front, e.g. ``"station."``), its value and the allowed range.
     ``study`` marks a file of the study's own ``data/`` (its validators see it in the context:
-    :mod:`calstudy.core.ledger` refuses inputs marked ``user`` there)."""
+    :mod:`calstudy.core.ledger` refuses inputs marked ``user`` there); ``ranges=False`` leaves
+    out the ledger's plausible ranges (a sweep goes beyond them on purpose)."""
     try:
-        return model.model_validate(data, context={"study": study})
+        return model.model_validate(data, context={"study": study, "ranges": ranges})
     except ValidationError as exc:
         raise CalibrationError(format_errors(exc, source, prefix, model)) from None
 
@@ -325,12 +336,18 @@ def file_key(path: Path) -> tuple:
     return (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
 
 
-def read_toml(path: str | Path, what: str) -> dict:
-    """The TOML table of ``path``; FileNotFoundError naming the path and ``what`` if missing,
-    CalibrationError with the parser's line and column if it is not valid TOML."""
+def _existing(path: str | Path, what: str) -> Path:
+    """``path`` as a Path; FileNotFoundError naming it and ``what`` if it is not a file."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file (the {what})")
+    return path
+
+
+def read_toml(path: str | Path, what: str) -> dict:
+    """The TOML table of ``path``; FileNotFoundError naming the path and ``what`` if missing,
+    CalibrationError with the parser's line and column if it is not valid TOML."""
+    path = _existing(path, what)
     key = file_key(path)
     if key in _PARSED:
         return copy.deepcopy(_PARSED[key])
@@ -351,39 +368,6 @@ def read_toml(path: str | Path, what: str) -> dict:
 #: scenario from the same few files again and again, and parsing them costs more than the copy
 #: handed out (an edited file has a new key, so it is read again)
 _PARSED: dict[tuple[str, int, int], dict] = {}
-
-
-def apply_overrides(table: dict, overrides: Mapping[str, object] | None) -> dict:
-    """A new table: ``table`` with the inputs at the dotted keys of ``overrides`` replaced,
-    for validation as if the file held them.
-
-    Parameters
-    ----------
-    table : dict
-        A parsed TOML table (left unchanged).
-    overrides : mapping of str to object, or None
-        Dotted TOML key (``"survey.marker_sigma_px"``) -> the value to put there.
-
-    Returns
-    -------
-    dict
-        A deep copy of ``table`` with the values replaced.
-
-    Raises
-    ------
-    CalibrationError
-        If a key names no input of ``table`` (a missing key, a table, a ledger entry), naming it.
-    """
-    out = copy.deepcopy(table)
-    for key, value in (overrides or {}).items():
-        *heads, name = key.split(".")
-        node: Any = out
-        for head in heads:
-            node = node.get(head) if isinstance(node, dict) and head != PROVENANCE else None
-        if not isinstance(node, dict) or name not in node or isinstance(node[name], dict):
-            raise CalibrationError(f"override {key!r}: the scenario has no input {key!r}")
-        node[name] = value
-    return out
 
 
 def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
@@ -416,6 +400,118 @@ PROVENANCE = "provenance"
 #: every Monte Carlo trial draws its station from the same files, and validating them costs
 #: more than the rest of the loading (an edited file has a new key, so it is checked again)
 _VALIDATED: set = set()
+
+
+def apply_overrides(table: dict, overrides: Mapping[str, object] | None) -> dict:
+    """A copy of the TOML table ``table`` with some of its inputs replaced.
+
+    Parameters
+    ----------
+    table : dict
+        A parsed TOML file (:func:`read_toml`); left unchanged.
+    overrides : mapping of str to object, or None
+        Dotted keys of the file (``"survey.marker_sigma_px"``) and their new values, in the
+        file's own units.
+
+    Returns
+    -------
+    dict
+        A new table, to be validated as the file would be (so a value outside its type's bounds
+        or its ledger range is refused the same way).
+
+    Raises
+    ------
+    CalibrationError
+        If a key names no entry of the table, a whole table or a ``provenance`` entry (none is
+        an input), naming it.
+    """
+    out = copy.deepcopy(table)
+    for key, value in (overrides or {}).items():
+        parts = str(key).split(".")
+        node = out
+        for i, part in enumerate(parts):
+            last = i == len(parts) - 1
+            if (
+                not isinstance(node, dict)
+                or part not in node
+                or part == PROVENANCE
+                or (last and isinstance(node[part], dict))
+            ):
+                raise CalibrationError(
+                    f"override {key!r}: {'.'.join(parts[: i + 1])!r} names no input of the "
+                    "scenario file (misspelt?)"
+                )
+            if not last:
+                node = node[part]
+        node[parts[-1]] = copy.deepcopy(value)
+    return out
+
+
+def load_model(
+    path: str | Path, model: type[M], what: str, overrides: Mapping[str, object] | None = None
+) -> M:
+    """The TOML file ``path`` (the ``what``, for messages) validated against ``model``, with the
+    dotted ``overrides`` (:func:`apply_overrides`) applied first.
+
+    A file of the study's ``data/`` is validated as one (:func:`is_study_file`). The validated
+    model is kept by (file, modification time, size, model, overrides): a Monte Carlo trial
+    loads the same few files again and again; the model is frozen, so it is shared.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a file.
+    CalibrationError
+        If the file is not TOML, an override names no input, or the table breaks ``model``
+        (the message names the file, the key, the value and the allowed range).
+    """
+    path = _existing(path, what)
+    key = (*file_key(path), model, repr(sorted((overrides or {}).items())))
+    if key not in _MODELS:
+        try:
+            table = apply_overrides(read_toml(path, what), overrides)
+        except CalibrationError as exc:
+            raise CalibrationError(f"{path}: {exc}") from None
+        loaded = validate(model, table, path, study=is_study_file(path))
+        if len(_MODELS) >= 64:
+            _MODELS.clear()
+        _MODELS[key] = loaded
+    return _MODELS[key]
+
+
+#: validated models of :func:`load_model` by (resolved path, modification time, size, model,
+#: overrides): validating a scenario costs more than the rest of loading it (an edited file has
+#: a new key, so it is checked again)
+_MODELS: dict[tuple, BaseModel] = {}
+
+
+def with_inputs(model: M, changes: Mapping[str, object], ranges: bool = False) -> M:
+    """A copy of the validated ``model`` with the inputs at dotted keys changed, validated
+    again: types, bounds and the rules across keys and tables hold as in a file.
+
+    Parameters
+    ----------
+    model : pydantic.BaseModel
+        A validated scenario (or table).
+    changes : mapping of str to object
+        Dotted keys of ``model`` (``"scanner.sigma_point_mm"``) and their new values.
+    ranges : bool
+        Also hold the values to their ledger ranges (:mod:`calstudy.core.ledger`); off by
+        default, as a sweep goes beyond them on purpose.
+
+    Returns
+    -------
+    pydantic.BaseModel
+        A new model of the same type.
+
+    Raises
+    ------
+    CalibrationError
+        If a key names no input or a value breaks the model (naming the key and the value).
+    """
+    table = apply_overrides(model.model_dump(), changes)
+    source = f"{type(model).__name__} with changed inputs"
+    return validate(type(model), table, source, ranges=ranges)
 
 
 def rotation_problem(matrix, tol: float = 1e-4) -> str:
@@ -459,14 +555,27 @@ def check_principal_point(cx: float, cy: float, width: int, height: int) -> None
         )
 
 
-def load_toml(
-    path: str | Path, model: type[M], what: str, overrides: Mapping[str, object] | None = None
-) -> M:
-    """Read the TOML file ``path`` (the ``what``, for messages), replace the inputs of
-    ``overrides`` (:func:`apply_overrides`) and validate it against ``model``: a replaced value
-    is checked as if the file held it."""
-    table = apply_overrides(read_toml(path, what), overrides)
-    return validate(model, table, path, study=is_study_file(path))
+#: a rigid 4 x 4 transform written as four rows (last row ``[0, 0, 0, 1]``, an orthonormal
+#: rotation of determinant +1 within :func:`rotation_problem`'s tolerance)
+Rigid4x4 = rigid_transform()
+
+
+class Pinhole(Schema):
+    """The table of a pinhole camera: focal lengths and principal point (px) inside a
+    ``width`` x ``height`` px image. A scenario's camera table derives from it (with
+    :class:`calstudy.core.ledger.Inputs` for the provenance of each entry)."""
+
+    fx: PositiveFinite
+    fy: PositiveFinite
+    cx: Finite
+    cy: Finite
+    width: Pixels
+    height: Pixels
+
+    @model_validator(mode="after")
+    def _centre_in_image(self) -> Pinhole:
+        check_principal_point(self.cx, self.cy, self.width, self.height)
+        return self
 
 
 # ----------------------------------------------------------------------------------------------
@@ -526,8 +635,7 @@ def read_csv_table(path: str | Path, what: str) -> tuple[list[str], list[tuple[i
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise CalibrationError(
-            f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); save it as "
-            "CSV UTF-8"
+            f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); save it as CSV UTF-8"
         ) from None
     lines = [
         (i, ln)
@@ -598,9 +706,11 @@ __all__ = [
     "NonNegativeFinite",
     "NonNegativeInt",
     "PositiveFinite",
+    "Pinhole",
     "PositiveInt",
     "Pixels",
     "Radians",
+    "Rigid4x4",
     "Row",
     "Schema",
     "Texts",
@@ -611,7 +721,7 @@ __all__ = [
     "file_key",
     "format_errors",
     "is_study_file",
-    "load_toml",
+    "load_model",
     "number_problem",
     "parse_number",
     "read_csv_table",
@@ -621,5 +731,6 @@ __all__ = [
     "rotation_problem",
     "validate",
     "validate_rows",
+    "with_inputs",
     "without_provenance",
 ]

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
+from pydantic import BaseModel
 
 from calstudy.core.errors import CalibrationError
 
@@ -265,6 +266,9 @@ def _canonical(obj: object) -> object:
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         fields = {f.name: _canonical(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
         return {"dataclass": _qualified(type(obj)), "fields": fields}
+    if isinstance(obj, BaseModel):  # its fields, not what its cached properties hold
+        fields = {name: _canonical(getattr(obj, name)) for name in type(obj).model_fields}
+        return {"model": _qualified(type(obj)), "fields": fields}
     if isinstance(obj, Mapping):
         items = sorted(([_canonical(k), _canonical(v)] for k, v in obj.items()), key=_dumps)
         return {"mapping": _qualified(type(obj)), "items": items}

@@ -23,12 +23,12 @@ from calstudy.io.claims_cells import typeset
 from calstudy.papers.binocular import schema as binocular
 from calstudy.papers.dualarm import schema as dualarm
 from calstudy.papers.hybrid import schema as hybrid
-from calstudy.papers.selfcal import schema as selfcal
+from calstudy.papers.selfcal import scenario as selfcal
 
 #: paper -> its scenario files and their schemas, in book order
 SCENARIO_FILES = {
     "hybrid": (("station.toml", hybrid.StationFile), ("production.toml", hybrid.ProductionFile)),
-    "selfcal": (("scenario.toml", selfcal.ScenarioFile),),
+    "selfcal": (("scenario.toml", selfcal.Scenario),),
     "binocular": (
         ("sensor.toml", binocular.SensorFile),
         ("calibrator.toml", binocular.CalibratorFile),

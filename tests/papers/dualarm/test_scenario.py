@@ -59,7 +59,9 @@ def test_overrides_are_validated_as_the_file_would_be(scenario):
         match=r"scenario\.toml: detection\.sigma_px = 0\.5: outside its plausible range",
     ):
         load_scenario(overrides={"detection.sigma_px": 0.5})
-    with pytest.raises(CalibrationError, match=r"override 'detection\.sigma': the scenario has"):
+    with pytest.raises(
+        CalibrationError, match=r"override 'detection\.sigma': 'detection\.sigma' names no input"
+    ):
         load_scenario(overrides={"detection.sigma": 0.05})
 
 

@@ -1,6 +1,8 @@
 """The experiments: exact recovery on a noise-free station, what the nominal model costs, the
 Cramer-Rao bound, determinism, the user's CSV, and the sweep of the robot's errors."""
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -29,7 +31,7 @@ def test_noise_free_station_recovers_everything_exactly():
     design = [r["field_error_mm"] for r in rows if r["variant"] == "design pose"]
     assert len(design) == 10 and min(design) > 0.05
     calibrated = np.array([r["estimate"] for r in rows if r["variant"] == "homography"])
-    s = simulate.with_overrides(s, datum_sigma=0.0)
+    s = dataclasses.replace(s, datum_sigma=0.0)
     for r in experiments.rps_trial(s, calibrated, rng, penalties=(1.0, 1e4)):
         assert r["frame_error_mm"] < 1e-6
 
@@ -113,12 +115,12 @@ def test_move_ranges_bound_the_pure_translations_and_refuse_a_stripe_across_the_
 
 
 def test_mounting_error_has_the_stated_tolerance_as_three_sigma():
-    st = scenario.load_station()["stationary"]
-    design = np.repeat(simulate._stationary_sensors(st)[None], 400, axis=0)
+    st = scenario.load_station().stationary
+    design = np.repeat(st.design[None], 400, axis=0)
     mounted = simulate._mount_stationary(design, st, rng(4))
     shift = (mounted[..., :3, 3] - design[..., :3, 3]).reshape(-1, 3)
     turn = np.rad2deg(geo.rotation_error(mounted.reshape(-1, 4, 4), design.reshape(-1, 4, 4)))
-    np.testing.assert_allclose(shift.std(axis=0), st["mounting_tolerance_mm"] / 3, rtol=0.05)
+    np.testing.assert_allclose(shift.std(axis=0), st.mounting_tolerance_mm / 3, rtol=0.05)
     # the angle of a rotation vector with N(0, s^2) per axis has RMS s * sqrt(3)
     rms = np.sqrt(np.mean(turn**2))
-    assert rms == pytest.approx(st["mounting_tolerance_deg"] / 3 * np.sqrt(3), rel=0.05)
+    assert rms == pytest.approx(st.mounting_tolerance_deg / 3 * np.sqrt(3), rel=0.05)

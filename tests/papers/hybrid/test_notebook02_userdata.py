@@ -37,5 +37,6 @@ def test_notebook02_runs_on_user_csvs(tmp_path):
     assert "Measurements: your tables." in text
     assert "one simulated station" not in text
     table = pd.read_csv(tmp_path / "out" / notebook.stem / "table1_station.csv")
-    expected = report.station_table1(run, scenario.load_scenario().n_compensation)
+    n = scenario.load_scenario().production.protocol.n_compensation
+    expected = report.station_table1(run, n)
     assert table["count"].tolist() == expected["count"].tolist()

@@ -78,7 +78,7 @@ def test_notebook01_tables_and_verdicts_from_trials():
 
 @pytest.mark.skipif(not (NB02 / "trials_production.csv").is_file(), reason="no committed trials")
 def test_notebook02_tables_and_verdicts_from_trials():
-    n = load_scenario().n_compensation
+    n = load_scenario().production.protocol.n_compensation
     production = _trials(NB02, "production")
     _compare(report.summarise_systematic(production, n), NB02 / "systematic_summary.csv")
     deviation, correlation = report.table1(production, n)

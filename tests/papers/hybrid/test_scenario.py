@@ -5,15 +5,17 @@ import numpy as np
 import pytest
 
 from calstudy import CalibrationError
+from calstudy.core.schema import with_inputs
 from calstudy.papers.hybrid import scenario
 
 published = scenario.load_published()
+table1 = published.table1
 
 
 def test_published_table1_counts_match_its_percentages():
     for counts, percent in (
-        (published.deviation_counts, published.deviation_percent),
-        (published.correlation_counts, published.correlation_percent),
+        (table1.deviation_counts, table1.deviation_percent),
+        (table1.correlation_counts, table1.correlation_percent),
     ):
         assert sum(counts) == 174
         # the paper prints 10 / 174 = 5.747 % as 5.74 (truncated), hence 0.01 and not 0.005
@@ -21,24 +23,43 @@ def test_published_table1_counts_match_its_percentages():
 
 
 def test_duplicated_feature_ids_in_the_data_file_raise():
-    cfg = scenario.load_production()
-    cfg["flexible"]["features"][1]["id"] = cfg["flexible"]["features"][0]["id"]
+    features = [f.model_dump() for f in scenario.load_production().flexible.features]
+    features[1]["id"] = features[0]["id"]
     with pytest.raises(
-        CalibrationError, match=r"duplicated feature points in production.toml: \['H01'\]"
+        CalibrationError, match=r"production.toml: duplicated feature points \['H01'\]"
     ):
-        scenario.load_features(cfg)
+        scenario.load_production(overrides={"flexible.features": features})
 
 
 def test_scenario_checks_its_values():
     sc = scenario.load_scenario()
-    with pytest.raises(CalibrationError, match="n_compensation is 2; at least 3 products"):
-        sc.with_(n_compensation=2)
-    with pytest.raises(CalibrationError, match="part_sigma_mm is -0.1"):
-        sc.with_(part_sigma_mm=-0.1)
+    with pytest.raises(CalibrationError, match="protocol.n_compensation = 2: must be >= 3"):
+        with_inputs(sc, {"production.protocol.n_compensation": 2})
+    with pytest.raises(CalibrationError, match="part_sigma_mm = -0.1: must be >= 0"):
+        with_inputs(sc, {"production.variation.part_sigma_mm": -0.1})
+
+
+def test_overrides_are_validated_as_the_file():
+    """An override inside the ledger's range loads; outside it, or of no input, it is refused
+    naming the key and the value; a sweep's copy (with_inputs) goes beyond the range."""
+    sc = scenario.load_scenario(overrides={"production.variation.part_sigma_mm": 0.2})
+    assert sc.production.variation.part_sigma_mm == 0.2
+    assert scenario.load_scenario().production.variation.part_sigma_mm == 0.5
+    with pytest.raises(
+        CalibrationError, match=r"variation\.part_sigma_mm = 1\.0: outside its plausible range"
+    ):
+        scenario.load_scenario(overrides={"production.variation.part_sigma_mm": 1.0})
+    unknown = r"production\.toml: override 'variation\.part_sigma': .* names no"
+    with pytest.raises(CalibrationError, match=unknown):
+        scenario.load_scenario(overrides={"production.variation.part_sigma": 0.2})
+    with pytest.raises(CalibrationError, match="begins with 'station.' or 'production.'"):
+        scenario.load_scenario(overrides={"variation.part_sigma_mm": 0.2})
+    wide = with_inputs(sc, {"production.variation.part_sigma_mm": 1.0})
+    assert wide.production.variation.part_sigma_mm == 1.0
 
 
 def test_features_match_the_paper_counts():
-    f = scenario.load_features()
+    f = scenario.load_scenario().features
     assert len(f.ids) == 58 and len(f.flexible) == 48 and len(f.stationary) == 10
     assert int(f.fixed.sum()) == 6
     assert [f.ids[i] for i in np.argwhere(f.fixed)[:, 0]] == [
@@ -53,16 +74,16 @@ def test_features_match_the_paper_counts():
 
 def test_station_reads_the_move_ranges_and_the_panel_size_from_the_data():
     cfg = scenario.load_station()
-    assert cfg["calibration_moves"]["across_plane_range_mm"] == 2.0
-    assert cfg["calibration_moves"]["rotation_min_deg"] == 10.0
-    assert cfg["workpiece"]["size_mm"] == [1500.0, 1200.0]
+    assert cfg.calibration_moves.across_plane_range_mm == 2.0
+    assert cfg.calibration_moves.rotation_min_deg == 10.0
+    assert cfg.workpiece.size_mm == [1500.0, 1200.0]
 
 
 def test_published_numbers_are_the_papers():
-    assert published.within_0p3_percent == 96.55 and published.r_above_0p7_percent == 85.64
-    assert published.systematic_mm == (2.0, 4.0)
-    assert published.deviation_edges_mm == (0.1, 0.2, 0.3, 0.5)
-    assert published.correlation_edges == (0.6, 0.7, 0.8, 0.9)
+    assert table1.within_0p3_percent == 96.55 and table1.r_above_0p7_percent == 85.64
+    assert published.systematic.range_mm == (2.0, 4.0)
+    assert published.table1.deviation_edges_mm == (0.1, 0.2, 0.3, 0.5)
+    assert published.table1.correlation_edges == (0.6, 0.7, 0.8, 0.9)
 
 
 def test_missing_file_and_missing_key_raise(tmp_path):

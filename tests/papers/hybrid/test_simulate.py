@@ -35,14 +35,14 @@ def test_robot_error_scale_multiplies_the_drawn_link_errors():
 def _tilted_flange_poses(station, n, rng):
     """Flange poses of the true robot tilted about the sphere centre, drawn as the calibration
     moves draw them (random axis, angle within the station's rotation range)."""
-    cfg = station.config["calibration_moves"]
+    cfg = station.config.calibration_moves
     ref = station.sphere_reference_pose()
     about = geo.make_transform(np.eye(3), station.sphere.centre)
     poses = []
     for _ in range(n):
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
-        angle = np.deg2rad(rng.uniform(cfg["rotation_min_deg"], cfg["rotation_range_deg"]))
+        angle = np.deg2rad(rng.uniform(cfg.rotation_min_deg, cfg.rotation_range_deg))
         turn = about @ geo.make_transform(geo.rotvec_to_matrix(axis * angle), np.zeros(3))
         poses.append(turn @ geo.invert(about) @ ref @ geo.invert(station.sensor2flange_true))
     return poses

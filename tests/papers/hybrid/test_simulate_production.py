@@ -1,14 +1,16 @@
 """Panels measured on the simulated station and the CMM: exact without robot error and noise,
 a repeatable millimetre deviation with it, and the paper's layout."""
 
+import dataclasses
+
 import numpy as np
 from support import ideal_station
 
+from calstudy.core.schema import with_inputs
 from calstudy.papers.hybrid import (
     compensation,
     experiments,
     scenario,
-    simulate,
     simulate_production,
 )
 
@@ -16,10 +18,10 @@ from calstudy.papers.hybrid import (
 def _noise_free(robot_errors: bool):
     # notebook 01's noise-free station: no sensor, pixel or robot noise, a perfectly made target
     s, rng = ideal_station(seed=8, robot_errors=robot_errors)
-    s = simulate.with_overrides(s, datum_sigma=0.0)
-    sc = scenario.load_scenario().with_(
-        feature_sigma_mm=0.0, repeatability_mm=0.0, drift_sigma_mm=0.0, cmm_sigma_mm=0.0
-    )
+    s = dataclasses.replace(s, datum_sigma=0.0)
+    zero = ("production.sensors.feature_sigma_mm", "station.robot.repeatability_mm")
+    zero += ("production.drift.sigma_mm", "production.cmm.sigma_mm")
+    sc = with_inputs(scenario.load_scenario(), dict.fromkeys(zero, 0.0))
     return experiments.calibrate(s, rng), sc, rng
 
 
@@ -43,8 +45,8 @@ def test_simulated_run_has_the_paper_layout_and_frame_fixed_coordinates():
     ps = experiments.calibrated_station(rng)
     sc = scenario.load_scenario()
     run = simulate_production.simulate_run(ps, sc, rng)
-    assert run["compensation"][0].shape == (sc.n_compensation_max, 58, 3)
-    assert run["follow-up"][1].shape == (sc.n_follow_up, 58, 3)
+    assert run["compensation"][0].shape == (sc.production.protocol.n_compensation_max, 58, 3)
+    assert run["follow-up"][1].shape == (sc.production.protocol.n_follow_up, 58, 3)
     h = np.concatenate([run[p][0] for p in scenario.PHASES])
     c = np.concatenate([run[p][1] for p in scenario.PHASES])
     np.testing.assert_array_equal(compensation.frame_fixed(h, c), ps.features.fixed)

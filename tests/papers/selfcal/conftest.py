@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calstudy.core.schema import with_inputs
 from calstudy.papers.selfcal.scenario import load_scenario
 from calstudy.papers.selfcal.simulate import draw_placements, draw_station, simulate
 
@@ -18,9 +19,9 @@ def scenario():
 def quiet(scenario):
     """The scenario without any noise (scanner, repeatability and tracker exact) and without the
     unmodelled joint compliance: the true system lies in the model class."""
-    return scenario.with_(
-        sigma_point_mm=0.0, repeatability_mm=0.0, tracker=(0.0, 0.0, 2.0), compliance_scale=0.0
-    )
+    zero = ("scanner.sigma_point_mm", "repeatability.sigma_mm", "tracker.u0_mm")
+    zero += ("tracker.u1_mm_per_m", "compliance.scale")
+    return with_inputs(scenario, dict.fromkeys(zero, 0.0))
 
 
 @pytest.fixture(scope="module")

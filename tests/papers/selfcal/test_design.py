@@ -102,7 +102,12 @@ def test_selection_beats_random_and_runs_within_5_s(quiet, noise_free):
     station, _, _ = noise_free
     rng = np.random.default_rng(3)
     Q, sphere = candidate_views(
-        quiet.robot, quiet.sensor_design, view_geometry(quiet), station.spheres_base, 50, rng
+        quiet.nominal_robot,
+        quiet.sensor.design,
+        view_geometry(quiet),
+        station.spheres_base,
+        50,
+        rng,
     )
     # 5,000 candidates: the 200 planned views, each turned about joint 6 in 25 steps
     turns = np.linspace(-math.pi, math.pi, 25, endpoint=False)

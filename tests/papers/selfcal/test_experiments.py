@@ -58,9 +58,10 @@ def test_compliance_leaves_an_error_the_truth_cannot_remove(scenario):
 
 def test_alternation_moves_towards_the_two_step_solution(quiet, noise_free):
     station, meas, _ = noise_free
-    joint = two_step(meas, quiet.robot, station.nominal_params)
-    one, _ = three_step_alternated(meas, quiet.robot, station.nominal_params, max_rounds=1)
-    five, rounds = three_step_alternated(meas, quiet.robot, station.nominal_params, max_rounds=5)
+    robot = quiet.nominal_robot
+    joint = two_step(meas, robot, station.nominal_params)
+    one, _ = three_step_alternated(meas, robot, station.nominal_params, max_rounds=1)
+    five, rounds = three_step_alternated(meas, robot, station.nominal_params, max_rounds=5)
     assert rounds == 5
     assert scaled_error(five, joint) < scaled_error(one, joint)
     # without noise or compliance the joint fit recovers the truth
@@ -88,5 +89,5 @@ def test_payload_deflection_is_zero_only_when_switched_off(scenario, scale):
     from calstudy.papers.selfcal.simulate import joint_deflection
 
     q = np.array([[0.2, 0.3, -0.1, 0.0, -0.8, 0.0]])
-    d = joint_deflection(scenario, scenario.robot, q, scale)
+    d = joint_deflection(scenario, scenario.nominal_robot, q, scale)
     assert (np.abs(d).max() > 1e-5) == (scale > 0)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from calstudy import CalibrationError
+from calstudy.core.schema import with_inputs
 from calstudy.papers.selfcal.routes import (
     hand_eye,
     three_step,
@@ -54,7 +55,7 @@ def test_very_poor_start_converges_to_the_same_solution(scenario, noise_free):
 
 
 def test_weighted_identification_is_unbiased_with_noise(scenario):
-    scenario = scenario.with_(compliance_scale=0.0)  # noise only: the model holds exactly
+    scenario = with_inputs(scenario, {"compliance.scale": 0.0})  # noise only: model exact
     rng = np.random.default_rng(7)
     station = draw_station(scenario, rng)
     meas = simulate(scenario, station, station.spheres_base, 6, rng)
@@ -67,11 +68,11 @@ def test_three_step_is_exact_for_a_nominal_robot(quiet):
     """With no manufacturing error and no noise nothing propagates: three steps are exact."""
     rng = np.random.default_rng(8)
     station = draw_station(quiet, rng)
-    exact = parameters_from_robot(quiet.robot, station.part2base, station.sensor2flange)
+    exact = parameters_from_robot(quiet.nominal_robot, station.part2base, station.sensor2flange)
     station = replace(station, true_params=exact)
     meas = simulate(quiet, station, station.spheres_base, 6, rng)
     for route in (three_step, three_step_reordered, two_step):
-        params = route(meas, quiet.robot, station.nominal_params)
+        params = route(meas, quiet.nominal_robot, station.nominal_params)
         points = GlobalModel().points(params, meas.Q, meas.C)
         assert np.linalg.norm(points - meas.P_ref, axis=1).max() < 1e-6, route.__name__
 
@@ -82,7 +83,9 @@ def test_measurement_covariance_matches_monte_carlo(scenario):
     A tracker made noisy enough to dominate shows the correlation between two views of a sphere.
     """
     # the covariance describes the noise; the unmodelled compliance is switched off here
-    noisy_tracker = scenario.with_(tracker=(0.5, 0.0, 2.0), compliance_scale=0.0)
+    noisy_tracker = with_inputs(
+        scenario, {"tracker.u0_mm": 0.5, "tracker.u1_mm_per_m": 0.0, "compliance.scale": 0.0}
+    )
     rng = np.random.default_rng(14)
     station = draw_station(noisy_tracker, rng)
     model = GlobalModel()
@@ -126,23 +129,23 @@ def test_coincident_spheres_raise():
 
 def test_sphere_fit_needs_four_points(scenario):
     with pytest.raises(CalibrationError, match="at least 4"):
-        fit_sphere_cap(np.eye(3), scenario.max_cap_condition)
+        fit_sphere_cap(np.eye(3), scenario.scanner.max_fit_condition)
 
 
 def test_sphere_fit_rejects_coplanar_points(scenario):
     rng = np.random.default_rng(10)
     flat = np.column_stack([rng.uniform(-5, 5, (50, 2)), np.zeros(50)])
     with pytest.raises(CalibrationError, match="coplanar"):
-        fit_sphere_cap(flat, scenario.max_cap_condition)
+        fit_sphere_cap(flat, scenario.scanner.max_fit_condition)
 
 
 def test_small_cap_raises_with_condition_number(scenario):
     rng = np.random.default_rng(11)
     cap = scan_cap([0, 0, 300.0], 25.0, math.radians(5), 400, 0.02, rng)
     with pytest.raises(CalibrationError, match=r"too small to fix the radius: condition number \d"):
-        fit_sphere_cap(cap, scenario.max_cap_condition)
+        fit_sphere_cap(cap, scenario.scanner.max_fit_condition)
     wide = scan_cap([0, 0, 300.0], 25.0, math.radians(60), 400, 0.02, rng)
-    centre, radius, cond = fit_sphere_cap(wide, scenario.max_cap_condition)
+    centre, radius, cond = fit_sphere_cap(wide, scenario.scanner.max_fit_condition)
     assert cond < 5 and abs(radius - 25.0) < 0.05
 
 
@@ -164,7 +167,7 @@ def test_routes_given_the_hand_eye_fit_are_the_routes_that_fit_it(scenario):
     rng = np.random.default_rng(8)
     station = draw_station(scenario, rng)
     meas = simulate(scenario, station, station.spheres_base, 6, rng)
-    start, robot = station.nominal_params, scenario.robot
+    start, robot = station.nominal_params, scenario.nominal_robot
     first = hand_eye(meas, robot, start)
     assert three_step(meas, robot, start, first=first).tobytes() == (
         three_step(meas, robot, start).tobytes()

@@ -26,8 +26,8 @@ def _write_exact(folder, scenario, station, meas, val, noise=None):
     return measured.write_cell(
         folder,
         ROBOT_FILE,
-        scenario.base_rough,
-        scenario.sensor_design,
+        scenario.base.rough,
+        scenario.sensor.design,
         spheres,
         replace(meas, **strip),
         replace(val, sphere=val.sphere + k, **strip),

@@ -49,7 +49,7 @@ def test_hayati_link_is_eq2():
 
 def test_global_model_reproduces_the_dh_chain(scenario):
     rng = np.random.default_rng(1)
-    robot = perturb_robot(scenario.robot, rng)
+    robot = perturb_robot(scenario.nominal_robot, rng)
     vec = robot.parameters()
     vec[7] = 0.0  # d2: Eq. 2 has none
     robot = robot.with_parameters(vec)
@@ -64,13 +64,15 @@ def test_global_model_reproduces_the_dh_chain(scenario):
 def test_joint6_turns_about_the_z_axis_of_frame5(scenario):
     """Our reading of 5HS: turning joint 6 rotates the sensor about the joint-6 axis (frame 5 z)."""
     rng = np.random.default_rng(2)
-    params = parameters_from_robot(scenario.robot, np.eye(4), random_pose(rng, 200.0))
-    q = scenario.robot.random_configurations(rng, 1)
+    params = parameters_from_robot(scenario.nominal_robot, np.eye(4), random_pose(rng, 200.0))
+    q = scenario.nominal_robot.random_configurations(rng, 1)
     q2 = q.copy()
     q2[0, 5] += 0.7
     model = GlobalModel()
     a, b = model.sensor2part(params, np.vstack([q, q2]))
-    frame5 = scenario.robot.fk(q[0]) @ np.linalg.inv(scenario.robot.links[5].split()[1])
+    frame5 = scenario.nominal_robot.fk(q[0]) @ np.linalg.inv(
+        scenario.nominal_robot.links[5].split()[1]
+    )
     relative = np.linalg.inv(frame5) @ b @ np.linalg.inv(a) @ frame5
     expected = make_transform(
         np.array(
@@ -83,8 +85,10 @@ def test_joint6_turns_about_the_z_axis_of_frame5(scenario):
 
 def test_jacobian_matches_finite_differences(scenario):
     rng = np.random.default_rng(3)
-    params = parameters_from_robot(scenario.robot, random_pose(rng), random_pose(rng, 200.0))
-    Q = scenario.robot.random_configurations(rng, 4)
+    params = parameters_from_robot(
+        scenario.nominal_robot, random_pose(rng), random_pose(rng, 200.0)
+    )
+    Q = scenario.nominal_robot.random_configurations(rng, 4)
     C = rng.normal(0.0, 100.0, (4, 3))
     model = GlobalModel()
     points, jac = model.points_and_jacobian(params, Q, C)
@@ -111,16 +115,18 @@ def test_pose_parameters_round_trip():
     [(7, 2.0, "link 2 of Eq. 2 has no offset d"), (14, 0.01, "beta is only modelled on link 2")],
 )
 def test_tables_outside_the_model_raise(scenario, index, value, match):
-    vec = scenario.robot.parameters()
+    vec = scenario.nominal_robot.parameters()
     vec[index] = value
     with pytest.raises(CalibrationError, match=match):
-        parameters_from_robot(scenario.robot.with_parameters(vec), np.eye(4), np.eye(4))
+        parameters_from_robot(scenario.nominal_robot.with_parameters(vec), np.eye(4), np.eye(4))
 
 
 def test_points_and_jacobian_keep_the_last_answer_read_only(scenario):
     rng = np.random.default_rng(4)
-    params = parameters_from_robot(scenario.robot, random_pose(rng), random_pose(rng, 200.0))
-    Q = scenario.robot.random_configurations(rng, 3)
+    params = parameters_from_robot(
+        scenario.nominal_robot, random_pose(rng), random_pose(rng, 200.0)
+    )
+    Q = scenario.nominal_robot.random_configurations(rng, 3)
     C = rng.normal(0.0, 100.0, (3, 3))
     model = GlobalModel()
     points, jac = model.points_and_jacobian(params, Q, C)

@@ -44,9 +44,9 @@ def test_tables(calib):
     _compare(report.convergence_summary(calib), "convergence_counts")
     _compare(report.robot_example(calib), "robot_parameters_example")
     _compare(report.summarise_robot(calib), "robot_parameters_summary")
-    _compare(report.basin_table(_trials("basin"), sc.published_iterations), "basin")
+    _compare(report.basin_table(_trials("basin"), sc.published.convergence_iterations), "basin")
     compliance = _trials("compliance_sweep")
-    own = sc.compliance_scale
+    own = sc.compliance.scale
     _compare(
         report_sweeps.sweep_table(calib, compliance, "compliance_scale", own), "compliance_sweep"
     )
@@ -64,12 +64,12 @@ def test_compliance_sweep_judges_all_five_claims_at_every_scale(calib):
     at the scenario's own scale the verdicts are those of claims.csv."""
     sc = load_scenario()
     table = report_sweeps.sweep_verdicts(
-        calib, _trials("compliance_sweep"), "compliance_scale", sc.compliance_scale, sc
+        calib, _trials("compliance_sweep"), "compliance_scale", sc.compliance.scale, sc
     )
-    assert sorted(set(table["compliance_scale"])) == sorted(sc.compliance_sweep)
+    assert sorted(set(table["compliance_scale"])) == sorted(sc.compliance.sweep_scales)
     assert (table.groupby("compliance_scale")["claim"].nunique() == 5).all()
     assert (table["n"] >= 30).all()
-    own = table[table["compliance_scale"] == sc.compliance_scale].set_index("claim")
+    own = table[table["compliance_scale"] == sc.compliance.scale].set_index("claim")
     claims = pd.read_csv(OUT / "claims.csv").set_index("id")
     assert own["verdict"].to_dict() == claims["verdict"].to_dict()
     comparisons = table[table["null_control"] != ""]

@@ -13,12 +13,17 @@ from calstudy.papers.selfcal.scenario import load_scenario
 
 
 def test_published_and_protocol_numbers_come_from_the_file(scenario):
-    assert scenario.requirement_mm == 0.42  # Section 5.2
-    assert scenario.published_iterations == 4  # Section 5.2, Fig. 5
-    assert (scenario.n_spheres, scenario.views_per_sphere, scenario.n_validation) == (4, 6, 10)
-    assert scenario.max_cap_condition == 15.0
-    assert scenario.roll_deg == 90.0
-    assert math.isclose(scenario.cap_half_angle_rad, math.radians(60.0))
+    assert scenario.protocol.requirement_mm == 0.42  # Section 5.2
+    assert scenario.published.convergence_iterations == 4  # Section 5.2, Fig. 5
+    protocol = scenario.protocol
+    assert (scenario.spheres.count, protocol.views_per_sphere, protocol.validation_placements) == (
+        4,
+        6,
+        10,
+    )
+    assert scenario.scanner.max_fit_condition == 15.0
+    assert scenario.scanner.roll_deg == 90.0
+    assert math.isclose(scenario.scanner.cap_half_angle_deg, 60.0)
 
 
 def test_missing_key_names_file_and_key(tmp_path: Path):
@@ -43,5 +48,5 @@ def test_missing_file_and_bad_toml_raise(tmp_path: Path):
 def test_empty_path_means_the_papers_file(scenario):
     """The notebook passes ``scenario_toml or None``; an empty string also means the default."""
     default = load_scenario("")
-    assert default.robot.name == scenario.robot.name
-    assert default.requirement_mm == scenario.requirement_mm
+    assert default.nominal_robot.name == scenario.nominal_robot.name
+    assert default.protocol.requirement_mm == scenario.protocol.requirement_mm

@@ -28,7 +28,7 @@ from calstudy.core.schema import (
     apply_overrides,
     file_key,
     is_study_file,
-    load_toml,
+    load_model,
     read_toml,
     validate,
 )
@@ -289,7 +289,7 @@ def paper_table(name: str) -> SensorFile | CalibratorFile | StationFile:
 def _paper_file(name: str, path: Path, key: tuple) -> SensorFile | CalibratorFile | StationFile:
     """The validated file (``key``: :func:`calstudy.core.schema.file_key`; a trial reads the
     paper's names again and again, and an edited file has a new key)."""
-    return load_toml(path, SCHEMAS[name], f"binocular {name} table")
+    return load_model(path, SCHEMAS[name], f"binocular {name} table")
 
 
 def published(name: str, key: str):

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from calstudy.core.config import scenario_file
-from calstudy.core.schema import load_toml
+from calstudy.core.schema import load_model
 from calstudy.papers.dualarm.schema import PublishedFile, Scenario
 
 PAPER = "dualarm"
@@ -52,7 +52,7 @@ def load_scenario(
         message names the file, the key, the value and the allowed range.
     """
     src = scenario_file(PAPER, "scenario.toml", path)
-    return load_toml(src, Scenario, "dualarm scenario", overrides)
+    return load_model(src, Scenario, "dualarm scenario", overrides)
 
 
 def load_published(path: str | Path | None = None) -> PublishedFile:
@@ -72,7 +72,7 @@ def load_published(path: str | Path | None = None) -> PublishedFile:
         methods and rows that differ in number).
     """
     src = scenario_file(PAPER, "published.toml", path)
-    return load_toml(src, PublishedFile, "dualarm published results")
+    return load_model(src, PublishedFile, "dualarm published results")
 
 
 __all__ = ["SPHERES", "load_published", "load_scenario"]

@@ -9,7 +9,7 @@ the markers and transforms as arrays, angles in radians. Frames follow the study
 ``cam2flange`` maps left-camera points to the flange, ``world2base`` the marker (world) frame to
 a robot base, ``base2_to_base1`` base 2 to base 1.
 
-Checked on load (:func:`calstudy.core.schema.load_toml`): every key read must be there with its
+Checked on load (:func:`calstudy.core.schema.load_model`): every key read must be there with its
 type and range (lengths mm, angles degrees where the key says ``_deg``, rotation vectors rad),
 unknown keys are refused, and the cross-field rules below hold (one position per marker name,
 every marker in a declared group, a principal point inside the image, an outlier range that is

@@ -361,14 +361,14 @@ def deviation_bins(deviation) -> np.ndarray:
     """Counts ``(..., 5)`` of |deviation| (mm, last axis = coordinates) in Table 1's bins:
     <= 0.1, (0.1, 0.2], (0.2, 0.3], (0.3, 0.5], > 0.5 (edges from ``published.toml``)."""
     d = np.abs(np.asarray(deviation, dtype=float))
-    idx = np.digitize(d, load_published().deviation_edges_mm, right=True)
+    idx = np.digitize(d, load_published().table1.deviation_edges_mm, right=True)
     return (idx[..., None] == np.arange(5)).sum(axis=-2)
 
 
 def correlation_bins(r) -> np.ndarray:
     """Counts ``(..., 5)`` of correlation coefficients in Table 1's bins:
     > 0.9, (0.8, 0.9], (0.7, 0.8], (0.6, 0.7], <= 0.6 (edges from ``published.toml``)."""
-    edges = load_published().correlation_edges
+    edges = load_published().table1.correlation_edges
     idx = 4 - np.digitize(np.asarray(r, dtype=float), edges, right=True)
     return (idx[..., None] == np.arange(5)).sum(axis=-2)
 

@@ -27,6 +27,7 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
+from calstudy.core.schema import with_inputs
 from calstudy.estimators.fitting import fit_homography, homography_to_pose, solve_pnp
 from calstudy.estimators.handeye import (
     sphere_handeye,
@@ -41,12 +42,12 @@ from calstudy.papers.hybrid.handeye_experiments import (
     paper_moves,
 )
 from calstudy.papers.hybrid.scenario import (
-    SWEEP_LABELS,
+    SWEEP_KEYS,
     Scenario,
-    load_features,
     load_production,
     load_scenario,
     load_station,
+    panel_features,
 )
 from calstudy.papers.hybrid.simulate import (
     HybridStation,
@@ -190,7 +191,7 @@ def rps_trial(
         in_cam = geo.apply(geo.invert(station.statcam2base_true[j]), datums_base_true[j])
         in_cam = in_cam + rng.normal(0.0, station.datum_sigma, 3)
         measured[j] = geo.apply(statcam2base[j], in_cam)
-    length, width = station.config["workpiece"]["size_mm"]
+    length, width = station.config.workpiece.size_mm
     corners = np.array([[0, 0, 0], [length, 0, 0], [0, width, 0], [length, width, 0]], dtype=float)
     check_pts_base = geo.apply(work2base_true, np.vstack([corners, station.datums_work]))
     rows = []
@@ -257,7 +258,7 @@ def stationary_experiment(n_trials: int = 200) -> Experiment:
 def stationary_pixel_experiment(pixel_sigmas=None, n_trials: int = 30) -> Experiment:
     """The stationary sensors against the hole-centre noise (px), sensor noise only (the
     scenario of the verdict). Default values: ``[cameras] pixel_sigmas`` of ``station.toml``."""
-    values = load_station()["cameras"]["pixel_sigmas"] if pixel_sigmas is None else pixel_sigmas
+    values = load_station().cameras.pixel_sigmas if pixel_sigmas is None else pixel_sigmas
     if len(values) == 0:
         raise CalibrationError("no pixel noise values to sweep; give at least one")
     points = [{"scenario": "sensor noise only", "pixel_sigma": float(v)} for v in values]
@@ -349,7 +350,7 @@ def calibrated_station(
 def calibrate(st: HybridStation, rng: np.random.Generator) -> ProductionStation:
     """Calibrate a drawn station by the paper's methods: the flexible sensor from the sphere
     (4 translations, 6 pose changes), the stationary sensors by the homography chain (Eq. 23)."""
-    features = load_features(station_config=st.config)
+    features = panel_features(load_production(), st.config)
     meas, _ = simulate_sphere_measurements(st, *paper_moves(st), rng)
     s2f = sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
     rows = stationary_trial(st, s2f, child_rng(rng, "stationary sensors"), variants=("homography",))
@@ -366,7 +367,7 @@ def trial_summary(run: dict, scenario: Scenario, n_values) -> tuple[dict, list[d
     median |mean| over the coordinates not fixed by the frame; ``coord_above_2mm``, the share of
     them at 2 mm or more).
     """
-    before = before_compensation(run, scenario.n_before)
+    before = before_compensation(run, scenario.production.protocol.n_before)
     free = ~before["fixed"]
     norms = np.linalg.norm(before["mean"], axis=1)
     coord = np.abs(before["mean"][free])
@@ -394,11 +395,12 @@ def trial_summary(run: dict, scenario: Scenario, n_values) -> tuple[dict, list[d
 
 def _production_setup(n_values, scenario_toml: str) -> dict:
     scenario = load_scenario(scenario_toml or None)
-    n_values = sorted({int(n) for n in n_values} | {scenario.n_compensation})
-    if max(n_values) > scenario.n_compensation_max:
+    protocol = scenario.production.protocol
+    n_values = sorted({int(n) for n in n_values} | {protocol.n_compensation})
+    if max(n_values) > protocol.n_compensation_max:
         raise CalibrationError(
             f"n values up to {max(n_values)} exceed n_compensation_max "
-            f"{scenario.n_compensation_max}"
+            f"{protocol.n_compensation_max}"
         )
     return {"scenario": scenario, "n_values": n_values}
 
@@ -435,13 +437,12 @@ def sensitivity_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     Kolmogorov distance of the correlation bins and the deviation bin counts. The station keeps its
     systematic error; the panels, readings and drift are drawn from the same child stream for
     every value (paired: only the assumption differs between two values of a trial)."""
-    scenario = setup["scenario"]
     ps = calibrated_station(child_rng(rng, "station"))
     rows = []
     for name, values in setup["values"].items():
-        for v in values:
-            sc = scenario.with_(**{name: float(v)})
-            a = analyse_run(simulate_run(ps, sc, child_rng(rng, "production")), sc.n_compensation)
+        for v, sc in zip(values, setup["scenarios"][name], strict=True):
+            run = simulate_run(ps, sc, child_rng(rng, "production"))
+            a = analyse_run(run, sc.production.protocol.n_compensation)
             row = {"parameter": name, "value": float(v)}
             for key in ("within_0p3", "within_0p3_uncompensated", "within_0p3_oracle"):
                 row[key] = a[key]
@@ -458,7 +459,7 @@ def correlation_distance(counts) -> float:
     from calstudy.papers.hybrid.scenario import load_published
 
     c = np.asarray(counts, dtype=float)
-    pub = np.asarray(load_published().correlation_percent, dtype=float)
+    pub = np.asarray(load_published().table1.correlation_percent, dtype=float)
     share = np.cumsum(c) / max(1.0, c.sum())
     return float(np.max(np.abs(share - np.cumsum(pub) / pub.sum())))
 
@@ -466,11 +467,13 @@ def correlation_distance(counts) -> float:
 def sensitivity_experiment(n_trials: int = 30, scenario_toml: str = "") -> Experiment:
     """The sweeps of ``[sweep]`` in ``production.toml``, every value inside each trial."""
     scenario = load_scenario(scenario_toml or None)
-    values = {k: [float(v) for v in vals] for k, vals in load_production()["sweep"].items()}
-    for name in values:
-        if name not in SWEEP_LABELS:
-            raise CalibrationError(f"unknown swept assumption {name!r}; use {list(SWEEP_LABELS)}")
-    setup = {"scenario": scenario, "values": values}
+    sweep = load_production().sweep
+    values = {k: [float(v) for v in getattr(sweep, k)] for k in sweep.input_names()}
+    # each value's scenario, validated once (beyond the ledger's ranges: a sweep)
+    scenarios = {
+        k: [with_inputs(scenario, {SWEEP_KEYS[k]: v}) for v in vals] for k, vals in values.items()
+    }
+    setup = {"values": values, "scenarios": scenarios}
     return Experiment("sensitivity", sensitivity_run, setup, n_trials)
 
 
@@ -485,7 +488,8 @@ def robot_error_run(setup: dict, rng: np.random.Generator) -> list[dict]:
         # a fresh child of the same name: the same station draws at every factor
         ps = calibrated_station(child_rng(rng, "station"), robot_error_scale=float(scale))
         run = simulate_run(ps, scenario, child_rng(rng, "production"))
-        system, (table,) = trial_summary(run, scenario, [scenario.n_compensation])
+        n = scenario.production.protocol.n_compensation
+        system, (table,) = trial_summary(run, scenario, [n])
         rows.append({"robot_error_scale": float(scale)} | system | table)
     return rows
 

@@ -11,12 +11,15 @@ this module; a trial function is ``trial(setup, rng, **point) -> list[dict]``.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
+from calstudy.core.schema import with_inputs
 from calstudy.estimators.handeye import (
     OPENCV_METHODS,
     opencv_handeye,
@@ -30,7 +33,6 @@ from calstudy.papers.hybrid.simulate import (
     HybridStation,
     make_station,
     simulate_sphere_measurements,
-    with_overrides,
 )
 
 SCENARIOS = {
@@ -66,8 +68,8 @@ def check_scenario(name: str) -> dict:
 
 def paper_moves(station: HybridStation) -> tuple[int, int]:
     """The paper's calibration moves (section 4.2): pure translations, then pose changes."""
-    moves = station.config["calibration_moves"]
-    return moves["n_translations"], moves["n_rotations"]
+    moves = station.config.calibration_moves
+    return moves.n_translations, moves.n_rotations
 
 
 # ---------------------------------------------------------------------------------------------
@@ -186,8 +188,8 @@ def _handeye_setup(baselines: bool) -> dict:
 
 def load_station_moves() -> tuple[int, int]:
     """The paper's calibration moves of ``station.toml`` (section 4.2)."""
-    moves = load_station()["calibration_moves"]
-    return int(moves["n_translations"]), int(moves["n_rotations"])
+    moves = load_station().calibration_moves
+    return moves.n_translations, moves.n_rotations
 
 
 def handeye_experiment(n_trials: int = 200) -> Experiment:
@@ -216,7 +218,7 @@ def with_move_ranges(
     """``station`` with the ranges of its pure translations replaced (None keeps the value of
     ``station.toml``)."""
     changes = {
-        key: float(value)
+        f"calibration_moves.{key}": float(value)
         for key, value in (
             ("translation_range_mm", translation_range_mm),
             ("across_plane_range_mm", across_plane_range_mm),
@@ -225,8 +227,7 @@ def with_move_ranges(
     }
     if not changes:
         return station
-    moves = station.config["calibration_moves"] | changes
-    return with_overrides(station, config=station.config | {"calibration_moves": moves})
+    return replace(station, config=with_inputs(station.config, changes))
 
 
 #: the move ranges the range sweep moves, each alone (the other at its value in station.toml)
@@ -251,14 +252,14 @@ def handeye_ranges_experiment(
     scenario of the verdict): points ``{"parameter": key, "value": mm}``, each range moved
     alone, the other at its default. Defaults: the values listed in ``[calibration_moves]`` of
     ``station.toml``."""
-    moves = load_station()["calibration_moves"]
+    moves = load_station().calibration_moves
     given = {
         "translation_range_mm": translation_ranges_mm,
         "across_plane_range_mm": across_plane_ranges_mm,
     }
     points = []
     for key, values in given.items():
-        values = moves[RANGE_KEYS[key]] if values is None else values
+        values = getattr(moves, RANGE_KEYS[key]) if values is None else values
         if len(values) == 0:
             raise CalibrationError(f"no values of {key} to sweep; give at least one")
         points += [{"parameter": key, "value": float(v)} for v in values]

@@ -44,7 +44,6 @@ from calstudy.papers.hybrid.scenario import (
     Features,
     Scenario,
     load_published,
-    load_station,
 )
 
 #: label of the correlation bin of the coordinates fixed by the frame (r undefined there)
@@ -253,17 +252,21 @@ def features_table(features: Features) -> pd.DataFrame:
 
 def assumptions_table(scenario: Scenario) -> pd.DataFrame:
     """The production assumptions of a scenario with where each comes from."""
-    size_mm = load_station()["workpiece"]["size_mm"]
+    prod, station = scenario.production, scenario.station
     rows = [
-        ("part_sigma_mm", scenario.part_sigma_mm, "assumption: +-2 mm tolerance (4.3), Cp 1.33"),
-        ("feature_sigma_mm", scenario.feature_sigma_mm, "assumption: line-laser feature noise"),
-        ("repeatability_mm", scenario.repeatability_mm, "paper 4.1: +-0.06 mm"),
-        ("drift_sigma_mm", scenario.drift_sigma_mm, "assumption: residual drift over a month"),
-        ("cmm_sigma_mm", scenario.cmm_sigma_mm, "assumption: CMM probing of sheet metal"),
-        ("n_before", scenario.n_before, "paper 4.3: 10 panels (Fig. 6)"),
-        ("n_compensation", scenario.n_compensation, "paper 4.3: usually 10-20 products"),
-        ("n_follow_up", scenario.n_follow_up, "paper 4.3: 30 products over a month"),
-        ("panel_mm", " x ".join(f"{v:g}" for v in size_mm), "paper 4.1"),
+        (
+            "part_sigma_mm",
+            prod.variation.part_sigma_mm,
+            "assumption: +-2 mm tolerance (4.3), Cp 1.33",
+        ),
+        ("feature_sigma_mm", prod.sensors.feature_sigma_mm, "assumption: line-laser feature noise"),
+        ("repeatability_mm", station.robot.repeatability_mm, "paper 4.1: +-0.06 mm"),
+        ("drift_sigma_mm", prod.drift.sigma_mm, "assumption: residual drift over a month"),
+        ("cmm_sigma_mm", prod.cmm.sigma_mm, "assumption: CMM probing of sheet metal"),
+        ("n_before", prod.protocol.n_before, "paper 4.3: 10 panels (Fig. 6)"),
+        ("n_compensation", prod.protocol.n_compensation, "paper 4.3: usually 10-20 products"),
+        ("n_follow_up", prod.protocol.n_follow_up, "paper 4.3: 30 products over a month"),
+        ("panel_mm", " x ".join(f"{v:g}" for v in station.workpiece.size_mm), "paper 4.1"),
     ]
     return pd.DataFrame(rows, columns=["assumption", "value", "source"]).astype({"value": str})
 
@@ -323,14 +326,14 @@ def _n_vectors(sub: pd.DataFrame) -> int:
 def _published_halves() -> tuple:
     """Both halves of the published Table 1: (half, bin labels, counts, shares %); the
     correlation half with the row of the coordinates fixed by the frame (none published)."""
-    pub = load_published()
+    table = load_published().table1
     return (
-        ("deviation", pub.deviation_bins, pub.deviation_counts, pub.deviation_percent),
+        ("deviation", table.deviation_bins, table.deviation_counts, table.deviation_percent),
         (
             "correlation",
-            pub.correlation_bins + (UNDEFINED_BIN,),
-            pub.correlation_counts + (0,),
-            pub.correlation_percent + (0.0,),
+            table.correlation_bins + (UNDEFINED_BIN,),
+            table.correlation_counts + (0,),
+            table.correlation_percent + (0.0,),
         ),
     )
 
@@ -456,7 +459,7 @@ def _verdict_text(make) -> str:
 
 def _systematic_verdict(sub: pd.DataFrame, pub):
     """Both readings of "2-4 mm": per coordinate (judged) and the 3-D length (reported)."""
-    lo_pub, hi_pub = pub.systematic_mm
+    lo_pub, hi_pub = pub.systematic.range_mm
     columns = CLAIMS["hybrid.systematic"]
     return tuple(
         judge_claim("hybrid.systematic", sub, columns, published=(lo_pub + hi_pub) / 2.0)
@@ -487,7 +490,7 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     sub = trials[trials["n_compensation"] == n_compensation]
     pub = load_published()
     v, v3 = _systematic_verdict(sub, pub)
-    lo_pub, hi_pub = pub.systematic_mm
+    lo_pub, hi_pub = pub.systematic.range_mm
     rows = [
         claim_row(
             "hybrid.systematic",
@@ -505,13 +508,13 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     ]
     dev = deviation_verdicts(sub, 200)
     dev_counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy()
-    dist = bin_distance(dev_counts, pub.deviation_percent)
-    chi = chi_square_distance(dev_counts, pub.deviation_percent)
+    dist = bin_distance(dev_counts, pub.table1.deviation_percent)
+    chi = chi_square_distance(dev_counts, pub.table1.deviation_percent)
     rows.append(
         claim_row(
             "hybrid.deviation",
             dev,
-            published=f"{pub.within_0p3_percent}",
+            published=f"{pub.table1.within_0p3_percent}",
             unit="%",
             notebook=notebook,
             note=f"offset from {n_compensation} products; {dev.claim.note}; beyond 0.5 mm "
@@ -525,7 +528,7 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     controls = control_rows("hybrid.deviation", dev)
     n_defined = _n_vectors(sub) - int(np.median(sub["n_fixed"]))
     dist_r = bin_distance(
-        sub[[f"correlation_bin{k}" for k in range(5)]].to_numpy(), pub.correlation_percent
+        sub[[f"correlation_bin{k}" for k in range(5)]].to_numpy(), pub.table1.correlation_percent
     )
     vr = judge_claim(
         "hybrid.correlation",
@@ -537,12 +540,13 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
         claim_row(
             "hybrid.correlation",
             vr,
-            published=f"bins {pub.correlation_percent}",
+            published=f"bins {pub.table1.correlation_percent}",
             unit="Kolmogorov distance",
             notebook=notebook,
             note=f"Kolmogorov distance of the correlation bins to the published ones, "
             f"{n_defined} coordinates where r is defined: {vr.claim.note}; share above 0.7 "
-            f"median {np.median(sub['r_above_0p7']):.3g} % (published {pub.r_above_0p7_percent})",
+            f"median {np.median(sub['r_above_0p7']):.3g} % "
+            f"(published {pub.table1.r_above_0p7_percent})",
         )
     )
     return rows, controls

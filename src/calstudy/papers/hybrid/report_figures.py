@@ -216,8 +216,8 @@ def _headline_shares(ax, x, summary: pd.DataFrame) -> None:
     values dashed."""
     published = load_published()
     for col, label, pub in (
-        ("within_0p3", "within +-0.3 mm", published.within_0p3_percent),
-        ("r_above_0p7", "r > 0.7", published.r_above_0p7_percent),
+        ("within_0p3", "within +-0.3 mm", published.table1.within_0p3_percent),
+        ("r_above_0p7", "r > 0.7", published.table1.r_above_0p7_percent),
     ):
         line = ax.plot(x, summary[col], "o-", label=label)[0]
         ax.fill_between(x, summary[f"{col}_low"], summary[f"{col}_high"], alpha=0.2)
@@ -236,7 +236,7 @@ def sensitivity_figure(summary: pd.DataFrame, scenario: Scenario):
     for ax, name in zip(axes.ravel(), names, strict=False):
         sub = summary[summary["parameter"] == name]
         _headline_shares(ax, sub["value"], sub)
-        ax.axvline(getattr(scenario, name), color="k", ls=":", lw=1)
+        ax.axvline(scenario.swept(name), color="k", ls=":", lw=1)
         ax.set_xlabel(SWEEP_LABELS[name], fontsize=9)
         ax.set_ylim(-3, 103)
         ax.grid(alpha=0.3)
@@ -257,7 +257,7 @@ def robot_error_figure(summary: pd.DataFrame, default: float = 1.0):
     The default factor is dotted."""
     fig, (ax_a, ax_b) = plt.subplots(2, 1, figsize=(COLUMN_IN, 7.0), constrained_layout=True)
     x = summary["robot_error_scale"]
-    lo, hi = load_published().systematic_mm
+    lo, hi = load_published().systematic.range_mm
     mid = (lo + hi) / 2.0
     ax_a.axhspan(lo, hi, color="0.85", label=f"published {lo:g}-{hi:g} mm")
     # the magnitude band of the verdict: the middle of the range within the register's factor 1.5

@@ -220,7 +220,7 @@ def deviation_distribution(trials: pd.DataFrame, n_compensation: int) -> pd.Data
     """The deviation half of Table 1 as a whole distribution at ``n_compensation``: per bin the
     median simulated share and the published one, then the Kolmogorov distance and the
     chi-square statistic over trials (median and 95 % spread) with their 5 % critical values."""
-    pub = load_published()
+    pub = load_published().table1
     sub = trials[trials["n_compensation"] == n_compensation]
     counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy(float)
     n = counts.sum(axis=1, keepdims=True)
@@ -259,7 +259,7 @@ def deviation_verdicts(sub: pd.DataFrame, min_trials: int = 30):
         "hybrid.deviation",
         sub,
         CLAIMS["hybrid.deviation"],
-        published=load_published().within_0p3_percent,
+        published=load_published().table1.within_0p3_percent,
         min_trials=min_trials,
     )
 
@@ -269,7 +269,7 @@ def summarise_drift(sweep: pd.DataFrame) -> pd.DataFrame:
     the drift (claim) and without it (oracle), the Kolmogorov and chi-square distances of the
     deviation bins to the published ones (medians over stations) and the ``hybrid.deviation``
     verdict by its rule."""
-    pub = load_published()
+    pub = load_published().table1
     drift = sweep[sweep["parameter"] == "drift_sigma_mm"]
     rows = []
     points = judge_along(

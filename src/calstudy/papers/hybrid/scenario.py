@@ -1,35 +1,36 @@
 """What the hybrid study starts from: the station, the production run and the published numbers.
 
 Three files of ``data/hybrid/`` describe the paper's setup, each number a fact from the paper
-(section given) or a documented assumption:
+(section given) or a documented assumption, each input with its provenance
+(:mod:`calstudy.core.ledger`):
 
 * ``station.toml``: the robot, the flexible and stationary sensors, the sphere, the hole target,
   the fixture and the workpiece frame (notebook 01; the station of notebook 02 too). Read by
-  :func:`load_station`.
+  :func:`load_station` into a :class:`~calstudy.papers.hybrid.schema.StationFile`.
 * ``production.toml``: the panel's 58 feature points, the part variation, the sensors' feature
-  noise, the CMM, the drift and the protocol of section 4.3 (notebook 02). Read by
-  :func:`load_production`; its assumptions are the :class:`Scenario` of :func:`load_scenario`,
-  its feature points the :class:`Features` of :func:`load_features`.
+  noise, the CMM, the drift and the protocol of section 4.3 (notebook 02). With the station it
+  is the :class:`Scenario` of :func:`load_scenario`, whose :attr:`Scenario.features` are the
+  panel's :class:`Features`.
 * ``published.toml``: Table 1 and the other numbers of section 4.3 that notebook 02 compares
   with, read by :func:`load_published`.
 
-Every file is read through :mod:`calstudy.core.config`, so a missing file, a malformed one or a
-missing key raise the same errors as in the other papers; ``station.toml`` and
-``production.toml`` (and ``published.toml``) are checked on load against the schemas of
-:mod:`calstudy.papers.hybrid.schema` (types, ranges, required keys, cross-field rules).
+Each file is validated on load against its schema (:mod:`calstudy.papers.hybrid.schema`: types,
+ranges, required keys, cross-field rules) and the validated model is what the simulation reads;
+a missing file, a malformed one or a missing key raise the same errors as in the other papers.
 """
 
 from __future__ import annotations
 
-import functools
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cached_property, reduce
 from pathlib import Path
 
 import numpy as np
 
-from calstudy.core.config import require, scenario_file
+from calstudy.core.config import scenario_file
 from calstudy.core.errors import CalibrationError
-from calstudy.core.schema import check_toml
+from calstudy.core.schema import Schema, load_model
 from calstudy.estimators.workpiece import RPS_EQUATIONS
 from calstudy.papers.hybrid.schema import ProductionFile, PublishedFile, StationFile
 
@@ -42,23 +43,41 @@ AXES = ("x", "y", "z")
 #: the two phases of the production protocol: the products of the offset, then the follow-up
 PHASES = ("compensation", "follow-up")
 
-#: the assumptions of :class:`Scenario` that the sensitivity sweep may move, with axis labels
+#: the assumptions that the sensitivity sweep may move (the names of its ``parameter`` column),
+#: with axis labels
 SWEEP_LABELS = {
     "part_sigma_mm": "part variation sigma (mm)",
     "feature_sigma_mm": "sensor feature noise sigma (mm)",
     "repeatability_mm": "robot repeatability (+-mm, 3 sigma)",
     "drift_sigma_mm": "drift before follow-up, sigma (mm)",
 }
+#: each swept assumption's dotted key in :class:`Scenario`
+SWEEP_KEYS = {
+    "part_sigma_mm": "production.variation.part_sigma_mm",
+    "feature_sigma_mm": "production.sensors.feature_sigma_mm",
+    "repeatability_mm": "station.robot.repeatability_mm",
+    "drift_sigma_mm": "production.drift.sigma_mm",
+}
 
 
-def _load(name: str, what: str, path: str | Path | None, model) -> dict:
-    """The TOML file ``path`` (default ``data/hybrid/<name>``) after checking it against
-    ``model`` (:mod:`calstudy.papers.hybrid.schema`)."""
-    return check_toml(scenario_file(PAPER, name, path), model, what)
+def load_station(
+    path: str | Path | None = None, overrides: Mapping[str, object] | None = None
+) -> StationFile:
+    """The station description (default ``data/hybrid/station.toml``), validated.
 
+    Parameters
+    ----------
+    path : str or Path, optional
+        The file; default (None or ``""``) the paper's.
+    overrides : mapping of str to object, optional
+        Dotted keys of the file and their values (``{"sensor.sigma_point_mm": 0.02}``), applied
+        before validation (:func:`calstudy.core.schema.apply_overrides`): a value outside its
+        ledger range is refused as in the file.
 
-def load_station(path: str | Path | None = None) -> dict:
-    """The station description (default ``data/hybrid/station.toml``) as a dict.
+    Returns
+    -------
+    StationFile
+        The frozen, validated station.
 
     Raises
     ------
@@ -67,178 +86,29 @@ def load_station(path: str | Path | None = None) -> dict:
     CalibrationError
         If it is not TOML or breaks :class:`~calstudy.papers.hybrid.schema.StationFile`: a
         missing or unknown key, a value out of range (the message names file, key, value and
-        range), a hand-eye matrix that is not rigid, collinear datums.
+        range), a hand-eye matrix that is not rigid, collinear datums; or an override names no
+        input.
     """
-    return _load(STATION_FILE, "hybrid station description", path, StationFile)
+    source = scenario_file(PAPER, STATION_FILE, path)
+    return load_model(source, StationFile, "hybrid station description", overrides)
 
 
-def load_production(path: str | Path | None = None) -> dict:
-    """The production description (default ``data/hybrid/production.toml``) as a dict, checked
-    against :class:`~calstudy.papers.hybrid.schema.ProductionFile` (errors as
+def load_production(
+    path: str | Path | None = None, overrides: Mapping[str, object] | None = None
+) -> ProductionFile:
+    """The production description (default ``data/hybrid/production.toml``), validated against
+    :class:`~calstudy.papers.hybrid.schema.ProductionFile` (parameters, returns and errors as
     :func:`load_station`)."""
-    return _load(PRODUCTION_FILE, "hybrid production description", path, ProductionFile)
-
-
-# ---------------------------------------------------------------------------------------------
-# the published numbers
-
-
-@dataclass(frozen=True)
-class Published:
-    """The numbers of the paper's section 4.3 that the study compares with.
-
-    Attributes
-    ----------
-    deviation_bins, correlation_bins : tuple of str
-        The five bin labels of each half of Table 1.
-    deviation_edges_mm : tuple of float
-        Upper edges of the first four bins of |deviation| (mm), each bin closed on the right.
-    correlation_edges : tuple of float
-        Edges of the correlation bins, ascending, each bin closed on the right.
-    deviation_counts, correlation_counts : tuple of int
-        Counts of the 174 vectors per bin (Table 1).
-    deviation_percent, correlation_percent : tuple of float
-        The same as printed shares (%).
-    within_0p3_percent, r_above_0p7_percent : float
-        The headline shares (%): deviation within +-0.3 mm and correlation above 0.7.
-    systematic_mm : (float, float)
-        The published size of the deviations before compensation, "about 2-4 mm".
-    """
-
-    deviation_bins: tuple
-    deviation_edges_mm: tuple
-    deviation_counts: tuple
-    deviation_percent: tuple
-    correlation_bins: tuple
-    correlation_edges: tuple
-    correlation_counts: tuple
-    correlation_percent: tuple
-    within_0p3_percent: float
-    r_above_0p7_percent: float
-    systematic_mm: tuple
-
-
-#: field of :class:`Published` -> key of ``published.toml``
-_PUBLISHED_KEYS = {
-    **{
-        f"{half}_{what}": f"table1.{half}_{what}"
-        for half in ("deviation", "correlation")
-        for what in ("bins", "counts", "percent")
-    },
-    "deviation_edges_mm": "table1.deviation_edges_mm",
-    "correlation_edges": "table1.correlation_edges",
-    "within_0p3_percent": "table1.within_0p3_percent",
-    "r_above_0p7_percent": "table1.r_above_0p7_percent",
-    "systematic_mm": "systematic.range_mm",
-}
-
-
-def load_published(path: str | Path | None = None) -> Published:
-    """The published numbers (default ``data/hybrid/published.toml``; read once per path),
-    checked against :class:`~calstudy.papers.hybrid.schema.PublishedFile` (shares that agree
-    with their counts, ascending bin edges; errors as :func:`load_station`)."""
-    return _published(str(scenario_file(PAPER, PUBLISHED_FILE, path)))
-
-
-@functools.cache
-def _published(path: str) -> Published:
-    table = check_toml(path, PublishedFile, "published numbers of the hybrid paper")
-
-    values = {name: require(table, key, path) for name, key in _PUBLISHED_KEYS.items()}
-    return Published(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
-
-
-# ---------------------------------------------------------------------------------------------
-# the production assumptions
-
-
-#: Most products a protocol count may ask for: every simulated product's readings are held in
-#: memory at once, so the counts are bounded before anything is allocated (the paper's protocol
-#: uses tens).
-MAX_PRODUCTS = 10_000
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """The production assumptions (mm) and protocol (product counts) of one simulation.
-
-    Raises
-    ------
-    CalibrationError
-        On a noise level that is negative or not finite, a product count that is not an
-        integer from 3 to :data:`MAX_PRODUCTS`, or ``n_compensation_max`` below ``n_before`` or
-        ``n_compensation``.
-    """
-
-    part_sigma_mm: float
-    feature_sigma_mm: float
-    repeatability_mm: float
-    drift_sigma_mm: float
-    cmm_sigma_mm: float
-    n_before: int
-    n_compensation: int
-    n_compensation_max: int
-    n_follow_up: int
-
-    def __post_init__(self) -> None:
-        for name in ("part_sigma_mm", "feature_sigma_mm", "repeatability_mm", "drift_sigma_mm"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0):
-                raise CalibrationError(f"{name} is {value!r}; expected a finite value >= 0")
-        if not (np.isfinite(self.cmm_sigma_mm) and self.cmm_sigma_mm >= 0):
-            raise CalibrationError(f"cmm_sigma_mm is {self.cmm_sigma_mm!r}; expected >= 0")
-        for name in ("n_before", "n_compensation", "n_compensation_max", "n_follow_up"):
-            value = getattr(self, name)
-            if not (
-                isinstance(value, int | np.integer | float)
-                and not isinstance(value, bool)
-                and np.isfinite(value)
-                and float(value).is_integer()
-                and value <= MAX_PRODUCTS
-            ):
-                raise CalibrationError(
-                    f"{name} is {value!r}; expected a whole number of products from 3 to "
-                    f"{MAX_PRODUCTS} (each product's readings are held in memory)"
-                )
-        for name in ("n_before", "n_compensation", "n_follow_up"):
-            if int(getattr(self, name)) < 3:
-                raise CalibrationError(
-                    f"{name} is {getattr(self, name)}; at least 3 products are needed"
-                )
-        if self.n_compensation_max < max(self.n_before, self.n_compensation):
-            raise CalibrationError(
-                f"n_compensation_max {self.n_compensation_max} is below n_before "
-                f"{self.n_before} or n_compensation {self.n_compensation}"
-            )
-
-    def with_(self, **changes) -> Scenario:
-        """A copy with some fields changed (checked again)."""
-        return replace(self, **changes)
-
-
-#: field of :class:`Scenario` -> key of ``production.toml`` (the repeatability is the station's)
-_SCENARIO_KEYS = {
-    "part_sigma_mm": "variation.part_sigma_mm",
-    "feature_sigma_mm": "sensors.feature_sigma_mm",
-    "drift_sigma_mm": "drift.sigma_mm",
-    "cmm_sigma_mm": "cmm.sigma_mm",
-    "n_before": "protocol.n_before",
-    "n_compensation": "protocol.n_compensation",
-    "n_compensation_max": "protocol.n_compensation_max",
-    "n_follow_up": "protocol.n_follow_up",
-}
-
-
-def load_scenario(
-    path: str | Path | None = None, station_path: str | Path | None = None
-) -> Scenario:
-    """The production scenario of ``path`` (default ``data/hybrid/production.toml``) with the
-    robot repeatability of ``station_path`` (default ``data/hybrid/station.toml``)."""
     source = scenario_file(PAPER, PRODUCTION_FILE, path)
-    cfg = load_production(source)
-    values = {name: require(cfg, key, source) for name, key in _SCENARIO_KEYS.items()}
-    repeatability = load_station(station_path)["robot"]["repeatability_mm"]
-    return Scenario(repeatability_mm=repeatability, **values)
+    return load_model(source, ProductionFile, "hybrid production description", overrides)
+
+
+def load_published(path: str | Path | None = None) -> PublishedFile:
+    """The published numbers (default ``data/hybrid/published.toml``), checked against
+    :class:`~calstudy.papers.hybrid.schema.PublishedFile` (shares that agree with their counts,
+    ascending bin edges; errors as :func:`load_station`)."""
+    source = scenario_file(PAPER, PUBLISHED_FILE, path)
+    return load_model(source, PublishedFile, "published numbers of the hybrid paper")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -285,48 +155,102 @@ class Features:
         return idx[np.argsort(self.sensor[idx], kind="stable")]
 
 
-def load_features(config: dict | None = None, station_config: dict | None = None) -> Features:
-    """The 58 feature points of ``production.toml``; datums A, B, C from ``station.toml``.
+def panel_features(production: ProductionFile, station: StationFile) -> Features:
+    """The feature points of ``production`` (58 in the paper's file), flexible ones first;
+    datums A, B, C (the first three stationary points) from ``station``.
 
-    ``config`` and ``station_config`` are the loaded files (default: :func:`load_production`
-    and :func:`load_station`).
+    Parameters
+    ----------
+    production, station : ProductionFile, StationFile
+        The validated files (:func:`load_production`, :func:`load_station`).
+
+    Returns
+    -------
+    Features
+        Ids, kinds, sensors, CAD coordinates (mm), view directions, yaws (rad) and the
+        coordinates the 3-2-1 frame fixes.
     """
-    cfg = load_production() if config is None else config
-    scfg = load_station() if station_config is None else station_config
-    flex = cfg["flexible"]["features"]
-    stat = cfg["stationary_features"]
-    w = scfg["workpiece"]
-    datums = [w["datum_A_slot_mm"], w["datum_B_hole_mm"], w["datum_C_plane_mm"]]
-    stat_xyz = datums + list(stat["others_xyz_mm"])
-    if len(stat["ids"]) != len(stat_xyz) or len(stat["kinds"]) != len(stat_xyz):
-        raise CalibrationError(
-            f"stationary_features lists {len(stat['ids'])} ids, {len(stat['kinds'])} kinds and "
-            f"{len(stat_xyz)} points (3 datums + others); they must match"
-        )
-    ids = tuple(f["id"] for f in flex) + tuple(stat["ids"])
-    _check_ids(list(ids), PRODUCTION_FILE)
-    view = np.array([f["view"] for f in flex] + [[0.0, 0.0, -1.0]] * len(stat_xyz), dtype=float)
+    flex = production.flexible.features
+    stat = production.stationary_features
+    stat_xyz = [list(v) for v in station.workpiece.datums] + list(stat.others_xyz_mm)
+    view = np.array([f.view for f in flex] + [[0.0, 0.0, -1.0]] * len(stat_xyz), dtype=float)
     view /= np.linalg.norm(view, axis=1, keepdims=True)
     n_flex = len(flex)
+    ids = tuple(f.id for f in flex) + tuple(stat.ids)
     fixed = np.zeros((len(ids), 3), dtype=bool)
     for datum, axis in RPS_EQUATIONS:
         fixed[n_flex + datum, axis] = True
     return Features(
         ids=ids,
-        kinds=tuple(f["kind"] for f in flex) + tuple(stat["kinds"]),
+        kinds=tuple(f.kind for f in flex) + tuple(stat.kinds),
         sensor=np.concatenate([np.zeros(n_flex, int), np.arange(1, len(stat_xyz) + 1)]),
-        cad=np.array([f["xyz_mm"] for f in flex] + stat_xyz, dtype=float),
+        cad=np.array([f.xyz_mm for f in flex] + stat_xyz, dtype=float),
         view=view,
-        yaw=np.deg2rad(np.array([f["yaw_deg"] for f in flex] + [0.0] * len(stat_xyz))),
+        yaw=np.deg2rad(np.array([f.yaw_deg for f in flex] + [0.0] * len(stat_xyz))),
         fixed=fixed,
     )
 
 
-def _check_ids(ids: list, where: str) -> None:
-    seen, dup = set(), []
-    for i in ids:
-        if i in seen:
-            dup.append(i)
-        seen.add(i)
-    if dup:
-        raise CalibrationError(f"duplicated feature points in {where}: {sorted(set(dup))}")
+# ---------------------------------------------------------------------------------------------
+# the scenario of notebook 02
+
+
+class Scenario(Schema):
+    """The hybrid study's inputs: the station (``station.toml``) and the production run
+    (``production.toml``), each validated with its ledger. Its dotted keys begin with the file
+    (``"production.variation.part_sigma_mm"``, ``"station.robot.repeatability_mm"``); a changed
+    copy is :func:`calstudy.core.schema.with_inputs` (validated again)."""
+
+    station: StationFile
+    production: ProductionFile
+
+    @cached_property
+    def features(self) -> Features:
+        """The panel's feature points (:func:`panel_features`)."""
+        return panel_features(self.production, self.station)
+
+    def swept(self, name: str) -> float:
+        """The value of the swept assumption ``name`` (a key of :data:`SWEEP_KEYS`)."""
+        return reduce(getattr, SWEEP_KEYS[name].split("."), self)
+
+
+def load_scenario(
+    path: str | Path | None = None,
+    overrides: Mapping[str, object] | None = None,
+    station_path: str | Path | None = None,
+) -> Scenario:
+    """The production scenario of ``path`` (default ``data/hybrid/production.toml``) on the
+    station of ``station_path`` (default ``data/hybrid/station.toml``).
+
+    Parameters
+    ----------
+    path, station_path : str or Path, optional
+        The production and station files; default (None or ``""``) the paper's.
+    overrides : mapping of str to object, optional
+        Dotted keys beginning with the file, ``"production."`` or ``"station."``, and their
+        values, applied to that file before validation (as :func:`load_station`).
+
+    Returns
+    -------
+    Scenario
+        Both files, validated and frozen.
+
+    Raises
+    ------
+    FileNotFoundError, CalibrationError
+        As :func:`load_station`; a CalibrationError also for an override key that begins with
+        neither file.
+    """
+    parts: dict[str, dict[str, object]] = {"station": {}, "production": {}}
+    for key, value in (overrides or {}).items():
+        head, _, rest = str(key).partition(".")
+        if head not in parts or not rest:
+            raise CalibrationError(
+                f"override {key!r}: a key of the hybrid scenario begins with 'station.' or "
+                "'production.'"
+            )
+        parts[head][rest] = value
+    return Scenario(
+        station=load_station(station_path, parts["station"]),
+        production=load_production(path, parts["production"]),
+    )

@@ -1,7 +1,8 @@
 """Schemas of the hybrid paper's files: ``station.toml``, ``production.toml`` and the rows of the
-hybrid and CMM tables of notebook 02.
+hybrid and CMM tables of notebook 02. The validated file is what the simulation reads
+(:mod:`calstudy.papers.hybrid.scenario`), with its derived objects as properties.
 
-Each TOML file is checked on load (:func:`calstudy.core.schema.check_toml`): every key the
+Each TOML file is checked on load (:func:`calstudy.core.schema.load_model`): every key the
 simulation reads must be there, with its type and range (lengths in mm, angles in degrees where
 the key says ``_deg``), unknown keys are refused (a misspelt key is not silently a default), and
 the cross-field rules below hold. A message names the file, the key, the value and the allowed
@@ -17,24 +18,27 @@ and the other size bounds (checked before anything is allocated).
 from __future__ import annotations
 
 import math
+from functools import cached_property
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
+from calstudy.core import geometry as geo
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.schema import (
     Degrees,
     Documented,
     Finite,
     NonNegativeFinite,
-    Pixels,
+    Pinhole,
     PositiveFinite,
+    Rigid4x4,
+    Row,
     Schema,
     Vec3,
-    check_principal_point,
-    rotation_problem,
 )
+from calstudy.models.sensors import PinholeCamera
 
 #: most products of a protocol phase: the paper's protocol uses 10-30; each product is a panel
 #: of 58 features simulated in memory, so a count is bounded before anything is allocated
@@ -73,7 +77,10 @@ def _noise(bound: str):
     return noise_level(NOISE_BOUNDS[bound])
 
 
-Row4 = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+def _frozen(array: np.ndarray) -> np.ndarray:
+    """``array`` made read-only: a derived array of a (shared, frozen) scenario."""
+    array.flags.writeable = False
+    return array
 
 
 class Source(Documented):
@@ -86,18 +93,14 @@ class Source(Documented):
 class HandEye(Inputs):
     """The ``[handeye]`` table of data/hybrid/station.toml."""
     #: sensor2flange, a rigid 4 x 4 transform (mm); printed to 6 decimals in the paper
-    matrix: Annotated[list[Row4], Field(min_length=4, max_length=4)]
+    matrix: Rigid4x4
 
-    @field_validator("matrix")
-    @classmethod
-    def _rigid(cls, matrix: list) -> list:
-        m = np.array(matrix, dtype=float)
-        if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-            raise ValueError(f"the last row is {m[3].tolist()}; a rigid transform has [0, 0, 0, 1]")
-        problem = rotation_problem(m)
-        if problem:
-            raise ValueError(f"not a rigid transform: {problem}")
-        return matrix
+    @cached_property
+    def sensor2flange(self) -> np.ndarray:
+        """The matrix (4, 4) with its rotation projected onto SO(3) (the printed decimals
+        leave it a few 1e-7 off), mm."""
+        hand = np.array(self.matrix, dtype=float)
+        return _frozen(geo.make_transform(geo.project_to_so3(hand[:3, :3]), hand[:3, 3]))
 
 
 class Robot(Inputs):
@@ -145,22 +148,18 @@ class Moves(Inputs):
         return self
 
 
-class Cameras(Inputs):
-    """The ``[cameras]`` table of data/hybrid/station.toml."""
-    fx: PositiveFinite
-    fy: PositiveFinite
-    cx: Finite
-    cy: Finite
-    width: Pixels
-    height: Pixels
+class Cameras(Pinhole, Inputs):
+    """The ``[cameras]`` table of data/hybrid/station.toml: the sensors' pinhole camera."""
     pixel_sigma: _noise("pixel")
     #: the values of the hole-centre noise swept by notebook 01
     pixel_sigmas: Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
-    @model_validator(mode="after")
-    def _centre_in_image(self) -> Cameras:
-        check_principal_point(self.cx, self.cy, self.width, self.height)
-        return self
+    @cached_property
+    def camera(self) -> PinholeCamera:
+        """The camera of the stationary and flexible sensors."""
+        return PinholeCamera(
+            fx=self.fx, fy=self.fy, cx=self.cx, cy=self.cy, width=self.width, height=self.height
+        )
 
 
 class Target(Inputs):
@@ -179,6 +178,16 @@ class Stationary(Inputs):
     #: mounting tolerance of a sensor on the fixture (3 sigma per axis), mm and deg
     mounting_tolerance_mm: _noise("mounting_mm")
     mounting_tolerance_deg: _noise("mounting_deg")
+
+    @cached_property
+    def design(self) -> np.ndarray:
+        """``statcam2base`` (S, 4, 4) of the sensors as designed: at ``positions_mm``, tilted
+        about x then y by ``tilts_deg``."""
+        tilts = np.deg2rad(np.array(self.tilts_deg, dtype=float))
+        zero = np.zeros(len(tilts))
+        rot = geo.rotvec_to_matrix(np.column_stack([tilts[:, 0], zero, zero]))
+        rot = rot @ geo.rotvec_to_matrix(np.column_stack([zero, tilts[:, 1], zero]))
+        return _frozen(geo.make_transform(rot, np.array(self.positions_mm, dtype=float)))
 
     @model_validator(mode="after")
     def _same_count(self) -> Stationary:
@@ -202,6 +211,12 @@ class Workpiece(Inputs):
     placement_sigma_deg: _noise("placement_deg")
     datum_sigma_mm: _noise("sensor_mm")
     free_direction_mm: NonNegativeFinite
+
+    @cached_property
+    def datums(self) -> np.ndarray:
+        """Datums A, B and C (3, 3) in the workpiece frame, mm."""
+        datums = (self.datum_A_slot_mm, self.datum_B_hole_mm, self.datum_C_plane_mm)
+        return _frozen(np.array(datums, dtype=float))
 
     @model_validator(mode="after")
     def _datums_not_collinear(self) -> Workpiece:
@@ -366,6 +381,13 @@ class ProductionFile(Ledgered):
     stationary_features: StationaryFeatures
     flexible: Flexible
 
+    def plausibility(self) -> None:
+        """Every feature point has its own id."""
+        ids = [f.id for f in self.flexible.features] + list(self.stationary_features.ids)
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        if dup:
+            raise ValueError(f"duplicated feature points {dup}: each point needs its own id")
+
 
 # ---------------------------------------------------------------------------------------------
 # the rows of the hybrid and CMM tables (notebook 02)
@@ -389,12 +411,16 @@ class MeasurementRow(Schema):
 #: two decimals and sometimes truncates (10 / 174 = 5.747 % printed 5.74)
 PERCENT_TOL = 0.01
 Percent = Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)]
-FiveLabels = Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=5, max_length=5)]
-FiveCounts = Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=5, max_length=5)]
-FivePercent = Annotated[list[Percent], Field(min_length=5, max_length=5)]
+FiveLabels = Annotated[
+    tuple[Annotated[str, Field(min_length=1)], ...], Field(min_length=5, max_length=5), Row
+]
+FiveCounts = Annotated[
+    tuple[Annotated[int, Field(ge=0)], ...], Field(min_length=5, max_length=5), Row
+]
+FivePercent = Annotated[tuple[Percent, ...], Field(min_length=5, max_length=5), Row]
 
 
-def _ascending(values: list) -> list:
+def _ascending(values: tuple) -> tuple:
     if any(b <= a for a, b in zip(values, values[1:], strict=False)):
         raise ValueError("the edges are not ascending")
     return values
@@ -403,13 +429,13 @@ def _ascending(values: list) -> list:
 class Systematic(Documented):
     """The ``[systematic]`` table of data/hybrid/published.toml."""
 
-    range_mm: Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
+    range_mm: Annotated[tuple[NonNegativeFinite, ...], Field(min_length=2, max_length=2), Row]
 
     @field_validator("range_mm")
     @classmethod
-    def _range(cls, value: list) -> list:
+    def _range(cls, value: tuple) -> tuple:
         if value[0] > value[1]:
-            raise ValueError(f"{value} is not [low, high]")
+            raise ValueError(f"{list(value)} is not [low, high]")
         return value
 
 
@@ -418,13 +444,16 @@ class Table1(Documented):
     vectors per bin, which must agree with each other within :data:`PERCENT_TOL`."""
 
     deviation_bins: FiveLabels
-    deviation_edges_mm: Annotated[list[PositiveFinite], Field(min_length=4, max_length=4)]
+    deviation_edges_mm: Annotated[
+        tuple[PositiveFinite, ...], Field(min_length=4, max_length=4), Row
+    ]
     deviation_counts: FiveCounts
     deviation_percent: FivePercent
     correlation_bins: FiveLabels
     correlation_edges: Annotated[
-        list[Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]],
+        tuple[Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)], ...],
         Field(min_length=4, max_length=4),
+        Row,
     ]
     correlation_counts: FiveCounts
     correlation_percent: FivePercent

@@ -15,7 +15,7 @@ jogged in the controller's base frame, i.e. at constant *nominal* orientation.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from calstudy.models.robots import load_robot, perturb_robot, robot_file
 from calstudy.models.sensors import LineLaserSensor, PinholeCamera
 from calstudy.models.targets import HoleTarget, ManufacturedHoleTarget, Sphere
 from calstudy.papers.hybrid.scenario import load_station
+from calstudy.papers.hybrid.schema import Stationary, StationFile, Target, Workpiece
 
 #: a few joint configurations (deg) tried as IK seeds, arm reaching forward and down
 _IK_SEEDS_DEG = np.array(
@@ -81,7 +82,7 @@ class HybridStation:
     datums_work: np.ndarray
     datum_sigma: float
     free_direction: float
-    config: dict = field(repr=False, default_factory=dict)
+    config: StationFile | None = field(default=None, repr=False)
     _sphere_ref: np.ndarray | None = field(default=None, repr=False)
     _ik_memo: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -173,14 +174,14 @@ class HybridStation:
         pose changes draw from their own streams of ``rng``: a pose change drawn again because
         the robot cannot reach it does not shift the translations.
         """
-        cfg = self.config["calibration_moves"]
+        cfg = self.config.calibration_moves
         trans_rng, rot_rng = streams(rng, "translation moves", "rotation moves")
         ref = self.sphere_reference_pose()
         s2f = self.sensor2flange_true
         q_ref = self.solve_ik(self.true, ref @ geo.invert(s2f))
         f_ref = self.nominal.fk(q_ref)
-        span = cfg["translation_range_mm"]
-        across = cfg["across_plane_range_mm"]
+        span = cfg.translation_range_mm
+        across = cfg.across_plane_range_mm
         shifts = trans_rng.uniform(-1.0, 1.0, (n_trans, 3))
         shifts_sensor = shifts * np.array([span, across, span])
         shifts_sensor[0] = 0.0
@@ -204,7 +205,7 @@ class HybridStation:
                 raise CalibrationError(f"only {len(q_rot)} of {n_rot} tilted poses are reachable")
             axis = rng.normal(size=3)
             axis /= np.linalg.norm(axis)
-            angle = np.deg2rad(rng.uniform(cfg["rotation_min_deg"], cfg["rotation_range_deg"]))
+            angle = np.deg2rad(rng.uniform(cfg.rotation_min_deg, cfg.rotation_range_deg))
             turn = about @ geo.make_transform(geo.rotvec_to_matrix(axis * angle), np.zeros(3))
             pose = turn @ geo.invert(about) @ ref
             try:
@@ -300,6 +301,7 @@ def make_station(
     pixel_sigma: float | None = None,
     repeatability_mm: float | None = None,
     robot_error_scale: float = 1.0,
+    config: StationFile | None = None,
 ) -> HybridStation:
     """Draw a station: the true robot, the made target, the CMM value, the panel placement.
 
@@ -320,45 +322,41 @@ def make_station(
         times the errors drawn at the file's tolerances. The draws are the same for every
         factor, so 0 gives the nominal robot and leaves every other draw of the station as it
         is. Ignored when ``robot_errors`` is False.
+    config
+        The station description (default :func:`calstudy.papers.hybrid.scenario.load_station`).
     """
     if not (np.isfinite(robot_error_scale) and robot_error_scale >= 0):
         raise CalibrationError(
             f"robot_error_scale is {robot_error_scale!r}; expected a finite factor >= 0"
         )
-    cfg = load_station()
+    cfg = load_station() if config is None else config
     robot_rng, target_rng, mount_rng, place_rng = streams(
         rng, "robot", "target", "stationary mounts", "workpiece"
     )
     nominal, true = _draw_robots(robot_rng, robot_errors, robot_error_scale)
-    hand = np.array(cfg["handeye"]["matrix"], dtype=float)
-    sensor2flange = geo.make_transform(geo.project_to_so3(hand[:3, :3]), hand[:3, 3])
-    cam = cfg["cameras"]
-    stripe = cfg["sensor"]
+    stripe = cfg.sensor
     laser = LineLaserSensor(
-        sigma_point_mm=stripe["sigma_point_mm"] if sigma_point_mm is None else sigma_point_mm,
-        n_points=stripe["n_points"],
-        arc_half_angle_deg=stripe["arc_half_angle_deg"],
+        sigma_point_mm=stripe.sigma_point_mm if sigma_point_mm is None else sigma_point_mm,
+        n_points=stripe.n_points,
+        arc_half_angle_deg=stripe.arc_half_angle_deg,
     )
-    sphere = Sphere(
-        radius_mm=cfg["sphere"]["radius_mm"],
-        centre=np.array(cfg["sphere"]["centre_mm"], dtype=float),
-    )
-    target, made, back2front_cmm = _make_target(cfg["target"], target_rng)
-    statcam2base_design = _stationary_sensors(cfg["stationary"])
-    statcam2base_true = _mount_stationary(statcam2base_design, cfg["stationary"], mount_rng)
-    standoff = cfg["sensor"]["standoff_mm"]
-    wcfg = cfg["workpiece"]
+    sphere = Sphere(radius_mm=cfg.sphere.radius_mm, centre=np.array(cfg.sphere.centre_mm))
+    target, made, back2front_cmm = _make_target(cfg.target, target_rng)
+    statcam2base_design = cfg.stationary.design
+    statcam2base_true = _mount_stationary(statcam2base_design, cfg.stationary, mount_rng)
+    standoff = stripe.standoff_mm
+    wcfg = cfg.workpiece
     base2work_nominal, work2base_true = _place_workpiece(wcfg, place_rng)
     station = HybridStation(
         nominal=nominal,
         true=true,
-        sensor2flange_true=sensor2flange,
+        sensor2flange_true=cfg.handeye.sensor2flange,
         laser=laser,
-        camera=_camera(cam),
-        pixel_sigma=cam["pixel_sigma"] if pixel_sigma is None else pixel_sigma,
+        camera=cfg.cameras.camera,
+        pixel_sigma=cfg.cameras.pixel_sigma if pixel_sigma is None else pixel_sigma,
         sphere=sphere,
         standoff=standoff,
-        stripe_offset=cfg["sensor"]["stripe_offset_fraction"] * sphere.radius_mm,
+        stripe_offset=stripe.stripe_offset_fraction * sphere.radius_mm,
         joint_sigma=0.0,
         target=target,
         target_made=made,
@@ -368,15 +366,12 @@ def make_station(
         statcam2base_design=statcam2base_design,
         base2work_nominal=base2work_nominal,
         base2work_true=geo.invert(work2base_true),
-        datums_work=np.array(
-            [wcfg["datum_A_slot_mm"], wcfg["datum_B_hole_mm"], wcfg["datum_C_plane_mm"]],
-            dtype=float,
-        ),
-        datum_sigma=wcfg["datum_sigma_mm"],
-        free_direction=wcfg["free_direction_mm"],
+        datums_work=wcfg.datums,
+        datum_sigma=wcfg.datum_sigma_mm,
+        free_direction=wcfg.free_direction_mm,
         config=cfg,
     )
-    rep = cfg["robot"]["repeatability_mm"] if repeatability_mm is None else repeatability_mm
+    rep = cfg.robot.repeatability_mm if repeatability_mm is None else repeatability_mm
     station.joint_sigma = repeatability_joint_sigma(station, rep / 3.0)
     return station
 
@@ -417,55 +412,42 @@ _NOMINAL: dict = {}
 
 
 def _make_target(
-    tcfg: dict, rng: np.random.Generator
+    tcfg: Target, rng: np.random.Generator
 ) -> tuple[HoleTarget, ManufacturedHoleTarget, np.ndarray]:
     """The hole target as designed and as made, and its ``back2front`` as the CMM measured it
     (``[target]``)."""
     target = HoleTarget()
     made = target.manufactured(rng)
     back2front_cmm = geo.perturb(
-        made.back2front, np.deg2rad(tcfg["cmm_sigma_deg"]), tcfg["cmm_sigma_mm"], rng
+        made.back2front, np.deg2rad(tcfg.cmm_sigma_deg), tcfg.cmm_sigma_mm, rng
     )
     return target, made, back2front_cmm
 
 
-def _camera(cam: dict) -> PinholeCamera:
-    """The sensors' camera of ``[cameras]``."""
-    return PinholeCamera(**{k: cam[k] for k in ("fx", "fy", "cx", "cy", "width", "height")})
-
-
-def _stationary_sensors(st: dict) -> np.ndarray:
-    """``statcam2base (10, 4, 4)`` of the stationary sensors of ``[stationary]``."""
-    tilts = np.deg2rad(np.array(st["tilts_deg"], dtype=float))
-    rot = geo.rotvec_to_matrix(
-        np.column_stack([tilts[:, 0], np.zeros(len(tilts)), np.zeros(len(tilts))])
-    )
-    rot = rot @ geo.rotvec_to_matrix(
-        np.column_stack([np.zeros(len(tilts)), tilts[:, 1], np.zeros(len(tilts))])
-    )
-    return geo.make_transform(rot, np.array(st["positions_mm"], dtype=float))
-
-
-def _mount_stationary(design: np.ndarray, st: dict, rng: np.random.Generator) -> np.ndarray:
+def _mount_stationary(
+    design: np.ndarray, st: Stationary, rng: np.random.Generator
+) -> np.ndarray:
     """``statcam2base (10, 4, 4)`` where the stationary sensors truly sit: the design pose moved
     by the mounting tolerance of ``[stationary]`` read as 3 sigma per axis."""
     return geo.perturb(
         design,
-        np.deg2rad(st["mounting_tolerance_deg"]) / 3.0,
-        st["mounting_tolerance_mm"] / 3.0,
+        np.deg2rad(st.mounting_tolerance_deg) / 3.0,
+        st.mounting_tolerance_mm / 3.0,
         rng,
     )
 
 
-def _place_workpiece(wcfg: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _place_workpiece(
+    wcfg: Workpiece, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """``(base2work_nominal, work2base_true)``: the fixture pose of ``[workpiece]`` and the
     panel as clamped (one draw of the placement variation)."""
     work2base_nominal = geo.make_transform(
-        _rz(np.deg2rad(wcfg["nominal_rotz_deg"])), np.array(wcfg["nominal_origin_mm"], dtype=float)
+        _rz(np.deg2rad(wcfg.nominal_rotz_deg)), np.array(wcfg.nominal_origin_mm, dtype=float)
     )
     base2work_nominal = geo.invert(work2base_nominal)
     work2base_true = geo.perturb(
-        work2base_nominal, np.deg2rad(wcfg["placement_sigma_deg"]), wcfg["placement_sigma_mm"], rng
+        work2base_nominal, np.deg2rad(wcfg.placement_sigma_deg), wcfg.placement_sigma_mm, rng
     )
     return base2work_nominal, work2base_true
 
@@ -497,7 +479,3 @@ def simulate_sphere_measurements(
     )
     return meas, actual
 
-
-def with_overrides(station: HybridStation, **changes) -> HybridStation:
-    """A copy of ``station`` with some fields replaced."""
-    return replace(station, **changes)

@@ -3,7 +3,7 @@ and on a CMM.
 
 A calibrated station (:class:`ProductionStation`, built by
 :func:`calstudy.papers.hybrid.experiments.calibrate`) measures a run of rear underbody panels. Each
-panel carries the 58 feature points of :func:`calstudy.papers.hybrid.scenario.load_features`: 48
+panel carries the 58 feature points of :func:`calstudy.papers.hybrid.scenario.panel_features`: 48
 measured by the flexible sensor, one taught robot pose each, and 10 by the stationary sensors, the
 first three of which are the datums A (slot), B (hole) and C (plane) that fix the workpiece frame
 by the 3-2-1 rule. A CMM measures the same panels. Every reading is in mm, in the workpiece frame
@@ -157,7 +157,7 @@ def simulate_products(
     hybrid[:, f.fixed] = f.cad[f.fixed]
     if drift is not None:
         hybrid += np.where(f.fixed, 0.0, np.asarray(drift, dtype=float))
-    cmm_noise = cmm_rng.normal(0.0, scenario.cmm_sigma_mm, truth_work.shape)
+    cmm_noise = cmm_rng.normal(0.0, scenario.production.cmm.sigma_mm, truth_work.shape)
     cmm = truth_work + cmm_noise
     cmm[:, f.fixed] = f.cad[f.fixed]
     return hybrid, cmm
@@ -169,14 +169,14 @@ def _draw_panels(
     """True feature coordinates of ``n`` new panels ``(n, F, 3)`` in WF and, clamped on the
     fixture, in the base frame."""
     st, f = ps.station, ps.features
-    dev = rng.normal(0.0, scenario.part_sigma_mm, (n, len(f.ids), 3))
+    dev = rng.normal(0.0, scenario.production.variation.part_sigma_mm, (n, len(f.ids), 3))
     dev[:, f.fixed] = 0.0
     truth_work = f.cad + dev
-    wcfg = st.config["workpiece"]
+    wcfg = st.config.workpiece
     work2base = geo.perturb(
         np.broadcast_to(geo.invert(st.base2work_nominal), (n, 4, 4)),
-        np.deg2rad(wcfg["placement_sigma_deg"]),
-        wcfg["placement_sigma_mm"],
+        np.deg2rad(wcfg.placement_sigma_deg),
+        wcfg.placement_sigma_mm,
         rng,
     )
     return truth_work, _transform_points(work2base[:, None], truth_work)
@@ -189,12 +189,12 @@ def _flexible_readings(
     them: true robot at the program joints (plus repeatability), nominal computation."""
     st = ps.station
     n = truth_base.shape[0]
-    sigma_q = ps.joint_sigma(scenario.repeatability_mm)
+    sigma_q = ps.joint_sigma(scenario.station.robot.repeatability_mm)
     q = ps.program[None] + rng.normal(0.0, sigma_q, (n,) + ps.program.shape)
     actual = st.true.fk_many(q.reshape(-1, q.shape[-1])).reshape(n, truth_base.shape[1], 4, 4)
     sensor2base = actual @ st.sensor2flange_true
     in_sensor = _transform_points(geo.invert(sensor2base), truth_base)
-    in_sensor += rng.normal(0.0, scenario.feature_sigma_mm, in_sensor.shape)
+    in_sensor += rng.normal(0.0, scenario.production.sensors.feature_sigma_mm, in_sensor.shape)
     return _transform_points(ps.reported_sensor2base()[None], in_sensor)
 
 
@@ -206,7 +206,8 @@ def _stationary_readings(
     st, f = ps.station, ps.features
     cams = f.sensor[f.stationary] - 1
     in_cam = _transform_points(geo.invert(st.statcam2base_true[cams])[None], truth_base)
-    sigma = np.where(np.isin(cams, (0, 1, 2)), st.datum_sigma, scenario.feature_sigma_mm)
+    feature_sigma = scenario.production.sensors.feature_sigma_mm
+    sigma = np.where(np.isin(cams, (0, 1, 2)), st.datum_sigma, feature_sigma)
     in_cam += rng.normal(0.0, 1.0, in_cam.shape) * sigma[None, :, None]
     return _transform_points(ps.statcam2base[cams][None], in_cam)
 
@@ -219,9 +220,10 @@ def simulate_run(ps: ProductionStation, scenario: Scenario, rng: np.random.Gener
     fixed by the frame), which a measured station does not know. The products before the drift,
     the drift and the follow-up products draw from their own streams of ``rng``."""
     before, drift_rng, after = streams(rng, "compensation products", "drift", "follow-up products")
-    comp = simulate_products(ps, scenario, scenario.n_compensation_max, before)
-    drift = drift_rng.normal(0.0, scenario.drift_sigma_mm, (len(ps.features.ids), 3))
-    follow = simulate_products(ps, scenario, scenario.n_follow_up, after, drift=drift)
+    protocol = scenario.production.protocol
+    comp = simulate_products(ps, scenario, protocol.n_compensation_max, before)
+    drift = drift_rng.normal(0.0, scenario.production.drift.sigma_mm, (len(ps.features.ids), 3))
+    follow = simulate_products(ps, scenario, protocol.n_follow_up, after, drift=drift)
     drift = np.where(ps.features.fixed, 0.0, drift)
     return {"compensation": comp, "follow-up": follow, "drift": drift}
 

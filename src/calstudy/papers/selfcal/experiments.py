@@ -35,6 +35,7 @@ import pandas as pd
 from calstudy.core.config import read_toml, scenario_file
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
+from calstudy.core.schema import with_inputs
 from calstudy.papers.selfcal.routes import (
     hand_eye,
     three_step,
@@ -117,7 +118,7 @@ def scenario_key(scenario_toml: str = "") -> str:
     """
     path = scenario_file("selfcal", "scenario.toml", scenario_toml or None)
     sc = load_scenario(path)
-    robot = sc.robot
+    robot = sc.nominal_robot
     record = {
         "version": TRIAL_VERSION,
         "scenario": Path(path).read_text(),
@@ -145,10 +146,11 @@ def _cell(scenario: Scenario, rng: np.random.Generator, compliance_scale: float)
     """Draw a true cell, its 24 calibration measurements and 10 validation measurements (each
     from its own child stream of ``rng``)."""
     st = draw_station(scenario, child_rng(rng, "station"))
-    views = scenario.views_per_sphere
+    views = scenario.protocol.views_per_sphere
     cal = child_rng(rng, "calibration measurements")
     meas = simulate(scenario, st, st.spheres_base, views, cal, compliance_scale)
-    val_sites = draw_placements(scenario, scenario.n_validation, child_rng(rng, "validation sites"))
+    n_val = scenario.protocol.validation_placements
+    val_sites = draw_placements(scenario, n_val, child_rng(rng, "validation sites"))
     val_rng = child_rng(rng, "validation measurements")
     val = simulate(scenario, st, val_sites, 1, val_rng, compliance_scale)
     return st, meas, val
@@ -248,13 +250,14 @@ def calibration_trial(
     the 18 robot parameters; the alternated row the rounds it ran.
     """
     if noise_scale != 1.0:
-        u0, u1, k = scenario.tracker
-        scenario = scenario.with_(
-            repeatability_mm=scenario.repeatability_mm * noise_scale,
-            sigma_point_mm=scenario.sigma_point_mm * noise_scale,
-            tracker=(u0 * noise_scale, u1 * noise_scale, k),
-        )
-    scale = scenario.compliance_scale if compliance_scale is None else compliance_scale
+        changes = {
+            "repeatability.sigma_mm": scenario.repeatability.sigma_mm * noise_scale,
+            "scanner.sigma_point_mm": scenario.scanner.sigma_point_mm * noise_scale,
+            "tracker.u0_mm": scenario.tracker.u0_mm * noise_scale,
+            "tracker.u1_mm_per_m": scenario.tracker.u1_mm_per_m * noise_scale,
+        }
+        scenario = with_inputs(scenario, changes)
+    scale = scenario.compliance.scale if compliance_scale is None else compliance_scale
     st, meas, val = _cell(scenario, rng, scale)
     good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
     start = poor_start(scenario, st, child_rng(rng, "poor start"))
@@ -264,17 +267,18 @@ def calibration_trial(
         poor = None
     ml = identify(meas, st.nominal_params, weighted=True, max_evaluations=MAX_EVALUATIONS)
     # the three three-step routes begin with the same hand-eye fit: computed once
-    first = hand_eye(meas, scenario.robot, st.nominal_params)
+    robot = scenario.nominal_robot
+    first = hand_eye(meas, robot, st.nominal_params)
     alternated, rounds = three_step_alternated(
-        meas, scenario.robot, st.nominal_params, max_rounds=ALTERNATION_ROUNDS, first=first
+        meas, robot, st.nominal_params, max_rounds=ALTERNATION_ROUNDS, first=first
     )
     params = {
         ONE_STEP: good.params,
         ONE_STEP_ML: ml.params,
-        ROUTES[0]: three_step(meas, scenario.robot, st.nominal_params, first=first),
-        ROUTES[1]: three_step_reordered(meas, scenario.robot, st.nominal_params, first=first),
+        ROUTES[0]: three_step(meas, robot, st.nominal_params, first=first),
+        ROUTES[1]: three_step_reordered(meas, robot, st.nominal_params, first=first),
         ROUTES[2]: alternated,
-        ROUTES[3]: two_step(meas, scenario.robot, st.nominal_params),
+        ROUTES[3]: two_step(meas, robot, st.nominal_params),
         NULL: st.nominal_params,
         ORACLE: _ideal_identification(meas, st),
         TRUTH: st.true_params,
@@ -294,7 +298,7 @@ def compliance_sweep_experiment(scenario_toml: str = "", n_trials: int = 30) -> 
     """:func:`calibration_trial` at each compliance scale of the scenario's ``sweep_scales``
     other than the scenario's own (that point is :func:`calibration_experiment`)."""
     sc = _scenario(scenario_toml)
-    scales = [s for s in sc.compliance_sweep if s != sc.compliance_scale]
+    scales = [s for s in sc.compliance.sweep_scales if s != sc.compliance.scale]
     points = [{"compliance_scale": float(s)} for s in scales]
     return _experiment("compliance_sweep", calibration_trial, scenario_toml, n_trials, points)
 
@@ -321,7 +325,7 @@ def basin_trial(scenario: Scenario, rng: np.random.Generator, start_scale: float
     """
     st = draw_station(scenario, child_rng(rng, "station"))
     cal = child_rng(rng, "calibration measurements")
-    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, cal)
+    meas = simulate(scenario, st, st.spheres_base, scenario.protocol.views_per_sphere, cal)
     good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
     try:
         start = poor_start(scenario, st, child_rng(rng, "poor start"), start_scale)
@@ -340,7 +344,7 @@ def basin_trial(scenario: Scenario, rng: np.random.Generator, start_scale: float
 def basin_experiment(scenario_toml: str = "", n_trials: int = 30) -> Experiment:
     """:func:`basin_trial` at the start scales of the scenario (``poor_start.basin_scales``)."""
     sc = _scenario(scenario_toml)
-    points = [{"start_scale": float(s)} for s in sc.basin_scales]
+    points = [{"start_scale": float(s)} for s in sc.poor_start.basin_scales]
     return _experiment("basin", basin_trial, scenario_toml, n_trials, points)
 
 
@@ -353,7 +357,7 @@ def example_station(scenario: Scenario, seed: int) -> tuple[Station, Measurement
     rng = trial_rng(seed, "calibration", {}, 0)
     st = draw_station(scenario, child_rng(rng, "station"))
     cal = child_rng(rng, "calibration measurements")
-    meas = simulate(scenario, st, st.spheres_base, scenario.views_per_sphere, cal)
+    meas = simulate(scenario, st, st.spheres_base, scenario.protocol.views_per_sphere, cal)
     return st, meas
 
 
@@ -379,7 +383,7 @@ def identifiability_designs(scenario: Scenario, meas: Measurements, params) -> d
     dict of DataFrames: ``singular`` and ``parameters`` (with a ``design`` column) and
     ``summary`` (design, rank, condition numbers, the parameters of the null space).
     """
-    one_point = np.tile([0.0, 0.0, scenario.standoff_mm], (len(meas), 1))
+    one_point = np.tile([0.0, 0.0, scenario.scanner.standoff_mm], (len(meas), 1))
     designs = {
         "scanner (sphere anywhere in the field)": meas,
         "one sensor point": replace(meas, C_true=one_point),
@@ -448,15 +452,16 @@ def pose_selection_trial(
     """
     st = draw_station(scenario, child_rng(rng, "station"))
     Q, sphere = candidate_views(
-        scenario.robot,
-        scenario.sensor_design,
+        scenario.nominal_robot,
+        scenario.sensor.design,
         view_geometry(scenario),
         st.spheres_base,
         per_sphere,
         child_rng(rng, "candidates"),
     )
     blocks, _ = candidate_jacobians(st.nominal_params, Q, st.spheres_part, sphere)
-    sites = draw_placements(scenario, scenario.n_validation, child_rng(rng, "validation sites"))
+    n_val = scenario.protocol.validation_placements
+    sites = draw_placements(scenario, n_val, child_rng(rng, "validation sites"))
     val = simulate(scenario, st, sites, 1, child_rng(rng, "validation measurements"))
     rows = []
     sizes_n = [int(v) for v in sizes.split()]
@@ -497,7 +502,7 @@ def pose_selection_experiment(
 
 def _example_data(scenario: Scenario, seed: int):
     """Trial 0 of :func:`calibration_experiment`: station, calibration and validation sets."""
-    return _cell(scenario, trial_rng(seed, "calibration", {}, 0), scenario.compliance_scale)
+    return _cell(scenario, trial_rng(seed, "calibration", {}, 0), scenario.compliance.scale)
 
 
 def _as_measured(meas: Measurements, sphere_offset: int = 0) -> Measurements:
@@ -514,7 +519,7 @@ def simulated_cell(scenario: Scenario, seed: int) -> MeasuredCell:
         [meas.P_ref[[np.flatnonzero(meas.sphere == s)[0] for s in range(k)]], val.P_ref]
     )
     return MeasuredCell(
-        scenario.robot,
+        scenario.nominal_robot,
         st.nominal_params,
         _as_measured(meas),
         _as_measured(val, k),
@@ -526,8 +531,8 @@ def simulated_cell(scenario: Scenario, seed: int) -> MeasuredCell:
         },
         None,
         f"the simulated cell (seed {seed})",
-        scenario.base_rough,
-        scenario.sensor_design,
+        scenario.base.rough,
+        scenario.sensor.design,
     )
 
 

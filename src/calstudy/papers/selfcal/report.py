@@ -322,9 +322,9 @@ def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict[str, Judge
     controls None where the claim has none, convergence)."""
     x = claim_samples(calib)
     references = {
-        "selfcal.identification": scenario.crb_multiple,
-        "selfcal.convergence": float(scenario.published_iterations),
-        "selfcal.residual": scenario.requirement_mm,
+        "selfcal.identification": scenario.protocol.crb_multiple,
+        "selfcal.convergence": float(scenario.published.convergence_iterations),
+        "selfcal.residual": scenario.protocol.requirement_mm,
     }
     return {
         cid: judge_claim(cid, x, columns, reference=references.get(cid))
@@ -335,9 +335,9 @@ def selfcal_verdicts(calib: pd.DataFrame, scenario: Scenario) -> dict[str, Judge
 def claim_rows(verdicts: dict, scenario: Scenario, notebook: str) -> list[ClaimRow]:
     """The five rows of ``claims.csv``."""
     published = {
-        "selfcal.convergence": f"{scenario.published_iterations:g}",
-        "selfcal.residual": f"{scenario.requirement_mm:g}",
-        "selfcal.identification": f"{scenario.crb_multiple:g}",
+        "selfcal.convergence": f"{scenario.published.convergence_iterations:g}",
+        "selfcal.residual": f"{scenario.protocol.requirement_mm:g}",
+        "selfcal.identification": f"{scenario.protocol.crb_multiple:g}",
     }
     return [
         claim_row(

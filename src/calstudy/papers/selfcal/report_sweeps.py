@@ -249,7 +249,7 @@ def sweep_figure(table: pd.DataFrame, key: str, scenario: Scenario, title: str, 
     ax.plot(x, table["one_step_val_max_median_mm"], "o-", label="one-step, median")
     ax.plot(x, table["one_step_val_max_p95_mm"], "s--", label="one-step, 95th pct.")
     ax.plot(x, table["oracle_val_max_p95_mm"], "^:", label="ideal identification,\n95th pct.")
-    req = scenario.requirement_mm
+    req = scenario.protocol.requirement_mm
     ax.axhline(req, color="r", ls="--", label=f"requirement {req:g} mm")
     ax.set_ylim(0.0, 1.1 * max(req, float(table["one_step_val_max_p95_mm"].max())))
     ax.set_ylabel("largest validation\nerror (mm)")
@@ -258,13 +258,14 @@ def sweep_figure(table: pd.DataFrame, key: str, scenario: Scenario, title: str, 
     ax.plot(x, table["one_step_over_best_route_median"], "o-", label=best)
     ax.plot(x, table["model_error_over_crb_median"], "s--", label="model error / CRB,\nmedian")
     ax.plot(x, table["model_error_over_crb_p95"], "d:", label="model error / CRB,\n95th pct.")
-    ax.axhline(scenario.crb_multiple, color="r", ls="--", label=f"bound {scenario.crb_multiple:g}")
+    crb = scenario.protocol.crb_multiple
+    ax.axhline(crb, color="r", ls="--", label=f"bound {crb:g}")
     ax.axhline(1.0, color="0.5", lw=0.8)
     ax.set_ylabel("ratio")
     ax = axes[2]
     ax.plot(x, table["poor_start_iterations_median"], "o-", label="median")
     ax.plot(x, table["poor_start_iterations_p95"], "s--", label="95th pct.")
-    bound = scenario.published_iterations
+    bound = scenario.published.convergence_iterations
     ax.axhline(bound, color="r", ls="--", label=f"published {bound:g}")
     ax.set_ylim(0.0, 1.25 * max(bound, float(table["poor_start_iterations_p95"].max())))
     ax.set_ylabel("iterations from the\nvery poor start")

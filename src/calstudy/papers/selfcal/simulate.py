@@ -80,11 +80,11 @@ class Station:
 def view_geometry(scenario: Scenario) -> ViewGeometry:
     """The scenario's scanner as the view planning sees it: standoff, field, view cone, roll."""
     return ViewGeometry(
-        scenario.standoff_mm,
-        scenario.field_mm,
-        scenario.depth_mm,
-        scenario.view_cone_rad,
-        scenario.roll_deg,
+        scenario.scanner.standoff_mm,
+        scenario.scanner.field_mm,
+        scenario.scanner.depth_mm,
+        math.radians(scenario.scanner.view_cone_deg),
+        scenario.scanner.roll_deg,
     )
 
 
@@ -93,20 +93,20 @@ def draw_placements(scenario: Scenario, n: int, rng: np.random.Generator, tries:
 
     Centres closer than ``min_separation_mm`` to an earlier one are redrawn.
     """
-    lo, hi = scenario.envelope
+    spheres = scenario.spheres
+    lo = np.array(spheres.envelope_min_mm, float)
+    hi = np.array(spheres.envelope_max_mm, float)
 
     def draw(found: list[np.ndarray]) -> np.ndarray | None:
         c = rng.uniform(lo, hi)
-        return (
-            c if all(np.linalg.norm(c - o) >= scenario.min_separation_mm for o in found) else None
-        )
+        return c if all(np.linalg.norm(c - o) >= spheres.min_separation_mm for o in found) else None
 
     return draw_until(
         n,
         tries,
         draw,
         lambda _: (
-            f"could not place {n} spheres {scenario.min_separation_mm:g} mm apart in the "
+            f"could not place {n} spheres {spheres.min_separation_mm:g} mm apart in the "
             f"envelope after {tries} draws"
         ),
     )
@@ -125,20 +125,23 @@ def draw_station(scenario: Scenario, rng: np.random.Generator) -> Station:
     robot_rng, base_rng, sensor_rng, sites_rng = streams(
         rng, "robot", "base", "sensor", "sphere placements"
     )
-    true_robot = perturb_robot(scenario.robot, robot_rng)
+    true_robot = perturb_robot(scenario.nominal_robot, robot_rng)
     vec = true_robot.parameters()
     vec[5 + 2] = 0.0  # d of link 2
     true_robot = true_robot.with_parameters(vec)
-    part2base = scenario.base_rough @ _random_motion(base_rng, *scenario.base_sigma)
-    sensor2flange = scenario.sensor_design @ _random_motion(sensor_rng, *scenario.sensor_sigma)
-    spheres = draw_placements(scenario, scenario.n_spheres, sites_rng)
-    check_sphere_layout(spheres, scenario.radius_mm)
+    base, sensor = scenario.base, scenario.sensor
+    part2base = base.rough @ _random_motion(base_rng, base.sigma_mm, math.radians(base.sigma_deg))
+    sensor2flange = sensor.design @ _random_motion(
+        sensor_rng, sensor.sigma_mm, math.radians(sensor.sigma_deg)
+    )
+    spheres = draw_placements(scenario, scenario.spheres.count, sites_rng)
+    check_sphere_layout(spheres, scenario.spheres.radius_mm)
     return Station(
         true_robot,
         part2base,
         sensor2flange,
         parameters_from_robot(true_robot, part2base, sensor2flange),
-        parameters_from_robot(scenario.robot, scenario.base_rough, scenario.sensor_design),
+        parameters_from_robot(scenario.nominal_robot, scenario.base.rough, scenario.sensor.design),
         spheres,
     )
 
@@ -205,9 +208,9 @@ def cap_centre_covariance(centre_sensor, radius_mm, half_angle, n, sigma) -> np.
 
 def tracker_sigma(scenario: Scenario, points_part) -> np.ndarray:
     """Standard deviation per axis (mm) of the tracker's reading of each point (m, 3)."""
-    u0, u1, k = scenario.tracker
+    t = scenario.tracker
     dist_m = np.linalg.norm(np.asarray(points_part, float), axis=-1) / 1000.0
-    return (u0 + u1 * dist_m) / k / math.sqrt(3.0)
+    return (t.u0_mm + t.u1_mm_per_m * dist_m) / t.coverage / math.sqrt(3.0)
 
 
 GRAVITY_MPS2 = 9.81
@@ -219,16 +222,16 @@ def joint_deflection(scenario: Scenario, robot: Robot, Q, scale: float | None = 
     Static joint compliance: ``K dq = J(q)^T F`` with ``F`` the payload's weight (-z of the robot
     base frame, ``payload_kg``) at the flange, ``J`` the flange Jacobian (mm/rad, so the torque
     is divided by 1000 for N m) and ``K`` the joint stiffnesses of the scenario (N m/rad),
-    multiplied by ``1/scale``. ``scale`` (default ``scenario.compliance_scale``) 0 removes the
+    multiplied by ``1/scale``. ``scale`` (default ``scenario.compliance.scale``) 0 removes the
     error: the true robot then lies in the model class.
     """
-    scale = scenario.compliance_scale if scale is None else float(scale)
+    scale = scenario.compliance.scale if scale is None else float(scale)
     Q = np.asarray(Q, float)
     if scale == 0.0:
         return np.zeros_like(Q)
-    force = np.array([0.0, 0.0, -scenario.payload_kg * GRAVITY_MPS2])
+    force = np.array([0.0, 0.0, -scenario.compliance.payload_kg * GRAVITY_MPS2])
     torque = np.array([robot.jacobian(q)[:3].T @ force for q in Q]) / 1000.0
-    return scale * torque / np.asarray(scenario.joint_stiffness, float)
+    return scale * torque / np.asarray(scenario.compliance.stiffness_nm_per_rad, float)
 
 
 def _measure_view(scenario: Scenario, pose: np.ndarray, centre_part, rng, repeat, tracker):
@@ -241,17 +244,17 @@ def _measure_view(scenario: Scenario, pose: np.ndarray, centre_part, rng, repeat
     part frame.
     """
     pose = pose.copy()
-    pose[:3, 3] += rng.normal(0.0, scenario.repeatability_mm, 3)
+    pose[:3, 3] += rng.normal(0.0, scenario.repeatability.sigma_mm, 3)
     c_true = np.linalg.solve(pose, np.append(centre_part, 1.0))[:3]
     cap = (
-        scenario.radius_mm,
-        scenario.cap_half_angle_rad,
-        scenario.points_per_cap,
-        scenario.sigma_point_mm,
+        scenario.spheres.radius_mm,
+        math.radians(scenario.scanner.cap_half_angle_deg),
+        scenario.scanner.points_per_cap,
+        scenario.scanner.sigma_point_mm,
     )
     frame = _cap_frame(c_true)
     cloud = _scan_cap(c_true, frame, *cap, rng)
-    centre_fit, _, _ = fit_sphere_cap(cloud, scenario.max_cap_condition)
+    centre_fit, _, _ = fit_sphere_cap(cloud, scenario.scanner.max_fit_condition)
     cov_c = frame @ _cap_covariance_local(*cap) @ frame.T
     rot = pose[:3, :3]
     return centre_fit, c_true, rot @ cov_c @ rot.T + repeat + tracker
@@ -286,16 +289,15 @@ def simulate(
     truth_part = parts.T + station.part2base[:3, 3]
     reading = (
         truth_part
-        + tracker_rng.normal(size=truth_part.shape)
-        * tracker_sigma(scenario, truth_part)[:, None]
+        + tracker_rng.normal(size=truth_part.shape) * tracker_sigma(scenario, truth_part)[:, None]
     )
     Q, Q_true, C, C_true, idx, cov, shared = [], [], [], [], [], [], []
-    repeat = scenario.repeatability_mm**2 * np.eye(3)
+    repeat = scenario.repeatability.sigma_mm**2 * np.eye(3)
     for k, centre in enumerate(placements):
         if views is None:
             planned = plan_views(
-                scenario.robot,
-                scenario.sensor_design,
+                scenario.nominal_robot,
+                scenario.sensor.design,
                 view_geometry(scenario),
                 centre,
                 views_per_sphere,
@@ -339,13 +341,13 @@ def simulate(
 def poor_start(
     scenario: Scenario, station: Station, rng: np.random.Generator, scale: float = 1.0
 ) -> np.ndarray:
-    """The "very poor" initial estimate of ``scenario.poor`` around the true system.
+    """The "very poor" initial estimate of ``scenario.poor_start`` around the true system.
 
-    ``scale`` multiplies every offset of ``scenario.poor`` (the start distance of the basin
+    ``scale`` multiplies every offset of ``scenario.poor_start`` (the start distance of the basin
     sweep); the directions and signs drawn are the same for every scale.
     """
     p = np.empty(N_PARAMS)
-    cfg = {k: scale * v for k, v in scenario.poor.items()}
+    poor = scenario.poor_start
 
     def offset(true6, mm, deg):
         t = rng.normal(size=3)
@@ -356,9 +358,11 @@ def poor_start(
         )
         return pose_to_params(bad)
 
-    p[BASE] = offset(station.true_params[BASE], cfg["base_mm"], cfg["base_deg"])
-    p[SENSOR] = offset(station.true_params[SENSOR], cfg["sensor_mm"], cfg["sensor_deg"])
+    p[BASE] = offset(station.true_params[BASE], scale * poor.base_mm, scale * poor.base_deg)
+    p[SENSOR] = offset(station.true_params[SENSOR], scale * poor.sensor_mm, scale * poor.sensor_deg)
     signs = rng.choice([-1.0, 1.0], size=18)
-    size = np.where(IS_LENGTH[ROBOT], cfg["robot_length_mm"], math.radians(cfg["robot_angle_deg"]))
+    size = np.where(
+        IS_LENGTH[ROBOT], scale * poor.robot_length_mm, math.radians(scale * poor.robot_angle_deg)
+    )
     p[ROBOT] = station.true_params[ROBOT] + signs * size
     return p
