@@ -12,7 +12,7 @@ import pytest
 from support import NOTEBOOK_DIR, REPRODUCIBLE_ENV, ci_parameters
 
 from calstudy.core.paths import data_path
-from calstudy.estimators import sphere_csv
+from calstudy.handeye import sphere_csv
 from calstudy.papers.hybrid import simulate
 
 

@@ -28,8 +28,8 @@ from scipy.optimize import least_squares
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.estimators.axxb import OPENCV_METHODS, opencv_handeye
 from calstudy.estimators.fitting import fit_rigid
-from calstudy.estimators.handeye import OPENCV_METHODS, opencv_handeye
 from calstudy.models.stereo import StereoRig
 
 #: Indices (0-based) of the physical targets averaged into the virtual P7 and P8 (Section 3.2).

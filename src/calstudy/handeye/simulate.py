@@ -1,7 +1,7 @@
 """A simulated eye-in-hand cell: synthetic hand-eye pose lists with the truth.
 
 The study's standard hand-eye scenario (:func:`simulate_cell`), drawn with the noise model of
-:func:`calstudy.estimators.handeye_refine.refine_ml`; used by the tests, the benchmark and the
+:func:`calstudy.handeye.refine.refine_ml`; used by the tests, the benchmark and the
 example cell of notebook 06.
 """
 

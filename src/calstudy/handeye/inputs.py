@@ -3,7 +3,7 @@
 Storage conventions, units and near-orthonormal rotations (:func:`prepare_poses`) and the spread
 of the robot motions (:func:`motion_conditioning`, on a linear number of pose pairs). Whether the
 declared conventions and units fit is judged after the fit
-(:mod:`~calstudy.estimators.handeye_checks`).
+(:mod:`~calstudy.handeye.checks`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye_refine import (
+from calstudy.handeye.refine import (
     log_so3,
     spread_subset,
 )

@@ -1,10 +1,10 @@
 """Hand-eye residuals, closed forms and maximum-likelihood refinement for ``A_i X B_i = Z``.
 
-The pieces :func:`calstudy.estimators.handeye_poses.calibrate_handeye` is made of: per-pose SE(3)
+The pieces :func:`calstudy.handeye.calibrate.calibrate_handeye` is made of: per-pose SE(3)
 residuals of the target pose, OpenCV's closed forms scored by them, the maximum-likelihood
 refinement on those residuals (:func:`refine_ml`) or on the reprojection error
 (:func:`refine_reprojection`), and the Cramer-Rao bound (:func:`handeye_crb`). Poses are in the
-canonical form of :class:`calstudy.estimators.handeye_inputs.PreparedPoses` (mm).
+canonical form of :class:`calstudy.handeye.inputs.PreparedPoses` (mm).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.estimation import Estimate, covariance_from_jacobian
-from calstudy.estimators.handeye import (
+from calstudy.estimators.axxb import (
     DEGENERATE_ROTATION,
     check_rotation_diversity,
     opencv_handeye,
@@ -201,7 +201,7 @@ def _opencv_rwhe(a: np.ndarray, b: np.ndarray, method: str) -> tuple[np.ndarray,
     """``(X, Z)`` by ``cv2.calibrateRobotWorldHandEye``: it solves ``B = inv(X) inv(A) Z`` and
     returns ``inv(Z)`` ("base2world") and ``inv(X)`` ("gripper2cam"). Degenerate motions (pure
     translations, rotations about one axis, a repeated pose) are refused first, as by
-    :func:`calstudy.estimators.handeye.opencv_handeye`: OpenCV would return a wrong answer."""
+    :func:`calstudy.estimators.axxb.opencv_handeye`: OpenCV would return a wrong answer."""
     check_rotation_diversity(a, DEGENERATE_ROTATION)
     ainv = geo.invert(a)
     with quiet_opencv():

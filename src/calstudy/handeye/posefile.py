@@ -2,7 +2,7 @@
 
 :func:`read_pose_list` reads a user's poses as stored (convention and unit named by the columns),
 :func:`write_pose_list` writes them; :meth:`PoseList.arguments` passes them to
-:func:`calstudy.estimators.handeye_poses.calibrate_handeye`.
+:func:`calstudy.handeye.calibrate.calibrate_handeye`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from calstudy.core import geometry as geo
 from calstudy.core import schema
 from calstudy.core.config import check_ids, parse_number
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye_inputs import (
+from calstudy.handeye.inputs import (
     CAMERA_CONVENTIONS,
     ROBOT_CONVENTIONS,
     UNITS_MM,
