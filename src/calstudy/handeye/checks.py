@@ -25,8 +25,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.handeye.refine import log_so3, pose_scale
+from calstudy.handeye.refine import pose_scale
 from calstudy.handeye.robust import outlier_limit, robust_sigmas
 
 #: false-alarm probability of the time-order break test over the whole series
@@ -165,7 +166,7 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     if n < BREAK_MIN_POSES:
         return -1, 0.0, 0.0, 0.0
     zs = a[idx] @ x @ b[idx]
-    rot = log_so3(np.einsum("ji,njk->nik", zs[0, :3, :3], zs[:, :3, :3])) * scale_mm
+    rot = geo.so3_log(np.einsum("ji,njk->nik", zs[0, :3, :3], zs[:, :3, :3])) * scale_mm
     v = np.concatenate([zs[:, :3, 3], rot], 1)
     d2 = np.sum(np.diff(v, axis=0) ** 2, 1)
     # successive differences: 2 s^2 chi2(6) each; their median is not moved by one step

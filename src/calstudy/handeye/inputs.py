@@ -15,10 +15,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.handeye.refine import (
-    log_so3,
-    spread_subset,
-)
+from calstudy.handeye.refine import spread_subset
 
 #: largest ``max |R^T R - I|`` re-projected to SO(3) silently: rotation entries rounded to 4
 #: decimals are off by up to about 1.7e-4, single-precision ones by 1e-7
@@ -317,7 +314,7 @@ def motion_conditioning(a: np.ndarray) -> Conditioning:
     si, sj = np.triu_indices(len(sub), 1)
     i, j = np.concatenate([i, sub[si]]), np.concatenate([j, sub[sj]])
     rel = np.einsum("nji,njk->nik", a[i, :3, :3], a[j, :3, :3])
-    rv = log_so3(rel)
+    rv = geo.so3_log(rel)
     ang = np.linalg.norm(rv, axis=1)
     if ang.max() < MIN_ROTATION:
         raise CalibrationError(
