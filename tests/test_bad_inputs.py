@@ -644,15 +644,15 @@ def test_misfit_is_flagged_by_default():
 #   models.stereo      StereoRig.from_table ................................ stereo_table
 #   estimators.fitting fit_rigid, fit_rotation, fit_sphere .................. point_fitters
 #                      fit_homography, homography_to_pose, solve_pnp ........ homography_and_pnp
-#   estimators.handeye sphere_handeye, sphere_handeye_ml, sphere_handeye_crb  sphere_handeye
-#                      opencv_handeye ....................................... opencv_handeye
-#   estimators.handeye_poses calibrate_handeye .............................. calibrate_handeye
+#   handeye.sphere     sphere_handeye, sphere_handeye_ml, sphere_handeye_crb  sphere_handeye
+#   estimators.axxb    opencv_handeye ....................................... opencv_handeye
+#   handeye.calibrate  calibrate_handeye .................................... calibrate_handeye
 #   estimators.workpiece rps_frame_so3, rps_frame_penalty, rps_frame_batch .. rps_frames
 #                      check_datums, rps_equations, orthogonality ........... workpiece_equations
 #   estimators.binocular triangulate, triangulate_sets, ray_gap ............. stereo_triangulation
 #                      calibrator_pose ...................................... stereo_triangulation
 #                      with_virtual, distances_to_p7, layout_problem, solve_calibrator_layout,
-#                      modify_observed_error(s), motion_axes, check_rotation_axes,
+#                      modify_observed_error(s), motion_axes,
 #                      preliminary_handeye, correct_transformation .......... binocular_calibrator
 #   estimators.stereo_views make_view, triangulate .......................... stereo_triangulation
 #   estimators.sfm     pnp_pose ............................................. stereo_triangulation
@@ -920,7 +920,7 @@ def test_property_binocular_calibrator(points, distances, start, poses):
     seen = np.broadcast_to(layout, (len(robot), 8, 3))
     _check(bino.correct_transformation, robot, S2F, seen, seen + points[0] * 1e-3)
     try:
-        bino.check_rotation_axes(robot)
+        he.check_rotation_diversity(robot, bino.MIN_MOVE_ROTATION)
     except CalibrationError:
         pass
 
