@@ -41,7 +41,8 @@ def tool_error(a, x, z, rng) -> float:
             res = hp.calibrate_handeye(a, b)
     except hp.CalibrationError:  # degenerate motions (random poses about one axis): refused
         return np.nan
-    return float(np.linalg.norm(geo.apply(res.camera2flange, TOOL_POINT) - geo.apply(x, TOOL_POINT)))
+    moved = geo.apply(res.camera2flange, TOOL_POINT) - geo.apply(x, TOOL_POINT)
+    return float(np.linalg.norm(moved))
 
 
 def cell(n: int, seed: int) -> tuple[float, float, float]:

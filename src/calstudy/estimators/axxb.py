@@ -37,15 +37,34 @@ OPENCV_METHODS = {
 def check_rotation_diversity(
     flange2base: np.ndarray, min_rotation: float, tol: float = geo.ORTHONORMAL_TOL
 ) -> None:
-    """Raise a :class:`CalibrationError` unless the flange poses ``(N, 4, 4)`` rotate enough for
-    Tsai-Lenz.
+    """Refuse flange poses that do not rotate enough to determine a hand-eye rotation.
 
     Tsai-Lenz (as ``cv2.calibrateHandEye`` runs it) uses the motion between every pair of poses;
     a pair that does not rotate adds an equation that holds for any rotation and harms nothing.
     The hand-eye rotation is determined once at least two motions rotate by ``min_rotation``
     (rad) or more about axes at least ``min_rotation`` apart (each axis in the frame of the
-    motion's first flange, as the method uses it). The message says which condition fails and
-    the number behind it. ``tol`` is the orthonormality tolerance of the rotations.
+    motion's first flange, as the method uses it). This is the library's one motion-diversity
+    check: :func:`opencv_handeye` and the preliminary AX = XB of the binocular paper run it.
+
+    Parameters
+    ----------
+    flange2base : array_like, shape (N, 4, 4)
+        Flange poses in the base frame (translations in any unit), ``N >= 3``.
+    min_rotation : float
+        Smallest rotation of a motion, and smallest angle between two motion axes, rad (> 0).
+    tol : float
+        Orthonormality tolerance of the rotations.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    CalibrationError
+        For bad shapes, fewer than 3 poses or a ``min_rotation`` that is not a positive angle;
+        when no pair of poses rotates by ``min_rotation`` (the largest rotation named), or all
+        rotating motions turn about one axis (the spread of the axes named).
     """
     poses = geo.check_transform("flange poses", flange2base, tol)
     if poses.ndim != 3 or poses.shape[0] < 3:

@@ -212,9 +212,28 @@ class HandEyeResult:
         return self.prepared.a.shape[0] >= MIN_TRUSTED_POSES
 
     def region_limit(self, level: float = 0.95, k: int = 6) -> float:
-        """Limit of the squared Mahalanobis distance of a ``k``-parameter block at ``level``:
+        """Limit of the squared Mahalanobis distance of a ``k``-parameter block at ``level``.
+
         ``chi2_k`` with a given noise level, ``k F(k, dof)`` with an estimated one (the scale of
-        the covariance is then estimated from ``dof`` residual degrees of freedom)."""
+        the covariance is then estimated from ``dof`` residual degrees of freedom).
+
+        Parameters
+        ----------
+        level : float
+            Coverage of the region, in (0, 1).
+        k : int
+            Parameters of the block (6 for one transform).
+
+        Returns
+        -------
+        float
+            The limit (dimensionless).
+
+        Raises
+        ------
+        None
+            An out-of-range ``level`` gives nan.
+        """
         from scipy.special import chdtri, fdtri
 
         if np.isinf(self.dof):
@@ -222,9 +241,24 @@ class HandEyeResult:
         return float(k * fdtri(k, self.dof, level))
 
     def camera_distance(self, camera2mount_true) -> float:
-        """Squared Mahalanobis distance of :attr:`camera2mount` from ``camera2mount_true``
-        (4, 4) under the covariance of ``[theta_camera, t_camera]``: inside the 95 % region when
-        at most ``region_limit(0.95)``."""
+        """Squared Mahalanobis distance of :attr:`camera2mount` from a true pose.
+
+        Parameters
+        ----------
+        camera2mount_true : array_like, shape (4, 4)
+            The true ``camera2flange`` (eye-in-hand) or ``camera2base`` (eye-to-hand), mm.
+
+        Returns
+        -------
+        float
+            The distance under the covariance of ``[theta_camera, t_camera]`` (dimensionless):
+            inside the 95 % region when at most ``region_limit(0.95)``.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            If the covariance block is singular.
+        """
         xt = np.asarray(camera2mount_true, dtype=float)
         x = self.camera2mount
         theta = geo.matrix_to_rotvec(x[:3, :3].T @ xt[:3, :3])
@@ -238,9 +272,23 @@ class HandEyeResult:
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
     def point_covariance(self, point_camera) -> np.ndarray:
-        """Covariance ``(3, 3)`` (mm^2) of ``camera2mount @ p`` for a point ``p`` (mm) in the
-        camera frame: the predicted uncertainty of a tool or measured point mapped to the flange
-        (or base)."""
+        """Predicted uncertainty of a point of the camera frame mapped to the flange (or base).
+
+        Parameters
+        ----------
+        point_camera : array_like, shape (3,)
+            A tool or measured point in the camera frame, mm.
+
+        Returns
+        -------
+        numpy.ndarray, shape (3, 3)
+            Covariance of ``camera2mount @ p``, mm^2.
+
+        Raises
+        ------
+        CalibrationError
+            If ``point_camera`` is not 3 finite numbers.
+        """
         p = geo.check_shape("point", point_camera, (3,))
         jac = np.zeros((3, 12))
         jac[:, 0:3] = -self.camera2mount[:3, :3] @ geo.skew(p)

@@ -15,6 +15,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.core.userfile import LENGTH_UNITS
 from calstudy.handeye.refine import spread_subset
 
 #: largest ``max |R^T R - I|`` re-projected to SO(3) silently: rotation entries rounded to 4
@@ -24,8 +25,6 @@ ORTHO_TOL = 1e-3
 MIN_ROTATION = np.deg2rad(2.0)
 #: smallest ratio of the 2nd to the 1st singular value of the relative rotation vectors
 MIN_AXIS_SPREAD = 0.05
-#: translation units accepted, in mm
-UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 #: storage forms of the robot poses (the first two are what the study uses)
 ROBOT_CONVENTIONS = {
     "gripper2base": False,
@@ -99,9 +98,11 @@ def parse_convention(convention: str | Sequence[str] | None) -> tuple[str, str]:
 
 def unit_factor(which: str, unit: str) -> float:
     """Millimetres per ``unit``; CalibrationError naming ``which`` side for an unknown unit."""
-    if unit not in UNITS_MM:
-        raise CalibrationError(f"unknown {which} unit {unit!r}; use one of {', '.join(UNITS_MM)}")
-    return UNITS_MM[unit]
+    if unit not in LENGTH_UNITS:
+        raise CalibrationError(
+            f"unknown {which} unit {unit!r}; use one of {', '.join(LENGTH_UNITS)}"
+        )
+    return LENGTH_UNITS[unit]
 
 
 def _reorthonormalise(name: str, poses: np.ndarray, ids: np.ndarray, tol: float):

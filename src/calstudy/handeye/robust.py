@@ -26,8 +26,30 @@ CHI2_3_MEDIAN = 2.3659738843753377
 
 
 def outlier_limit(alpha: float = 1e-3) -> float:
-    """Outlier flag limit: the ``1 - alpha`` quantile of chi-square with 6 degrees of freedom."""
+    """Outlier flag limit: the ``1 - alpha`` quantile of chi-square with 6 degrees of freedom.
+
+    A pose whose whitened squared residual (``HandEyeResult.outlier_score``) exceeds it is
+    flagged.
+
+    Parameters
+    ----------
+    alpha : float
+        False-alarm probability per pose, in (0, 1).
+
+    Returns
+    -------
+    float
+        The limit (dimensionless).
+
+    Raises
+    ------
+    CalibrationError
+        If ``alpha`` is not in (0, 1).
+    """
     from scipy.special import chdtri  # chi2.isf without importing scipy.stats
+
+    if not 0.0 < alpha < 1.0:
+        raise CalibrationError(f"alpha = {alpha!r}: a false-alarm probability must be in (0, 1)")
 
     return float(chdtri(6, alpha))
 

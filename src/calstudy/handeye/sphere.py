@@ -200,6 +200,13 @@ def sphere_handeye(
     Estimate
         ``value`` is ``sensor2flange`` (4 x 4); ``params`` is ``[T_F, rotvec(R_F)]``;
         ``condition_number`` that of Eq. 13; no covariance (closed form).
+
+    Raises
+    ------
+    CalibrationError
+        On bad shapes or non-finite values; if the translations change the orientation or are
+        too few or collinear, or the centres do not move as far as the flange (a unit mismatch);
+        if the pose changes do not rotate about two axes (Eq. 13 rank deficient).
     """
     r_f = rotation_from_translations(trans_flange2base, trans_centres, center=center)
     t_f, cond = translation_from_rotations(rot_flange2base, rot_centres, r_f)
@@ -387,10 +394,25 @@ def sphere_handeye_ml(
 def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x_b) -> np.ndarray:
     """Cramer-Rao bound of ``[T_F, delta, X_B]`` for the fixed-sphere problem at the truth.
 
-    Parameters are as in :func:`sphere_handeye_ml`, with the true ``sensor2flange`` and the true
-    sphere centre ``x_b`` in base. Returns the ``(9, 9)`` covariance ``(J^T J)^-1`` of the
-    whitened problem; ``sqrt(trace)`` of its blocks is the smallest RMS error any unbiased
-    estimator can reach from these poses and this noise.
+    Parameters
+    ----------
+    flange2base : array_like, shape (N, 4, 4)
+        All flange poses, mm.
+    centres_true : array_like, shape (N, 3)
+        The true sphere centres in the sensor frame, mm.
+    sensor_sigma : float or array_like, shape (3,), (3, 3) or (N, 3, 3)
+        The sensor noise as in :func:`sphere_handeye_ml` (mm, or mm^2 for a covariance).
+    sensor2flange : array_like, shape (4, 4)
+        The true hand-eye transform, mm.
+    x_b : array_like, shape (3,)
+        The true sphere centre in the base frame, mm.
+
+    Returns
+    -------
+    numpy.ndarray, shape (9, 9)
+        The covariance ``(J^T J)^-1`` of ``[T_F (mm), delta (rad), X_B (mm)]`` of the whitened
+        problem; ``sqrt(trace)`` of its blocks is the smallest RMS error any unbiased estimator
+        can reach from these poses and this noise.
 
     Raises
     ------
