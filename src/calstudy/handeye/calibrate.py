@@ -42,7 +42,7 @@ is drawn by :mod:`~calstudy.handeye.simulate`.
 Noise model of the refinement: the measured target pose is ``B_i exp(xi_i)`` with a rotation
 error ``N(0, sigma_rot^2 I)`` (rad) and a translation error ``N(0, sigma_trans^2 I)`` (mm); robot
 poses are exact. The residuals are whitened with these, so the covariance at the truth,
-``(J^T J)^-1``, is the Cramer-Rao bound (``handeye_refine.handeye_crb``).
+``(J^T J)^-1``, is the Cramer-Rao bound (:func:`calstudy.handeye.refine.handeye_crb`).
 """
 
 from __future__ import annotations
