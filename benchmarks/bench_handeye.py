@@ -1,7 +1,7 @@
 """Hand-eye from pose lists: accuracy of OpenCV's closed forms and of the ML refinement against
 the Cramer-Rao bound, and time per call.
 
-Standard scenario: :func:`calstudy.estimators.handeye_sim.simulate_cell` with 15 poses,
+Standard scenario: :func:`calstudy.handeye.simulate.simulate_cell` with 15 poses,
 camera-pose noise 1e-3 rad and 0.2 mm, 200 trials (each its own cell). Goals: ML RMS
 error within 10 % of the bound, ML median error at least 2x below the best closed form, one
 refinement on 100 poses within 50 ms; the whole calibration (closed forms on 12 well-spread
@@ -18,12 +18,12 @@ import time
 import numpy as np
 from timing import best_ms
 
+from calstudy import handeye as he
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye as he
-from calstudy.estimators import handeye_inputs as hi
-from calstudy.estimators import handeye_poses as hp
-from calstudy.estimators import handeye_refine as hr
-from calstudy.estimators import handeye_sim as hs
+from calstudy.handeye import calibrate as hp
+from calstudy.handeye import inputs as hi
+from calstudy.handeye import refine as hr
+from calstudy.handeye import simulate as hs
 
 N_POSES, SIGMA_ROT, SIGMA_TRANS, TRIALS = 15, 1e-3, 0.2, 200
 METHODS = list(he.OPENCV_METHODS) + list(hr.OPENCV_RWHE_METHODS)
@@ -128,7 +128,7 @@ def main() -> None:
         f"{1000 * DIAGNOSIS_BUDGET_S:g} ms)"
     )
     print(
-        f"  {'import of calstudy.estimators.handeye_poses':<40s} {1000 * import_seconds():8.1f} ms"
+        f"  {'import of calstudy.handeye':<40s} {1000 * import_seconds():8.1f} ms"
         f"   (a fresh interpreter, its start-up subtracted; budget {1000 * IMPORT_BUDGET_S:g} ms)"
     )
 
@@ -153,7 +153,7 @@ def import_seconds(repeats: int = 5) -> float:
             out = min(out, time.perf_counter() - start)
         return out
 
-    return best("import calstudy.estimators.handeye_poses") - best("pass")
+    return best("import calstudy.handeye") - best("pass")
 
 
 if __name__ == "__main__":

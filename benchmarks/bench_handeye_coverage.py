@@ -1,6 +1,6 @@
 """Coverage of the hand-eye calibration's reported 95 % region of ``camera2flange`` against the
 truth, with the noise level not given (the default): 200 cells per pose count, each cell its own
-simulated eye-in-hand cell (:func:`calstudy.estimators.handeye_sim.simulate_cell`, camera noise
+simulated eye-in-hand cell (:func:`calstudy.handeye.simulate.simulate_cell`, camera noise
 1e-3 rad and 0.2 mm per axis).
 
 Robot error of the cells (the estimator models a Gaussian robot rotation error of unknown size,
@@ -25,8 +25,8 @@ import numpy as np
 
 from calstudy import CalibrationWarning
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye_poses as hp
-from calstudy.estimators import handeye_sim as hs
+from calstudy.handeye import calibrate as hp
+from calstudy.handeye import simulate as hs
 
 CELLS = 200
 POSE_COUNTS = (5, 6, 8, 10, 15, 30)
@@ -59,7 +59,7 @@ def covered(kind: str, n: int, seed: int) -> bool | None:
             res = hp.calibrate_handeye(a, cell.target2camera)
     except hp.CalibrationError:
         return None
-    return res.x_distance(cell.camera2flange) <= res.region_limit(0.95)
+    return res.camera_distance(cell.camera2flange) <= res.region_limit(0.95)
 
 
 def main(kinds=("none", "gauss", "uniform 2x", "laplace 4x"), cells: int = CELLS) -> None:

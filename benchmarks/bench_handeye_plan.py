@@ -1,8 +1,8 @@
 """Planned against random robot poses for a hand-eye calibration, by Monte Carlo.
 
-Each cell draws 200 candidate flange poses (:func:`calstudy.estimators.handeye_sim.simulate_cell`:
+Each cell draws 200 candidate flange poses (:func:`calstudy.handeye.simulate.simulate_cell`:
 a camera 500 mm from the target, tilted up to 40 deg, rolled up to 45 deg), chooses N of them by
-:func:`calstudy.estimators.handeye_plan.plan_poses` (nominal X and Z: the truth, camera noise
+:func:`calstudy.handeye.plan.plan_poses` (nominal X and Z: the truth, camera noise
 1e-3 rad and 0.2 mm, tool point 500 mm along the optical axis) and N at random, simulates the
 camera's measurements of both sets, calibrates (:func:`calibrate_handeye`, noise estimated) and
 measures the tool point's error (a random set the calibration refuses, rotating about one axis,
@@ -20,9 +20,9 @@ import numpy as np
 
 from calstudy import CalibrationWarning
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye_plan as hplan
-from calstudy.estimators import handeye_poses as hp
-from calstudy.estimators import handeye_sim as hs
+from calstudy.handeye import calibrate as hp
+from calstudy.handeye import plan as hplan
+from calstudy.handeye import simulate as hs
 
 CELLS = 200
 POSE_COUNTS = (6, 10, 20)
@@ -41,7 +41,8 @@ def tool_error(a, x, z, rng) -> float:
             res = hp.calibrate_handeye(a, b)
     except hp.CalibrationError:  # degenerate motions (random poses about one axis): refused
         return np.nan
-    return float(np.linalg.norm(geo.apply(res.x, TOOL_POINT) - geo.apply(x, TOOL_POINT)))
+    moved = geo.apply(res.camera2flange, TOOL_POINT) - geo.apply(x, TOOL_POINT)
+    return float(np.linalg.norm(moved))
 
 
 def cell(n: int, seed: int) -> tuple[float, float, float]:

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from calstudy.core.paths import REPO_ROOT
-from calstudy.estimators.handeye_sim import simulate_cell
+from calstudy.handeye.simulate import simulate_cell
 from calstudy.models.targets import ManufacturedHoleTarget
 from calstudy.papers.hybrid import simulate
 

@@ -22,6 +22,7 @@ from hypothesis.configuration import set_hypothesis_home_dir
 from hypothesis.extra import numpy as hnp
 
 from calstudy import CalibrationError
+from calstudy import handeye as he
 from calstudy.claims import claim_ids, claim_register
 from calstudy.core import estimation, schema, stats, verdicts
 from calstudy.core import geometry as geo
@@ -29,13 +30,13 @@ from calstudy.core.circles import fit_circle_2d
 from calstudy.estimators import binocular as bino
 from calstudy.estimators import bundle, coc, icp, sfm
 from calstudy.estimators import fitting as ft
-from calstudy.estimators import handeye as he
-from calstudy.estimators import handeye_refine as hr
-from calstudy.estimators import sphere_csv as spc
 from calstudy.estimators import stereo_views as sv
 from calstudy.estimators import workpiece as wp
-from calstudy.estimators.handeye_poses import calibrate_handeye
-from calstudy.estimators.posefile import read_pose_list, write_pose_list
+from calstudy.handeye import refine as hr
+from calstudy.handeye import sphere
+from calstudy.handeye import sphere_csv as spc
+from calstudy.handeye.calibrate import calibrate_handeye
+from calstudy.handeye.posefile import read_pose_list, write_pose_list
 from calstudy.io.params import check_parameters
 from calstudy.io.results import aggregate_claims, write_table
 from calstudy.io.runs import load_factory, rebuild
@@ -384,11 +385,11 @@ CASES = [
     ("solve_pnp_ransac-threshold", lambda p: ft.solve_pnp_ransac(CUBE, UV[:1].repeat(6, 0), K, -1.0), E, "threshold_px"),
     ("solve_pnp_ransac-three", lambda p: ft.solve_pnp_ransac(CUBE[:3], UV[:3], K, 2.0), E, "4 points; got 3"),
     # sphere hand-eye
-    ("rotation_from_translations-orientation", lambda p: he.rotation_from_translations(ROT[:4], CENTRES[4:8]), E, "not pure translations"),
-    ("rotation_from_translations-three", lambda p: he.rotation_from_translations(TRANS[:3], CENTRES[:3]), E, "at least 4 positions; got 3"),
-    ("rotation_from_translations-collinear", lambda p: he.rotation_from_translations(geo.make_transform(np.broadcast_to(TRANS[0, :3, :3], (4, 3, 3)), np.outer(np.arange(4.0), [10, 0, 0])), CENTRES[:4]), E, "one line"),
-    ("translation_from_rotations-pure", lambda p: he.translation_from_rotations(TRANS, CENTRES[:4], S2F[:3, :3]), E, "pure translations"),
-    ("translation_from_rotations-parallel", lambda p: he.translation_from_rotations(geo.make_transform(geo.rotvec_to_matrix(np.outer(np.deg2rad([0, 10, 20, 30]), [0, 0, 1])), np.zeros((4, 3))), CENTRES[:4], S2F[:3, :3]), E, "parallel \\(condition number"),
+    ("rotation_from_translations-orientation", lambda p: sphere.rotation_from_translations(ROT[:4], CENTRES[4:8]), E, "not pure translations"),
+    ("rotation_from_translations-three", lambda p: sphere.rotation_from_translations(TRANS[:3], CENTRES[:3]), E, "at least 4 positions; got 3"),
+    ("rotation_from_translations-collinear", lambda p: sphere.rotation_from_translations(geo.make_transform(np.broadcast_to(TRANS[0, :3, :3], (4, 3, 3)), np.outer(np.arange(4.0), [10, 0, 0])), CENTRES[:4]), E, "one line"),
+    ("translation_from_rotations-pure", lambda p: sphere.translation_from_rotations(TRANS, CENTRES[:4], S2F[:3, :3]), E, "pure translations"),
+    ("translation_from_rotations-parallel", lambda p: sphere.translation_from_rotations(geo.make_transform(geo.rotvec_to_matrix(np.outer(np.deg2rad([0, 10, 20, 30]), [0, 0, 1])), np.zeros((4, 3))), CENTRES[:4], S2F[:3, :3]), E, "parallel \\(condition number"),
     ("sphere_handeye_ml-translation_only", lambda p: he.sphere_handeye_ml(ONLY_T, _centres(ONLY_T), 0.02, S2F), E, "condition number"),
     ("sphere_handeye_ml-sphere_moved", lambda p: he.sphere_handeye_ml(ALL, MOVED, 0.02, S2F, ids=np.arange(1, 11), misfit="raise"), E, "chi2/dof = .* id \\d+"),
     ("sphere_handeye_ml-sigma_zero", lambda p: he.sphere_handeye_ml(ALL, CENTRES, 0.0, S2F), E, "sigma must be positive"),
@@ -545,7 +546,7 @@ CASES = [
     ("closed_forms-robot_world_one_axis", lambda p: _raise_refused(hr.closed_forms(_degenerate("one_axis"), _camera_poses(_degenerate("one_axis")), ["Shah", "Li"])), E, r"Shah: solver failed: the 15 rotating motions of the 6 poses turn about one axis"),
     ("opencv_handeye-min_pair_rotation_nan", lambda p: he.opencv_handeye(CELL_A, CELL_B, "Park", min_pair_rotation=np.nan), E, r"min_pair_rotation = nan"),
     # other exception types, now a CalibrationError naming the input
-    ("calibrate_handeye_csv-two_sigmas", lambda p: hhe.calibrate_handeye(str(_csv(p, _sphere_rows(), "mine.csv")), 1, [0.02, 0.03]), E, r"sensor_sigma_mm = \[0\.02, 0\.03\]: .*one per sensor axis \(3 values\)"),
+    ("calibrate_handeye_csv-two_sigmas", lambda p: hhe.sphere_station_calibration(str(_csv(p, _sphere_rows(), "mine.csv")), 1, [0.02, 0.03]), E, r"sensor_sigma_mm = \[0\.02, 0\.03\]: .*one per sensor axis \(3 values\)"),
     ("identify-29_parameters", lambda p: identify(None, np.zeros(29)), E, r"start \(the parameter vector\) has shape \(29,\); expected \(30\)"),
     ("refine_ml-zero_weights", lambda p: hr.refine_ml(CELL_A, CELL_B, S2F, CELL_Z, 1e-3, 0.1, weights=np.zeros(8)), E, r"weights leave 0 of the 8 poses with a weight > 0; AX = ZB needs at least 3"),
     ("calibrate_handeye-zero_weights", lambda p: calibrate_handeye(CELL_A, CELL_B, weights=np.zeros(8)), E, r"weights leave 0 of the 8 poses"),
@@ -579,7 +580,7 @@ CASES = [
 
 @pytest.mark.parametrize(("make", "error", "match"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_bad_input_is_refused(tmp_path, make, error, match):
-    from calstudy.estimators.sphere_csv import read_sphere_measurements
+    from calstudy.handeye.sphere_csv import read_sphere_measurements
 
     with pytest.raises(error, match=match):
         out = make(tmp_path)
@@ -640,15 +641,15 @@ def test_misfit_is_flagged_by_default():
 #   models.stereo      StereoRig.from_left2right ........................... stereo_rig
 #   estimators.fitting fit_rigid, fit_rotation, fit_sphere .................. point_fitters
 #                      fit_homography, homography_to_pose, solve_pnp ........ homography_and_pnp
-#   estimators.handeye sphere_handeye, sphere_handeye_ml, sphere_handeye_crb  sphere_handeye
-#                      opencv_handeye ....................................... opencv_handeye
-#   estimators.handeye_poses calibrate_handeye .............................. calibrate_handeye
+#   handeye.sphere     sphere_handeye, sphere_handeye_ml, sphere_handeye_crb  sphere_handeye
+#   estimators.axxb    opencv_handeye ....................................... opencv_handeye
+#   handeye.calibrate  calibrate_handeye .................................... calibrate_handeye
 #   estimators.workpiece rps_frame_so3, rps_frame_penalty, rps_frame_batch .. rps_frames
 #                      check_datums, rps_equations, orthogonality ........... workpiece_equations
 #   estimators.binocular triangulate, triangulate_sets, ray_gap ............. stereo_triangulation
 #                      calibrator_pose ...................................... stereo_triangulation
 #                      with_virtual, distances_to_p7, layout_problem, solve_calibrator_layout,
-#                      modify_observed_error(s), motion_axes, check_rotation_axes,
+#                      modify_observed_error(s), motion_axes,
 #                      preliminary_handeye, correct_transformation .......... binocular_calibrator
 #   estimators.stereo_views make_view, triangulate .......................... stereo_triangulation
 #   estimators.sfm     pnp_pose ............................................. stereo_triangulation
@@ -674,8 +675,8 @@ def _arrays(shape):
 
 def _finite(out):
     """Every number in ``out`` (arrays, numbers, tuples, lists, dataclass fields) is finite."""
-    if hasattr(out, "covariance") and hasattr(out, "x"):  # HandEyeResult
-        parts = [out.x, out.z, out.covariance]
+    if hasattr(out, "covariance") and hasattr(out, "camera2mount"):  # HandEyeResult
+        parts = [out.camera2mount, out.target2mount, out.covariance]
     elif isinstance(out, estimation.Estimate):
         parts = [out.value, out.params] + ([out.covariance] if out.covariance is not None else [])
     elif isinstance(out, tuple | list):
@@ -914,7 +915,7 @@ def test_property_binocular_calibrator(points, distances, start, poses):
     seen = np.broadcast_to(layout, (len(robot), 8, 3))
     _check(bino.correct_transformation, robot, S2F, seen, seen + points[0] * 1e-3)
     try:
-        bino.check_rotation_axes(robot)
+        he.check_rotation_diversity(robot, bino.MIN_MOVE_ROTATION)
     except CalibrationError:
         pass
 

@@ -101,7 +101,9 @@ EDITS = [
     ("data/dualarm/published.toml", {"05"}),
     ("data/robots/kuka_kr16_2.toml", {"01", "02", "03", "04"}),
     ("notebooks/06_handeye_your_cell.ipynb", {"06"}),
-    ("src/calstudy/estimators/handeye_cell.py", {"06"}),
+    ("src/calstudy/io/handeye_report.py", {"06"}),
+    ("src/calstudy/handeye/calibrate.py", {"01", "02", "06"}),
+    ("src/calstudy/estimators/axxb.py", {"01", "02", "04", "05", "06"}),
     ("src/calstudy/core/errors.py", {"01", "02", "03", "04", "05", "06"}),
     ("src/calstudy/io/book.py", set()),
 ]

@@ -12,7 +12,7 @@ import pytest
 from support import NOTEBOOK_DIR, REPRODUCIBLE_ENV, ci_parameters
 
 from calstudy.core.paths import data_path
-from calstudy.estimators import sphere_csv
+from calstudy.handeye import sphere_csv
 from calstudy.papers.hybrid import simulate
 
 
@@ -60,7 +60,7 @@ def test_notebook01_stops_at_the_measurements_cell(tmp_path):
     err = _run_broken(tmp_path, "01_hybrid_global_calibration", {"measurements_csv": str(csv)})
     assert "ML sphere hand-eye: whitened residual chi2/dof" in err.evalue
     assert "disagree most: id" in err.evalue
-    assert "experiments.calibrate_handeye(" in err.source
+    assert "experiments.sphere_station_calibration(" in err.source
 
 
 def test_notebook02_stops_at_the_tables_cell(tmp_path):

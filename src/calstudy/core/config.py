@@ -3,15 +3,12 @@
 Every paper's ``scenario.load_scenario(path=None)`` reads its file through :func:`read_toml`
 (default: the paper's file under ``data/``) and its values through :func:`require`, so a missing
 file, a malformed file and a missing key are reported the same way in all four papers.
-:func:`parse_number` and :func:`check_ids` read the cells of a CSV data file the same way.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from calstudy.core import schema
 from calstudy.core.errors import CalibrationError
@@ -46,22 +43,3 @@ def require(table: dict, dotted_key: str, source: str | Path) -> Any:
             raise CalibrationError(f"{source}: missing key '{where}'")
         node = node[part]
     return node
-
-
-def parse_number(path: str | Path, line: int, column: str, text: str) -> float:
-    """``float(text)`` of the cell in row ``line`` (1-based, the header is row 1) and ``column``
-    of the CSV file ``path``; CalibrationError naming all three if it is not a finite number
-    (a decimal comma such as ``12,5`` is named as such)."""
-    return schema.parse_number(path, line, column, text)
-
-
-def check_ids(path: str | Path, ids: np.ndarray) -> np.ndarray:
-    """The ``id`` column (N,) of the CSV file ``path`` (first data row is row 2), checked to hold
-    distinct integers; CalibrationError naming the row or the repeated id."""
-    if np.any(ids != np.round(ids)):
-        bad = int(np.argmax(ids != np.round(ids)))
-        raise CalibrationError(f"{path}: row {bad + 2}, column 'id': {ids[bad]} is not an integer")
-    uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        raise CalibrationError(f"{path}: id {int(uniq[counts > 1][0])} appears more than once")
-    return ids

@@ -364,6 +364,70 @@ def rotation_angle(rotation) -> np.ndarray:
     return np.arctan2(np.sqrt(np.sum(v * v, axis=-1)), cos2)
 
 
+#: above this angle (rad) :func:`so3_log` takes the axis from scipy (the skew part vanishes
+#: near pi)
+SO3_LOG_NEAR_PI = np.pi - 1e-2
+
+
+def so3_log(rotation) -> np.ndarray:
+    """Rotation vectors ``(N, 3)`` (rad) of proper rotation matrices ``(..., 3, 3)``, fast.
+
+    ``v * a / |v|`` with ``v`` the skew part and ``a`` the angle of :func:`rotation_angle`
+    (accurate at every angle; a fifth of the cost of scipy's conversion, which an iterative
+    refinement calls at every evaluation); within 0.01 rad of pi, where the skew part loses the
+    axis, scipy's conversion. It agrees with :func:`matrix_to_rotvec` to about 1e-15 rad, not
+    bit for bit.
+
+    Parameters
+    ----------
+    rotation : array_like, shape (..., 3, 3)
+        Proper rotation matrices (not checked).
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, 3)
+        Rotation vectors (axis times angle, rad), the leading axes flattened.
+    """
+    r = np.asarray(rotation, dtype=float).reshape(-1, 3, 3)
+    v = np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], 1)
+    s = np.sqrt(np.sum(v * v, axis=1))
+    ang = np.arctan2(s, r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2] - 1.0)
+    out = v * np.where(s > 1e-300, ang / np.maximum(s, 1e-300), 0.5)[:, None]
+    far = ang > SO3_LOG_NEAR_PI
+    if np.any(far):
+        out[far] = _rotation().from_matrix(r[far]).as_rotvec()
+    return out
+
+
+def so3_exp(rotvec) -> np.ndarray:
+    """Rotation matrix ``(1, 3, 3)`` of one rotation vector, fast (Rodrigues' formula, its
+    series below 1e-4 rad).
+
+    For one vector inside an iterative refinement, where scipy's conversion
+    (:func:`rotvec_to_matrix`) costs more than the formula; the two agree to about 1e-16, not
+    bit for bit.
+
+    Parameters
+    ----------
+    rotvec : array_like, shape (3,)
+        Rotation vector (axis times angle, rad).
+
+    Returns
+    -------
+    numpy.ndarray, shape (1, 3, 3)
+        The rotation matrix.
+    """
+    v = np.asarray(rotvec, dtype=float).reshape(3)
+    th2 = float(v @ v)
+    k = skew(v)
+    if th2 < 1e-8:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = np.sqrt(th2)
+        a, b = np.sin(th) / th, (1.0 - np.cos(th)) / th2
+    return (np.eye(3) + a * k + b * (k @ k))[None]
+
+
 def rotation_error(estimate, truth) -> np.ndarray:
     """Angle in rad of ``R_truth^T R_est`` for rotations or transforms ``(..., 3|4, 3|4)``."""
     e = np.asarray(estimate, dtype=float)[..., :3, :3]

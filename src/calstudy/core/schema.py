@@ -13,11 +13,10 @@ row and column), the value found and the allowed range::
 replacing some of its inputs first (checked as if the file held them); the validated model is
 then the scenario itself, frozen, its derived values cached on it. :meth:`Schema.replace` makes a
 changed copy without validation (an oracle, a sweep point beyond the file's ranges),
-:func:`with_inputs` one validated again. :func:`read_csv_table` reads a CSV the way a spreadsheet
-writes it (byte-order mark, ``;`` as separator, ``#`` comment lines) and :func:`validate_rows`
-checks its rows. The range types (:data:`Finite`, :data:`PositiveFinite`, ...),
-:func:`rigid_transform` (:data:`Rigid4x4`), :class:`Pinhole`, :class:`Radians` and :class:`Texts`
-are the building blocks of the schemas.
+:func:`with_inputs` one validated again. :func:`validate_rows` checks the rows of a CSV file
+that :func:`calstudy.core.userfile.read_csv_table` read. The range types (:data:`Finite`,
+:data:`PositiveFinite`, ...), :func:`rigid_transform` (:data:`Rigid4x4`), :class:`Pinhole`,
+:class:`Radians` and :class:`Texts` are the building blocks of the schemas.
 
 A paper's ``scenario.py`` uses it as::
 
@@ -37,12 +36,9 @@ A paper's ``scenario.py`` uses it as::
 from __future__ import annotations
 
 import copy
-import csv
-import io
-import math
 import re
 import tomllib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from functools import cached_property
 from pathlib import Path
 from typing import Annotated, Any, Self, TypeVar, get_args
@@ -60,6 +56,7 @@ from pydantic import (
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import DATA_DIR
+from calstudy.core.userfile import number_problem
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -582,103 +579,12 @@ class Pinhole(Schema):
 # CSV files
 
 
-_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
-
-
-def number_problem(text: str) -> str:
-    """Why ``text`` is not a finite number, in words (for messages)."""
-    if text == "":
-        return "is not a number (empty cell)"
-    if _DECIMAL_COMMA.match(text):
-        return f"is not a number (decimal comma? write {text.replace(',', '.')})"
-    try:
-        value = float(text)
-    except ValueError:
-        return "is not a number"
-    return "is not finite" if not math.isfinite(value) else ""
-
-
-def parse_number(path: str | Path, line: int, column: str, text: str) -> float:
-    """``float(text)`` of the cell in row ``line`` (1-based, the header is row 1) and ``column``
-    of the CSV file ``path``; CalibrationError naming all three if it is not a finite number."""
-    problem = number_problem(text)
-    if problem:
-        raise CalibrationError(f"{path}: row {line}, column {column!r}: {text!r} {problem}")
-    return float(text)
-
-
-def read_csv_table(path: str | Path, what: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """Header and rows of a spreadsheet-written CSV file.
-
-    Accepts a UTF-8 byte-order mark, ``,`` or ``;`` as the separator (``;`` when the header has
-    no ``,``, as European spreadsheets write it), ``#`` comment lines and blank lines.
-
-    Returns
-    -------
-    header : list of str
-        Stripped column names.
-    rows : list of (int, list of str)
-        File line number (1-based, as a spreadsheet shows it) and stripped cells of each row.
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` is not a file (naming it and ``what``).
-    CalibrationError
-        For an empty file, a file that is not UTF-8 text, or a row whose cell count differs
-        from the header's (naming the row; a decimal comma is the usual cause).
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file (the {what})")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise CalibrationError(
-            f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); save it as CSV UTF-8"
-        ) from None
-    lines = [
-        (i, ln)
-        for i, ln in enumerate(text.splitlines(), start=1)
-        if ln.strip() and not ln.lstrip().startswith("#")
-    ]
-    if not lines:
-        raise CalibrationError(f"{path}: the file is empty (no header)")
-    first = lines[0][1]
-    delimiter = ";" if ";" in first and "," not in first else ","
-    parsed = list(csv.reader(io.StringIO("\n".join(ln for _, ln in lines)), delimiter=delimiter))
-    header = [h.strip() for h in parsed[0]]
-    rows = []
-    for (line, _), cells in zip(lines[1:], parsed[1:], strict=True):
-        if len(cells) != len(header):
-            hint = (
-                " (a decimal comma such as 12,5 splits a cell in two: write 12.5)"
-                if len(cells) > len(header) and delimiter == ","
-                else ""
-            )
-            raise CalibrationError(
-                f"{path}: row {line} has {len(cells)} cells; the header has {len(header)}{hint}"
-            )
-        rows.append((line, [c.strip() for c in cells]))
-    return header, rows
-
-
-def require_columns(path: str | Path, header: Iterable[str], columns: Iterable[str]) -> None:
-    """CalibrationError naming the file and the missing columns, if any."""
-    have = set(header)
-    missing = [c for c in columns if c not in have]
-    if missing:
-        raise CalibrationError(
-            f"{path}: missing column(s) {', '.join(missing)} (the header has "
-            f"{', '.join(header) or 'nothing'})"
-        )
-
-
 def validate_rows(
     model: type[M], header: Sequence[str], rows: Sequence[tuple[int, Sequence[str]]], path
 ) -> list[M]:
-    """Each row (from :func:`read_csv_table`) validated against ``model``; the first bad cell is
-    reported with its row, column, text and what is allowed."""
+    """Each row (from :func:`calstudy.core.userfile.read_csv_table`) validated against
+    ``model``; the first bad cell is reported with its row, column, text and what is
+    allowed."""
     out = []
     fields = model.model_fields
     for line, cells in rows:
@@ -722,11 +628,7 @@ __all__ = [
     "format_errors",
     "is_study_file",
     "load_model",
-    "number_problem",
-    "parse_number",
-    "read_csv_table",
     "read_toml",
-    "require_columns",
     "rigid_transform",
     "rotation_problem",
     "validate",

@@ -10,7 +10,7 @@ The geometric half of the `binocular` paper (Sections 2 and 3.2); the imaging ha
 - :func:`solve_calibrator_layout`: a 3D layout of targets P1-P6 and the virtual P7, P8 consistent
   with the standard distances of Table 2.
 - :func:`modify_observed_error`: the distance-constraint adjustment of Eq. 23-25 (least norm).
-- :func:`preliminary_handeye`: AX = XB (Eq. 13) with a check of the rotation axes.
+- :func:`preliminary_handeye`: AX = XB (Eq. 13) after the library's check of the rotation axes.
 - :func:`correct_transformation`: the transformation error correction of Eq. 14-22.
 
 Frames: the sensor frame is the left camera frame. ``sensor2flange`` is the paper's ``H_gc``,
@@ -28,8 +28,8 @@ from scipy.optimize import least_squares
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.estimators.axxb import OPENCV_METHODS, opencv_handeye
 from calstudy.estimators.fitting import fit_rigid
-from calstudy.estimators.handeye import OPENCV_METHODS, opencv_handeye
 from calstudy.models.stereo import StereoRig
 
 #: Indices (0-based) of the physical targets averaged into the virtual P7 and P8 (Section 3.2).
@@ -405,6 +405,11 @@ def modify_observed_errors(
 # hand-eye (Eq. 13-22)
 
 
+#: smallest rotation (rad) of a move, and smallest angle between the axes of two moves, that
+#: the preliminary AX = XB accepts
+MIN_MOVE_ROTATION = 1e-3
+
+
 def motion_axes(flange2base) -> tuple[np.ndarray, np.ndarray]:
     """Unit rotation axes ``(N - 1, 3)`` and angles (rad) of the moves from pose 0 to the others."""
     g = geo.check_transform("flange poses", flange2base)
@@ -412,30 +417,6 @@ def motion_axes(flange2base) -> tuple[np.ndarray, np.ndarray]:
     rv = geo.matrix_to_rotvec(rel)
     angle = np.linalg.norm(rv, axis=1)
     return rv / np.maximum(angle, 1e-300)[:, None], angle
-
-
-def check_rotation_axes(flange2base, min_angle_rad: float = 1e-3, min_axis_angle_rad: float = 1e-2):
-    """Raise unless the robot moves contain two rotations about non-parallel axes (AX = XB).
-
-    Raises
-    ------
-    CalibrationError
-        Fewer than 2 moves rotate by ``min_angle_rad``, or all their axes lie within
-        ``min_axis_angle_rad`` of one line.
-    """
-    axes, angle = motion_axes(flange2base)
-    used = axes[angle > min_angle_rad]
-    if used.shape[0] < 2:
-        raise CalibrationError(
-            f"{used.shape[0]} of the {angle.size} moves rotate by more than {min_angle_rad:g} rad; "
-            "AX = XB needs at least 2 rotations about non-parallel axes"
-        )
-    spread = max(math.asin(min(1.0, float(np.linalg.norm(np.cross(used[0], a))))) for a in used[1:])
-    if spread < min_axis_angle_rad:
-        raise CalibrationError(
-            f"the rotation axes of the {used.shape[0]} moves are parallel (largest angle between "
-            f"them {spread:.3g} rad); add a move about another axis"
-        )
 
 
 def calibrator_pose(layout_points, measured_points) -> np.ndarray:
@@ -447,13 +428,13 @@ def preliminary_handeye(flange2base, calibrator2sensor, method: str = "Park") ->
     """The preliminary ``sensor2flange`` from AX = XB (Eq. 13) by a closed-form solver.
 
     The paper cites Shiu and Ahmad's formulation; OpenCV does not implement that solver, so the
-    closed-form solvers of ``cv2.calibrateHandEye`` stand in (Park-Martin by default), after a
-    check that the moves rotate about at least two non-parallel axes.
+    closed-form solvers of ``cv2.calibrateHandEye`` stand in (Park-Martin by default), after
+    the library's motion check (:func:`calstudy.estimators.axxb.check_rotation_diversity`): two
+    moves rotating by :data:`MIN_MOVE_ROTATION` or more about axes that far apart.
     """
     if method not in OPENCV_METHODS:
         raise CalibrationError(f"unknown method {method!r}; use one of {list(OPENCV_METHODS)}")
-    check_rotation_axes(flange2base)
-    return opencv_handeye(flange2base, calibrator2sensor, method)
+    return opencv_handeye(flange2base, calibrator2sensor, method, MIN_MOVE_ROTATION)
 
 
 def correct_transformation(

@@ -53,7 +53,7 @@ def factory_name(factory: Callable) -> str:
 #: :func:`load_factory` imports.
 FACTORIES = frozenset(
     {
-        "calstudy.estimators.handeye_cell:tool_point_experiment",
+        "calstudy.io.handeye_report:tool_point_experiment",
         *(
             f"calstudy.papers.binocular.experiments:{name}_experiment"
             for name in ("binocular", "field", "optics")

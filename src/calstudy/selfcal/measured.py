@@ -36,7 +36,6 @@ rows before and after against a requirement.
 
 from __future__ import annotations
 
-import csv
 import itertools
 import math
 import re
@@ -48,10 +47,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calstudy.core.config import check_ids, parse_number, require
+from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform, matrix_to_euler_zyx
 from calstudy.core.schema import check_toml
+from calstudy.core.userfile import (
+    ANGLE_UNITS,
+    LENGTH_UNITS,
+    check_ids,
+    parse_number,
+    read_csv_table,
+)
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import load_robot
 from calstudy.models.urdf import robot_from_urdf
@@ -74,8 +80,6 @@ from calstudy.selfcal.model import (
 )
 
 CELL_FILE, SPHERES_FILE, MEASUREMENTS_FILE = "cell.toml", "spheres.csv", "measurements.csv"
-LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
-ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
 SETS = ("calibration", "validation")
 #: the rejection rule: a measurement is an outlier if ``|e|^2 / sigma^2`` exceeds the 99.9 %
 #: quantile of chi-square with 3 degrees of freedom (``|e|`` above 4.03 sigma), with ``sigma``
@@ -144,27 +148,13 @@ class MeasuredCell:
 # reading
 
 
-def _csv_rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """Header and (line number, cells) of the data rows; comments and blank lines skipped."""
-    if not path.is_file():
-        raise CalibrationError(f"{path}: no such file")
-    with open(path, newline="") as handle:
-        numbered = [(i + 1, ln) for i, ln in enumerate(handle) if not ln.lstrip().startswith("#")]
-    rows = [
-        (n, r) for (n, _), r in zip(numbered, csv.reader(ln for _, ln in numbered), strict=True)
-    ]
-    rows = [(n, r) for n, r in rows if any(c.strip() for c in r)]
+def _csv_rows(path: Path, what: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
+    """Header and (line number, cells) of the data rows (the user-file tokeniser); a file
+    without data rows is refused."""
+    header, rows = read_csv_table(path, what)
     if not rows:
-        raise CalibrationError(f"{path}: the file is empty")
-    header = [h.strip() for h in rows[0][1]]
-    if not rows[1:]:
         raise CalibrationError(f"{path}: no data rows")
-    for n, r in rows[1:]:
-        if len(r) != len(header):
-            raise CalibrationError(
-                f"{path}: row {n} has {len(r)} cells; the header has {len(header)}"
-            )
-    return header, rows[1:]
+    return header, rows
 
 
 def _unit_columns(path, header, stems, units: dict, what: str) -> tuple[list[str], float]:
@@ -201,7 +191,7 @@ def _ids(path, header, rows, name) -> np.ndarray:
 def read_spheres(path) -> tuple[np.ndarray, np.ndarray]:
     """Sphere ids (k,) and tracker readings (k, 3) mm of ``spheres.csv``."""
     path = Path(path)
-    header, rows = _csv_rows(path)
+    header, rows = _csv_rows(path, "sphere table")
     ids = _ids(path, header, rows, "sphere")
     uniq, counts = np.unique(ids, return_counts=True)
     if np.any(counts > 1):
@@ -222,7 +212,7 @@ def read_measurements(path, sphere_ids) -> pd.DataFrame:
     """The rows of ``measurements.csv``: ``pose, set, sphere`` (index), ``q1..q6`` rad and
     ``cx, cy, cz`` mm, with the source line number in ``line``."""
     path = Path(path)
-    header, rows = _csv_rows(path)
+    header, rows = _csv_rows(path, "measurement table")
     poses = _ids(path, header, rows, "pose")
     check_ids(path, poses.astype(float))
     sets = _column(path, header, rows, "set", parse=False)
@@ -410,8 +400,10 @@ def read_cell(folder) -> MeasuredCell:
 
     Raises
     ------
+    FileNotFoundError
+        A missing file (``cell.toml``, ``spheres.csv``, ``measurements.csv``).
     CalibrationError
-        A missing file, key or column, a unit not declared, a cell that is not a number (with
+        A missing key or column, a unit not declared, a cell that is not a number (with
         its file, row and column), a repeated id, an unknown sphere or set, no calibration rows;
         a declared unit the values contradict (joint angles all within +-pi in degree columns,
         sphere placements within 10 mm of each other or sensor centres within 10 mm of the
@@ -419,8 +411,6 @@ def read_cell(folder) -> MeasuredCell:
     """
     folder = Path(folder)
     cell_path = folder / CELL_FILE
-    if not cell_path.is_file():
-        raise CalibrationError(f"{cell_path}: no such file (the cell description)")
     table = check_toml(cell_path, CellFile, "cell description")
     robot = _robot_from(table, folder, cell_path)
     part2base = _pose_from(table, "base", cell_path)

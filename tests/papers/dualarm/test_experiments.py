@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 
 from calstudy import CalibrationError
+from calstudy import handeye as he
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye as he
 from calstudy.estimators import sfm as mk
 from calstudy.estimators.bundle import bundle_adjust
 from calstudy.estimators.fitting import solve_pnp_ransac
@@ -269,3 +269,23 @@ def test_camera_pose_refinement_matches_finite_differences(scenario):
     assert geo.translation_error(got, fd) < 1e-4
     # the start was off by far more than that
     assert geo.translation_error(start, fd) > 0.5
+
+
+def test_base_to_base_chains_two_robots():
+    """Eq. 11: two robots whose cameras see one world frame give the transform between their
+    bases, for any number of poses per robot; unequal pose counts are rejected."""
+    rng = np.random.default_rng(22)
+    def pose(n, scale):
+        return geo.make_transform(geo.random_rotation(rng, n), rng.uniform(-scale, scale, (n, 3)))
+
+    world2base, cam2flange = pose(2, 900.0), pose(2, 100.0)
+    args = []
+    for a, n in ((0, 3), (1, 5)):
+        flange2base = pose(n, 900.0)
+        world2cam = geo.invert(flange2base @ cam2flange[a]) @ world2base[a]
+        args += [flange2base, cam2flange[a], world2cam]
+    truth = world2base[0] @ geo.invert(world2base[1])
+    np.testing.assert_allclose(ex.base_to_base(*args), truth, atol=1e-9)
+    args[2] = args[2][:2]
+    with pytest.raises(CalibrationError, match="3 flange poses but 2 camera poses"):
+        ex.base_to_base(*args)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from calstudy import handeye as he
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye as he
+from calstudy.papers.dualarm import experiments as ex
 from calstudy.papers.dualarm import simulate as sim
 
 
@@ -19,7 +20,7 @@ def test_base_to_base_is_eq11(quiet):
         np.testing.assert_allclose(true, reported, atol=1e-12)
         flange.append(reported)
         w2c.append(geo.invert(cam2world))
-    t = he.base_to_base(
+    t = ex.base_to_base(
         flange[0],
         quiet.calibration.cam2flange[0],
         w2c[0],

@@ -12,7 +12,7 @@ import pytest
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
-from calstudy.estimators import sphere_csv
+from calstudy.handeye import sphere_csv
 from calstudy.papers.hybrid import (
     compensation,
     handeye_experiments,
@@ -276,17 +276,19 @@ def sphere_files(tmp_path_factory):
 def test_sphere_that_moved_is_refused_naming_the_ids(sphere_files):
     good, moved = sphere_files
     # the robot's pose error is part of a measured centre's scatter: 0.3 mm
-    handeye_experiments.calibrate_handeye(str(good), 0, 0.3)
+    handeye_experiments.sphere_station_calibration(str(good), 0, 0.3)
     with pytest.raises(
         CalibrationError, match=r"chi2/dof = \d+(\.\d+)? .* disagree most: id \d+ \(RMS"
     ):
-        handeye_experiments.calibrate_handeye(str(moved), 0, 0.3)
+        handeye_experiments.sphere_station_calibration(str(moved), 0, 0.3)
 
 
 def test_sphere_that_moved_may_be_flagged(sphere_files):
     _, moved = sphere_files
     with pytest.warns(UserWarning, match=r"disagree most: id \d+"):
-        *_, ml, _ = handeye_experiments.calibrate_handeye(str(moved), 0, 0.3, misfit="flag")
+        *_, ml, _ = handeye_experiments.sphere_station_calibration(
+            str(moved), 0, 0.3, misfit="flag"
+        )
     assert any("disagree most" in f for f in ml.flags)
 
 

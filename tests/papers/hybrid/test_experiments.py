@@ -9,10 +9,10 @@ import pytest
 from support import ideal_station
 
 from calstudy import CalibrationError
+from calstudy import handeye as he
 from calstudy.core import geometry as geo
 from calstudy.core import montecarlo
-from calstudy.estimators import handeye as he
-from calstudy.estimators import sphere_csv
+from calstudy.handeye import sphere_csv
 from calstudy.papers.hybrid import experiments, handeye_experiments, scenario, simulate
 
 
@@ -71,7 +71,7 @@ def test_calibrate_from_user_csv(tmp_path):
     meas, _ = simulate.simulate_sphere_measurements(s, 4, 6, rng)
     path = tmp_path / "mine.csv"
     sphere_csv.write_sphere_measurements(meas, path)
-    source, _, paper, ml, table = handeye_experiments.calibrate_handeye(
+    source, _, paper, ml, table = handeye_experiments.sphere_station_calibration(
         str(path), 0, [0.01, 0.02, 0.01]
     )
     assert source.startswith(f"user measurements from {path}")
@@ -124,3 +124,21 @@ def test_mounting_error_has_the_stated_tolerance_as_three_sigma():
     # the angle of a rotation vector with N(0, s^2) per axis has RMS s * sqrt(3)
     rms = np.sqrt(np.mean(turn**2))
     assert rms == pytest.approx(st.mounting_tolerance_deg / 3 * np.sqrt(3), rel=0.05)
+
+
+def test_stationary_chain_noise_free_exact():
+    rng = np.random.default_rng(13)
+    sensor2flange = geo.make_transform(
+        geo.euler_zyx_to_matrix(10.0, 50.0, -5.0), np.array([-46.0, -4.5, 413.0])
+    )
+    flange2base = geo.make_transform(geo.random_rotation(rng), rng.uniform(-900, 900, 3))
+    front2sensor = geo.make_transform(geo.rotvec_to_matrix([np.pi, 0, 0]), [0, 0, 250.0])
+    back2front = geo.make_transform(geo.rotvec_to_matrix([np.pi, 0, 0]), [0, 0, -8.0])
+    statcam2base = geo.make_transform(geo.random_rotation(rng), rng.uniform(-900, 900, 3))
+    front2base = flange2base @ sensor2flange @ front2sensor
+    back2statcam = geo.invert(statcam2base) @ front2base @ back2front
+    est = experiments.stationary_sensor_to_base(
+        flange2base, sensor2flange, front2sensor, back2statcam, back2front
+    )
+    assert geo.rotation_error(est, statcam2base) < 1e-9
+    assert geo.translation_error(est, statcam2base) < 1e-9

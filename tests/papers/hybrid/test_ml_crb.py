@@ -9,8 +9,8 @@ of the old "ML" must not be (it ignores the y-z correlation)."""
 
 import numpy as np
 
+from calstudy import handeye as he
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye as he
 from calstudy.papers.hybrid import handeye_experiments, simulate
 
 N = 600

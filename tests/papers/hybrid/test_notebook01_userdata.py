@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 from support import NOTEBOOK_DIR, ci_parameters, run
 
-from calstudy.estimators import handeye as he
-from calstudy.estimators import sphere_csv
+from calstudy import handeye as he
+from calstudy.handeye import sphere_csv
 from calstudy.papers.hybrid import simulate
 
 NOTEBOOK = NOTEBOOK_DIR / "01_hybrid_global_calibration.ipynb"

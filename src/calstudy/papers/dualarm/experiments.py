@@ -33,9 +33,9 @@ from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, child_rng, streams
 from calstudy.estimators import sfm as mk
+from calstudy.estimators.axxb import MIN_PAIR_ROTATION, opencv_handeye
 from calstudy.estimators.bundle import refine_camera_pose
 from calstudy.estimators.fitting import fit_rigid, fit_sphere, solve_pnp, solve_pnp_ransac
-from calstudy.estimators.handeye import MIN_PAIR_ROTATION, base_to_base, opencv_handeye
 from calstudy.estimators.icp import weighted_icp
 from calstudy.estimators.stereo_views import View
 from calstudy.papers.dualarm import simulate as sim
@@ -100,6 +100,47 @@ def locate_world(scn: Scenario, view: View, points) -> np.ndarray:
         sigma_mm=max(scn.detection.marker_sigma_mm, 1e-3),
         depth_ref_mm=scn.sensor.working_distance_mm,
     )
+
+
+def base_to_base(
+    flange2base_1, cam2flange_1, world2cam_1, flange2base_2, cam2flange_2, world2cam_2
+) -> np.ndarray:
+    """``base2_to_base1`` of two robots whose cameras locate one world frame (dualarm Eq. 11).
+
+    ``world2base_a = flange2base_a @ cam2flange_a @ world2cam_a``, averaged over arm ``a``'s
+    poses by :func:`calstudy.core.geometry.mean_transform`; then
+    ``base2_to_base1 = world2base_1 @ world2base_2^-1``.
+
+    Parameters
+    ----------
+    flange2base_1, flange2base_2 : array_like, shape (N_a, 4, 4)
+        Each robot's flange poses, mm.
+    cam2flange_1, cam2flange_2 : array_like, shape (4, 4)
+        Each robot's hand-eye transform.
+    world2cam_1, world2cam_2 : array_like, shape (N_a, 4, 4)
+        The world frame in each camera at each pose.
+
+    Returns
+    -------
+    (4, 4) array
+        ``base2_to_base1`` (``p_base1 = base2_to_base1 @ p_base2``).
+
+    Raises
+    ------
+    CalibrationError
+        On bad shapes, non-orthonormal rotations, or unequal numbers of flange and camera poses.
+    """
+    w2b = []
+    for g2b, c2f, w2c in (
+        (flange2base_1, cam2flange_1, world2cam_1),
+        (flange2base_2, cam2flange_2, world2cam_2),
+    ):
+        g = geo.check_transform("flange poses", g2b).reshape(-1, 4, 4)
+        w = geo.check_transform("world2cam", w2c).reshape(-1, 4, 4)
+        if len(g) != len(w):
+            raise CalibrationError(f"{len(g)} flange poses but {len(w)} camera poses")
+        w2b.append(geo.mean_transform(g @ geo.check_transform("cam2flange", c2f) @ w))
+    return w2b[0] @ geo.invert(w2b[1])
 
 
 def marker_base_to_base(scn: Scenario, cam2flange_est, points, arm_data) -> np.ndarray:

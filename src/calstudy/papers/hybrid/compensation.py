@@ -33,8 +33,9 @@ import pandas as pd
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.schema import read_csv_table, require_columns, validate_rows
+from calstudy.core.schema import validate_rows
 from calstudy.core.stats import lilliefors_tests
+from calstudy.core.userfile import LENGTH_UNITS, read_csv_table, require_columns
 from calstudy.papers.hybrid.scenario import AXES, PHASES, load_published
 from calstudy.papers.hybrid.schema import MeasurementRow
 
@@ -153,8 +154,6 @@ def measurements_from_frames(hybrid: pd.DataFrame, cmm: pd.DataFrame):
     return ids_h, run
 
 
-#: factor to mm of the coordinate columns ``x_<unit>, y_<unit>, z_<unit>``
-LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
 #: coordinates all below this (in magnitude) look like metres ...
 METRE_SUSPECT = 10.0
 #: ... when the other table's reach this

@@ -29,11 +29,8 @@ from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
 from calstudy.core.schema import with_inputs
 from calstudy.estimators.fitting import fit_homography, homography_to_pose, solve_pnp
-from calstudy.estimators.handeye import (
-    sphere_handeye,
-    stationary_sensor_to_base,
-)
 from calstudy.estimators.workpiece import rps_frame_penalty, rps_frame_so3
+from calstudy.handeye import sphere_handeye
 from calstudy.models.robots import load_robot, perturb_robot, pose_errors
 from calstudy.papers.hybrid.compensation import analyse_run, before_compensation
 from calstudy.papers.hybrid.handeye_experiments import (
@@ -82,6 +79,47 @@ def _target_poses(method: str, front_cad, back_cad, uv_pair, k) -> tuple:
         homography_to_pose(fit_homography(front_cad[:, :2], uv_front), k),
         homography_to_pose(fit_homography(back_cad[:, :2], uv_back), k),
     )
+
+
+def stationary_sensor_to_base(
+    flange2base, sensor2flange, front2flexcam, back2statcam, back2front
+) -> np.ndarray:
+    """Pose of a stationary camera in the robot base frame by Eq. 23.
+
+    ``statcam2base = flange2base @ sensor2flange @ front2flexcam @ inv(back2statcam @ front2back)``
+    which, with ``front2back = inv(back2front)``, is
+    ``flange2base @ sensor2flange @ front2flexcam @ back2front @ inv(back2statcam)``.
+
+    Parameters
+    ----------
+    flange2base : (4, 4) array
+        Flange pose reported by the robot (forward kinematics), mm.
+    sensor2flange : (4, 4) array
+        Hand-eye of the flexible sensor; its camera frame is taken as the sensor frame.
+    front2flexcam : (4, 4) array
+        Front face of the target in the flexible sensor's camera frame (from its image).
+    back2statcam : (4, 4) array
+        Back face of the target in the stationary camera frame (from its image).
+    back2front : (4, 4) array
+        Back face to front face of the target (pre-calibrated on a CMM).
+
+    Returns
+    -------
+    (4, 4) array
+        ``statcam2base``.
+    """
+    mats = [
+        geo.check_transform(name, m)
+        for name, m in [
+            ("flange2base", flange2base),
+            ("sensor2flange", sensor2flange),
+            ("front2flexcam", front2flexcam),
+            ("back2statcam", back2statcam),
+            ("back2front", back2front),
+        ]
+    ]
+    f2b, s2f, front2cam, back2cam, b2f = mats
+    return f2b @ s2f @ front2cam @ b2f @ geo.invert(back2cam)
 
 
 def stationary_trial(

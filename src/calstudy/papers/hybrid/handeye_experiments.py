@@ -4,7 +4,8 @@ The paper's method (Eq. 6-14) against the maximum likelihood of the sensor noise
 Cramer-Rao bound and OpenCV's AX = XB solvers on one simulated run (:func:`handeye_trial`), the
 Monte Carlo experiments built on it (:func:`handeye_experiment` and the sweeps of the laser noise,
 the number of pose changes and the two ranges of the pure translations), and one calibration
-with its uncertainty from a user's measurements or a simulated run (:func:`calibrate_handeye`).
+with its uncertainty from a user's measurements or a simulated run
+(:func:`sphere_station_calibration`).
 Every Monte Carlo loop runs through :func:`calstudy.io.runs.run_experiments` with a factory of
 this module; a trial function is ``trial(setup, rng, **point) -> list[dict]``.
 """
@@ -20,14 +21,14 @@ from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
 from calstudy.core.schema import with_inputs
-from calstudy.estimators.handeye import (
+from calstudy.handeye import (
     OPENCV_METHODS,
     opencv_handeye,
+    read_sphere_measurements,
     sphere_handeye,
     sphere_handeye_crb,
     sphere_handeye_ml,
 )
-from calstudy.estimators.sphere_csv import read_sphere_measurements
 from calstudy.papers.hybrid.scenario import load_station
 from calstudy.papers.hybrid.simulate import (
     HybridStation,
@@ -281,7 +282,7 @@ def _sensor_sigma(sensor_sigma_mm) -> np.ndarray:
     return np.broadcast_to(sigma, (3,))
 
 
-def calibrate_handeye(
+def sphere_station_calibration(
     measurements_csv: str, seed: int, sensor_sigma_mm=None, misfit: str = "raise"
 ):
     """The fixed-sphere hand-eye from a user's CSV if given, else from one simulated run.
@@ -301,7 +302,7 @@ def calibrate_handeye(
     ------
     CalibrationError
         For a user's CSV, on any check of
-        :func:`calstudy.estimators.sphere_csv.read_sphere_measurements`, and if the ML fit is far
+        :func:`calstudy.handeye.sphere_csv.read_sphere_measurements`, and if the ML fit is far
         outside ``sensor_sigma_mm`` (goodness of fit, ``misfit="flag"``): the message names the
         measurement ids that disagree most (a sphere that moved between the two series);
         ``misfit="flag"`` turns this into a warning.

@@ -24,7 +24,7 @@ from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import streams
 from calstudy.core.schema import file_key
 from calstudy.estimators.fitting import solve_pnp
-from calstudy.estimators.sphere_csv import SphereMeasurements
+from calstudy.handeye.sphere_csv import SphereMeasurements
 from calstudy.models.kinematics import Robot
 from calstudy.models.reach import reach_bound
 from calstudy.models.robots import load_robot, perturb_robot, robot_file

@@ -11,10 +11,10 @@ from support import handeye_cell as _cell
 
 from calstudy import CalibrationError, CalibrationWarning
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye_cell as hc
-from calstudy.estimators import handeye_plan as hplan
-from calstudy.estimators import handeye_poses as hp
-from calstudy.estimators import handeye_sim as hs
+from calstudy.handeye import calibrate as hp
+from calstudy.handeye import plan as hplan
+from calstudy.handeye import simulate as hs
+from calstudy.io import handeye_report as hc
 
 
 def test_region_limit_is_chi2_with_a_given_noise_and_f_with_an_estimated_one():
@@ -63,7 +63,7 @@ def test_the_95_percent_region_covers_the_truth_with_robot_error(n):
                 res = hp.calibrate_handeye(a, b)
             except CalibrationError:
                 continue
-        inside.append(res.x_distance(truth) <= res.region_limit(0.95))
+        inside.append(res.camera_distance(truth) <= res.region_limit(0.95))
     assert len(inside) >= 145
     assert 0.88 <= np.mean(inside) <= 0.99
 
@@ -109,7 +109,7 @@ def test_planned_poses_beat_random_ones_by_monte_carlo():
             except CalibrationError:
                 errs.append(np.nan)
                 continue
-            errs.append(np.linalg.norm(geo.apply(fit.x, point) - geo.apply(x, point)))
+            errs.append(np.linalg.norm(geo.apply(fit.camera2flange, point) - geo.apply(x, point)))
         planned.append(errs[0])
         random.append(errs[1])
         predicted.append(plan.predicted_rms_mm)

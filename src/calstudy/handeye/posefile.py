@@ -2,7 +2,7 @@
 
 :func:`read_pose_list` reads a user's poses as stored (convention and unit named by the columns),
 :func:`write_pose_list` writes them; :meth:`PoseList.arguments` passes them to
-:func:`calstudy.estimators.handeye_poses.calibrate_handeye`.
+:func:`calstudy.handeye.calibrate.calibrate_handeye`.
 """
 
 from __future__ import annotations
@@ -13,13 +13,11 @@ from pathlib import Path
 import numpy as np
 
 from calstudy.core import geometry as geo
-from calstudy.core import schema
-from calstudy.core.config import check_ids, parse_number
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye_inputs import (
+from calstudy.core.userfile import LENGTH_UNITS, check_ids, parse_number, read_csv_table
+from calstudy.handeye.inputs import (
     CAMERA_CONVENTIONS,
     ROBOT_CONVENTIONS,
-    UNITS_MM,
     check_pose_array,
     unit_factor,
 )
@@ -63,10 +61,20 @@ class PoseList:
     camera_rotation_columns: np.ndarray | None = None
 
     def rereadings(self) -> dict:
-        """Other readings of the rotation columns, ``{cause: (robot, camera)}`` (N, 4, 4) each,
-        as stored: quaternions in x, y, z, w order, rotation vectors in degrees, Euler angles of
-        another order or in radians (:func:`alternative_rotations`); tried by the diagnosis of a
-        failed fit check, never applied silently."""
+        """Other readings of the rotation columns, tried by the diagnosis of a failed fit check
+        and never applied silently: quaternions in x, y, z, w order, rotation vectors in
+        degrees, Euler angles of another order or in radians (:func:`alternative_rotations`).
+
+        Returns
+        -------
+        dict
+            ``{cause: (robot, camera)}``, each an array (N, 4, 4) as stored (mm or the file's
+            unit).
+
+        Raises
+        ------
+        None
+        """
         out = {}
         sides = (
             ("robot", self.robot, self.robot_form, self.robot_rotation_columns),
@@ -90,7 +98,19 @@ class PoseList:
 
     def arguments(self) -> dict:
         """Keyword arguments for :func:`calibrate_handeye` and
-        :func:`calibrate_robot_world_handeye`."""
+        :func:`calibrate_robot_world_handeye`: the poses with their convention, units, ids and
+        :meth:`rereadings`.
+
+        Returns
+        -------
+        dict
+            ``flange2base``, ``target2camera`` (N, 4, 4), ``convention``, ``robot_unit``,
+            ``camera_unit``, ``ids`` and ``rereadings``.
+
+        Raises
+        ------
+        None
+        """
         return {
             "flange2base": self.robot,
             "target2camera": self.camera,
@@ -129,11 +149,11 @@ def _find_prefix(path, header, names, what):
 
 
 def _pose_columns(path, header, prefix):
-    units = [u for u in UNITS_MM if f"{prefix}_x_{u}" in header]
+    units = [u for u in LENGTH_UNITS if f"{prefix}_x_{u}" in header]
     if len(units) != 1:
         raise CalibrationError(
             f"{path}: no translation columns {prefix}_x_<unit>, {prefix}_y_<unit>, "
-            f"{prefix}_z_<unit> with one unit of {', '.join(UNITS_MM)}"
+            f"{prefix}_z_<unit> with one unit of {', '.join(LENGTH_UNITS)}"
         )
     unit = units[0]
     trans = [f"{prefix}_{c}_{unit}" for c in "xyz"]
@@ -258,6 +278,11 @@ def read_pose_list(path) -> PoseList:
     the separator (spreadsheet exports) are accepted. Quaternions must have norm 1 within
     :data:`QUATERNION_NORM_TOL`; other rotations are checked by the calibration (naming the pose).
 
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The pose-list CSV file.
+
     Returns
     -------
     PoseList
@@ -266,13 +291,15 @@ def read_pose_list(path) -> PoseList:
 
     Raises
     ------
+    FileNotFoundError
+        If ``path`` is not a file.
     CalibrationError
         For a header that names no or two conventions, units or rotation forms, a missing
         column, no rows, a cell that is empty, not a number or not finite (naming the row, 1-based
         with the header as row 1, and the column), a non-integer or repeated id.
     """
     path = Path(path)
-    header, rows = schema.read_csv_table(path, "pose list")
+    header, rows = read_csv_table(path, "pose list")
     if "id" not in header:
         raise CalibrationError(f"{path}: missing column 'id'")
     rprefix = _find_prefix(path, header, list(ROBOT_CONVENTIONS), "robot")
@@ -344,16 +371,35 @@ def write_pose_list(
     Parameters
     ----------
     path : str or pathlib.Path
-    flange2base, target2camera : (N, 4, 4) arrays
+        The file to write (its folder is created).
+    flange2base, target2camera : array_like, shape (N, 4, 4)
         Poses in the study's convention (mm); written in ``robot_convention`` /
         ``camera_convention`` (inverted if those say so) and ``unit``.
-    ids : (N,) int array, optional
+    ids : array_like of int, shape (N,), optional
+        Pose ids (default ``1 .. N``).
     rotation : str
         One of :data:`ROTATION_FORMS`.
+    robot_convention : str
+        ``"flange2base"``, ``"gripper2base"``, ``"base2flange"`` or ``"base2gripper"``.
+    camera_convention : str
+        ``"target2camera"`` or ``"camera2target"``.
+    unit : {"mm", "cm", "m", "in"}
+        Length unit of the written translations.
     digits : int
         Significant digits of every number.
     comment : str
         Written as ``#`` lines above the header.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    CalibrationError
+        For an unknown rotation form, convention or unit, or poses that are not (N, 4, 4)
+        rigid transforms.
     """
     if rotation not in ROTATION_FORMS:
         raise CalibrationError(

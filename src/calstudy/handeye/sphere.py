@@ -1,4 +1,4 @@
-"""Hand-eye calibration: the fixed-sphere method, AX = XB baselines, the stationary-sensor chain.
+"""Hand-eye calibration by the fixed-sphere method (hybrid paper, Eq. 6-14).
 
 The fixed-sphere method (hybrid paper, section 3.1, Eq. 6-14) uses one point fixed in the robot
 base frame, the centre of a standard sphere, measured by the flange-mounted sensor from many robot
@@ -11,19 +11,14 @@ sensor frame, every measurement satisfies ``X_B = R_0 (R_F X_F + T_F) + T_0`` (E
   weighting by the sensor's noise: the maximum-likelihood estimate, whose covariance at the true
   parameters is the Cramer-Rao bound.
 
-:func:`opencv_handeye` wraps ``cv2.calibrateHandEye`` (Tsai, Park, Horaud, Andreff, Daniilidis),
-which needs the full pose of a target in the sensor frame rather than a point.
-
-:func:`stationary_sensor_to_base` is Eq. 23: a stationary camera located in the robot base frame
-from one robot pose and two images of a two-sided target.
+The AX = XB closed forms, which need the full pose of a target in the sensor frame rather than
+a point, are :func:`calstudy.estimators.axxb.opencv_handeye`.
 """
 
 from __future__ import annotations
 
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from calstudy.core import geometry as geo
@@ -45,23 +40,6 @@ MAX_CONDITION = 1e6
 #: condition number of the whitened ML Jacobian above which R_F, T_F, X_B are unobservable (a
 #: well-posed station gives about 1e5; translation-only poses give 1e17)
 MAX_ML_CONDITION = 1e10
-#: smallest rotation (rad) of a motion between two poses that counts for Tsai-Lenz, and smallest
-#: angle between the axes of two such motions (the dualarm chain's rotation diversity check)
-MIN_PAIR_ROTATION = np.deg2rad(0.5)
-#: Rotation (rad) below which a motion counts as none, and axes this close as one axis, in every
-#: call of :func:`opencv_handeye`: 0.01 deg (36 arc seconds), below the orientation repeatability
-#: of an industrial robot, so such motions carry no information on the hand-eye rotation.
-DEGENERATE_ROTATION = np.deg2rad(0.01)
-
-OPENCV_METHODS = {
-    "Tsai": cv2.CALIB_HAND_EYE_TSAI,
-    "Park": cv2.CALIB_HAND_EYE_PARK,
-    "Horaud": cv2.CALIB_HAND_EYE_HORAUD,
-    "Andreff": cv2.CALIB_HAND_EYE_ANDREFF,
-    "Daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS,
-}
-
-
 def _check_measurements(name: str, flange2base, centres) -> tuple[np.ndarray, np.ndarray]:
     poses = geo.check_transform(f"{name} flange poses", flange2base)
     if poses.ndim != 3:
@@ -222,6 +200,13 @@ def sphere_handeye(
     Estimate
         ``value`` is ``sensor2flange`` (4 x 4); ``params`` is ``[T_F, rotvec(R_F)]``;
         ``condition_number`` that of Eq. 13; no covariance (closed form).
+
+    Raises
+    ------
+    CalibrationError
+        On bad shapes or non-finite values; if the translations change the orientation or are
+        too few or collinear, or the centres do not move as far as the flange (a unit mismatch);
+        if the pose changes do not rotate about two axes (Eq. 13 rank deficient).
     """
     r_f = rotation_from_translations(trans_flange2base, trans_centres, center=center)
     t_f, cond = translation_from_rotations(rot_flange2base, rot_centres, r_f)
@@ -409,10 +394,25 @@ def sphere_handeye_ml(
 def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x_b) -> np.ndarray:
     """Cramer-Rao bound of ``[T_F, delta, X_B]`` for the fixed-sphere problem at the truth.
 
-    Parameters are as in :func:`sphere_handeye_ml`, with the true ``sensor2flange`` and the true
-    sphere centre ``x_b`` in base. Returns the ``(9, 9)`` covariance ``(J^T J)^-1`` of the
-    whitened problem; ``sqrt(trace)`` of its blocks is the smallest RMS error any unbiased
-    estimator can reach from these poses and this noise.
+    Parameters
+    ----------
+    flange2base : array_like, shape (N, 4, 4)
+        All flange poses, mm.
+    centres_true : array_like, shape (N, 3)
+        The true sphere centres in the sensor frame, mm.
+    sensor_sigma : float or array_like, shape (3,), (3, 3) or (N, 3, 3)
+        The sensor noise as in :func:`sphere_handeye_ml` (mm, or mm^2 for a covariance).
+    sensor2flange : array_like, shape (4, 4)
+        The true hand-eye transform, mm.
+    x_b : array_like, shape (3,)
+        The true sphere centre in the base frame, mm.
+
+    Returns
+    -------
+    numpy.ndarray, shape (9, 9)
+        The covariance ``(J^T J)^-1`` of ``[T_F (mm), delta (rad), X_B (mm)]`` of the whitened
+        problem; ``sqrt(trace)`` of its blocks is the smallest RMS error any unbiased estimator
+        can reach from these poses and this noise.
 
     Raises
     ------
@@ -433,240 +433,3 @@ def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x
     )
     return np.linalg.pinv(jac.T @ jac)
 
-
-def check_rotation_diversity(
-    flange2base: np.ndarray, min_rotation: float, tol: float = geo.ORTHONORMAL_TOL
-) -> None:
-    """Raise a :class:`CalibrationError` unless the flange poses ``(N, 4, 4)`` rotate enough for
-    Tsai-Lenz.
-
-    Tsai-Lenz (as ``cv2.calibrateHandEye`` runs it) uses the motion between every pair of poses;
-    a pair that does not rotate adds an equation that holds for any rotation and harms nothing.
-    The hand-eye rotation is determined once at least two motions rotate by ``min_rotation``
-    (rad) or more about axes at least ``min_rotation`` apart (each axis in the frame of the
-    motion's first flange, as the method uses it). The message says which condition fails and
-    the number behind it. ``tol`` is the orthonormality tolerance of the rotations.
-    """
-    poses = geo.check_transform("flange poses", flange2base, tol)
-    if poses.ndim != 3 or poses.shape[0] < 3:
-        raise CalibrationError(
-            f"flange poses of shape {poses.shape}: the rotation check needs (N, 4, 4) with N >= 3"
-        )
-    if not (np.isfinite(min_rotation) and min_rotation > 0.0):
-        raise CalibrationError(f"min_rotation must be a positive angle in rad, got {min_rotation}")
-    _check_diversity(poses[:, :3, :3], min_rotation)
-
-
-def _check_diversity(r: np.ndarray, min_rotation: float) -> None:
-    """:func:`check_rotation_diversity` on checked rotations ``(N, 3, 3)``, ``N >= 3``."""
-    i, j = np.triu_indices(len(r), 1)
-    rotvec = geo.matrix_to_rotvec(np.swapaxes(r[i], -1, -2) @ r[j])
-    angles = np.linalg.norm(rotvec, axis=1)
-    moving = angles >= min_rotation
-    if not np.any(moving):
-        raise CalibrationError(
-            f"no pair of the {len(r)} poses rotates by {np.degrees(min_rotation):.3g} deg or "
-            f"more (largest {np.degrees(angles.max()):.3g} deg): pure translations or repeated "
-            "orientations leave the hand-eye rotation undetermined; include rotating motions"
-        )
-    axes = rotvec[moving] / angles[moving, None]
-    # the largest angle between two axes; an axis far enough from the first one settles it
-    # without the (M, M) matrix of every pair (M ~ N^2 / 2 motions)
-    spread = float(np.arccos(np.clip(np.abs(axes @ axes[0]), 0.0, 1.0).min()))
-    if spread < min_rotation:
-        spread = max(
-            float(np.arccos(np.clip(np.abs(axes[k : k + 512] @ axes.T), 0.0, 1.0).min()))
-            for k in range(0, len(axes), 512)
-        )
-    if spread < min_rotation:
-        raise CalibrationError(
-            f"the {int(moving.sum())} rotating motions of the {len(r)} poses turn about one "
-            f"axis (axes within {np.degrees(spread):.3g} deg, minimum "
-            f"{np.degrees(min_rotation):.3g} deg): the hand-eye rotation about that axis and the "
-            "translation along it are undetermined; include motions about two axes"
-        )
-
-
-@contextmanager
-def quiet_opencv():
-    """OpenCV's log silenced within the block (its hand-eye solvers log failures on stderr,
-    which the callers report as :class:`CalibrationError` instead), the level restored after."""
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-    try:
-        yield
-    finally:
-        cv2.utils.logging.setLogLevel(level)
-
-
-def opencv_handeye(
-    flange2base,
-    target2sensor,
-    method: str,
-    min_pair_rotation: float = DEGENERATE_ROTATION,
-    tol: float = geo.ORTHONORMAL_TOL,
-) -> np.ndarray:
-    """``sensor2flange`` by ``cv2.calibrateHandEye`` (AX = XB) with a named method.
-
-    Parameters
-    ----------
-    flange2base : (N, 4, 4) array
-        Flange poses in the base frame, mm.
-    target2sensor : (N, 4, 4) array
-        Pose of a fixed target in the sensor frame at each robot pose, mm.
-    method : str
-        One of ``"Tsai"``, ``"Park"``, ``"Horaud"``, ``"Andreff"``, ``"Daniilidis"``.
-    min_pair_rotation : float, default :data:`DEGENERATE_ROTATION`
-        The poses must rotate enough overall (:func:`check_rotation_diversity`): at least two
-        motions between pose pairs rotating by this much (rad) or more about axes this far
-        apart. Every method takes the rotation axes of the motions, undefined for a pure
-        translation, and OpenCV returns a wrong answer (with a message on stderr at most) on
-        degenerate motions; poses with equal orientations are fine as long as others rotate.
-        :data:`MIN_PAIR_ROTATION` is a safe value for designed poses; values below
-        :data:`DEGENERATE_ROTATION` are raised to it (pure translations, rotations about one
-        axis and a repeated pose are always refused).
-    tol : float
-        Orthonormality tolerance of the input rotations. For measured poses with rounded
-        rotations, :func:`calstudy.estimators.handeye_poses.calibrate_handeye` re-projects them.
-
-    Returns
-    -------
-    (4, 4) array
-        ``sensor2flange``.
-
-    Raises
-    ------
-    CalibrationError
-        For an unknown method, fewer than 3 poses, bad shapes, poses without two motions rotating
-        by ``min_pair_rotation`` about axes that far apart (pure translations, rotations about
-        one axis, repeated poses: the message names the largest rotation or the spread of the
-        axes), OpenCV's own failure, or a non-finite OpenCV result.
-    """
-    if method not in OPENCV_METHODS:
-        raise CalibrationError(
-            f"unknown hand-eye method {method!r}; use one of {list(OPENCV_METHODS)}"
-        )
-    g2b = geo.check_transform("flange poses", flange2base, tol)
-    t2c = geo.check_transform("target poses", target2sensor, tol)
-    if g2b.ndim != 3 or g2b.shape != t2c.shape:
-        raise CalibrationError(
-            f"flange poses {g2b.shape} and target poses {t2c.shape} must both be (N, 4, 4)"
-        )
-    if g2b.shape[0] < 3:
-        raise CalibrationError(f"AX = XB needs at least 3 poses; got {g2b.shape[0]}")
-    if not (np.isfinite(min_pair_rotation) and min_pair_rotation >= 0.0):
-        raise CalibrationError(
-            f"min_pair_rotation = {min_pair_rotation} must be a finite angle >= 0 in rad"
-        )
-    # before OpenCV: on degenerate motions it prints to stderr and returns a wrong answer
-    _check_diversity(g2b[:, :3, :3], max(float(min_pair_rotation), DEGENERATE_ROTATION))
-    try:
-        with quiet_opencv():
-            rot, trans = cv2.calibrateHandEye(
-                list(g2b[:, :3, :3]),
-                list(g2b[:, :3, 3:]),
-                list(t2c[:, :3, :3]),
-                list(t2c[:, :3, 3:]),
-                method=OPENCV_METHODS[method],
-            )
-    except cv2.error as exc:
-        raise CalibrationError(
-            f"OpenCV {method} hand-eye failed on {g2b.shape[0]} poses: {exc.err or exc}"
-        ) from None
-    if rot is None or trans is None:
-        raise CalibrationError(f"OpenCV {method} hand-eye returned no result")
-    out = geo.make_transform(rot, trans.ravel())
-    if np.array_equal(out, np.eye(4)):
-        # what OpenCV's Tsai returns (logging an error) when no motion rotates enough
-        raise CalibrationError(
-            f"OpenCV {method} hand-eye failed on {g2b.shape[0]} poses: not enough informative "
-            "motions (include larger rotations)"
-        )
-    if not np.all(np.isfinite(out)):
-        raise CalibrationError(f"OpenCV {method} hand-eye returned a non-finite result")
-    return out
-
-
-def base_to_base(
-    flange2base_1, cam2flange_1, world2cam_1, flange2base_2, cam2flange_2, world2cam_2
-) -> np.ndarray:
-    """``base2_to_base1`` of two robots whose cameras locate one world frame (dualarm Eq. 11).
-
-    ``world2base_a = flange2base_a @ cam2flange_a @ world2cam_a``, averaged over arm ``a``'s
-    poses by :func:`calstudy.core.geometry.mean_transform`; then
-    ``base2_to_base1 = world2base_1 @ world2base_2^-1``.
-
-    Parameters
-    ----------
-    flange2base_1, flange2base_2 : array_like, shape (N_a, 4, 4)
-        Each robot's flange poses, mm.
-    cam2flange_1, cam2flange_2 : array_like, shape (4, 4)
-        Each robot's hand-eye transform.
-    world2cam_1, world2cam_2 : array_like, shape (N_a, 4, 4)
-        The world frame in each camera at each pose.
-
-    Returns
-    -------
-    (4, 4) array
-        ``base2_to_base1`` (``p_base1 = base2_to_base1 @ p_base2``).
-
-    Raises
-    ------
-    CalibrationError
-        On bad shapes, non-orthonormal rotations, or unequal numbers of flange and camera poses.
-    """
-    w2b = []
-    for g2b, c2f, w2c in (
-        (flange2base_1, cam2flange_1, world2cam_1),
-        (flange2base_2, cam2flange_2, world2cam_2),
-    ):
-        g = geo.check_transform("flange poses", g2b).reshape(-1, 4, 4)
-        w = geo.check_transform("world2cam", w2c).reshape(-1, 4, 4)
-        if len(g) != len(w):
-            raise CalibrationError(f"{len(g)} flange poses but {len(w)} camera poses")
-        w2b.append(geo.mean_transform(g @ geo.check_transform("cam2flange", c2f) @ w))
-    return w2b[0] @ geo.invert(w2b[1])
-
-
-def stationary_sensor_to_base(
-    flange2base, sensor2flange, front2flexcam, back2statcam, back2front
-) -> np.ndarray:
-    """Pose of a stationary camera in the robot base frame by Eq. 23.
-
-    ``statcam2base = flange2base @ sensor2flange @ front2flexcam @ inv(back2statcam @ front2back)``
-    which, with ``front2back = inv(back2front)``, is
-    ``flange2base @ sensor2flange @ front2flexcam @ back2front @ inv(back2statcam)``.
-
-    Parameters
-    ----------
-    flange2base : (4, 4) array
-        Flange pose reported by the robot (forward kinematics), mm.
-    sensor2flange : (4, 4) array
-        Hand-eye of the flexible sensor; its camera frame is taken as the sensor frame.
-    front2flexcam : (4, 4) array
-        Front face of the target in the flexible sensor's camera frame (from its image).
-    back2statcam : (4, 4) array
-        Back face of the target in the stationary camera frame (from its image).
-    back2front : (4, 4) array
-        Back face to front face of the target (pre-calibrated on a CMM).
-
-    Returns
-    -------
-    (4, 4) array
-        ``statcam2base``.
-    """
-    mats = [
-        geo.check_transform(name, m)
-        for name, m in [
-            ("flange2base", flange2base),
-            ("sensor2flange", sensor2flange),
-            ("front2flexcam", front2flexcam),
-            ("back2statcam", back2statcam),
-            ("back2front", back2front),
-        ]
-    ]
-    f2b, s2f, front2cam, back2cam, b2f = mats
-    return f2b @ s2f @ front2cam @ b2f @ geo.invert(back2cam)
-
-
-#: columns of a user's fixed-sphere measurement file, in order

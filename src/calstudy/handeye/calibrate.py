@@ -16,8 +16,8 @@ flange (``setup="eye_to_hand"``) the robot poses are inverted, ``A_i = base2flan
 unknowns become ``X = camera2base`` and ``Z = target2flange``.
 
 Steps of :func:`calibrate_handeye` and :func:`calibrate_robot_world_handeye`, in the modules
-:mod:`~calstudy.estimators.handeye_inputs` (1, 2), :mod:`~calstudy.estimators.handeye_refine`
-(3, 4) and :mod:`~calstudy.estimators.handeye_robust` (noise level, outliers):
+:mod:`~calstudy.handeye.inputs` (1, 2), :mod:`~calstudy.handeye.refine`
+(3, 4) and :mod:`~calstudy.handeye.robust` (noise level, outliers):
 
 1. ``prepare_poses``: storage convention, units, near-orthonormal rotations re-projected to
    SO(3) (largest correction reported), beyond ``ortho_tol`` a :class:`CalibrationError`.
@@ -30,19 +30,19 @@ Steps of :func:`calibrate_handeye` and :func:`calibrate_robot_world_handeye`, in
 4. ``refine_ml``: maximum likelihood on SE(3) residuals of the target pose (per-pose weights,
    analytic Jacobian), optionally robust (Huber or Cauchy by iterative reweighting, or RANSAC over
    pose triplets), or on the reprojection error when target points and pixels are given.
-5. ``check_cell`` (:mod:`~calstudy.estimators.handeye_checks`), on every path: the camera's and
+5. ``check_cell`` (:mod:`~calstudy.handeye.checks`), on every path: the camera's and
    the robot's ranges, a noise level estimated robustly and compared with what any instrument
    gives, a step of the target in time order. After a failure only,
-   :mod:`~calstudy.estimators.handeye_diagnose` tries the common reading mistakes and the
+   :mod:`~calstudy.handeye.diagnose` tries the common reading mistakes and the
    calibration refuses naming the ones that fit (``check_convention="warn"``: warns and goes on).
 
-Pose-list files are read and written by :mod:`~calstudy.estimators.posefile`; a simulated cell
-is drawn by :mod:`~calstudy.estimators.handeye_sim`.
+Pose-list files are read and written by :mod:`~calstudy.handeye.posefile`; a simulated cell
+is drawn by :mod:`~calstudy.handeye.simulate`.
 
 Noise model of the refinement: the measured target pose is ``B_i exp(xi_i)`` with a rotation
 error ``N(0, sigma_rot^2 I)`` (rad) and a translation error ``N(0, sigma_trans^2 I)`` (mm); robot
 poses are exact. The residuals are whitened with these, so the covariance at the truth,
-``(J^T J)^-1``, is the Cramer-Rao bound (``handeye_refine.handeye_crb``).
+``(J^T J)^-1``, is the Cramer-Rao bound (:func:`calstudy.handeye.refine.handeye_crb`).
 """
 
 from __future__ import annotations
@@ -62,16 +62,16 @@ from calstudy.core.estimation import (
     covariance_from_jacobian,
     goodness_of_fit,
 )
-from calstudy.estimators.handeye import OPENCV_METHODS
-from calstudy.estimators.handeye_checks import CellCheck, CellLimits, check_cell
-from calstudy.estimators.handeye_inputs import (
+from calstudy.estimators.axxb import OPENCV_METHODS
+from calstudy.handeye.checks import CellCheck, CellLimits, check_cell
+from calstudy.handeye.inputs import (
     ORTHO_TOL,
     Conditioning,
     PreparedPoses,
     motion_conditioning,
     prepare_poses,
 )
-from calstudy.estimators.handeye_refine import (
+from calstudy.handeye.refine import (
     OPENCV_RWHE_METHODS,
     PARAM_NAMES,
     ClosedForm,
@@ -84,7 +84,7 @@ from calstudy.estimators.handeye_refine import (
     target_in_world,
     whitened_at,
 )
-from calstudy.estimators.handeye_robust import (
+from calstudy.handeye.robust import (
     MIN_CAMERA_SHARE,
     eiv_sigmas,
     outlier_limit,
@@ -106,21 +106,35 @@ ROBUST = (None, "huber", "cauchy", "ransac")
 # the result and the public entry points
 
 
-@dataclass
+#: the frames each setup solves for: (the camera's mount, the target's mount)
+SETUP_FRAMES = {
+    "eye_in_hand": ("camera2flange", "target2base"),
+    "eye_to_hand": ("camera2base", "target2flange"),
+}
+
+
+@dataclass(frozen=True, eq=False)
 class HandEyeResult:
     """A hand-eye calibration with its uncertainty and diagnostics.
 
+    The two solved transforms are named by their frames: eye-in-hand (camera on the flange)
+    gives ``camera2flange`` and ``target2base``, eye-to-hand (camera fixed, target on the
+    flange) gives ``camera2base`` and ``target2flange``; the other two fields are ``None``.
+    :attr:`camera2mount` and :attr:`target2mount` are the solved pair whatever the setup.
+
     Attributes
     ----------
-    x : (4, 4) array
-        ``camera2flange`` (eye-in-hand) or ``camera2base`` (eye-to-hand), mm.
-    z : (4, 4) array
-        ``target2base`` (eye-in-hand) or ``target2flange`` (eye-to-hand), mm.
-    x_name, z_name : str
-        Those names.
+    setup : {"eye_in_hand", "eye_to_hand"}
+    camera2flange, target2base : (4, 4) array or None
+        Eye-in-hand: the camera's pose on the flange and the fixed target's pose in the robot
+        base frame, mm.
+    camera2base, target2flange : (4, 4) array or None
+        Eye-to-hand: the fixed camera's pose in the base frame and the target's pose on the
+        flange, mm.
     covariance : (12, 12) array
-        Covariance of ``[theta_X, t_X, theta_Z, t_Z]`` (rad, mm), ``R_X = R_X,est exp(theta_X)``
-        (rotation error in the camera frame, target frame for Z).
+        Covariance of ``[theta_camera, t_camera, theta_target, t_target]`` (rad, mm) of
+        :attr:`camera2mount` and :attr:`target2mount`, ``R = R_est exp(theta)`` (rotation error
+        in the camera frame, target frame for the target).
     covariance_basis : str
         ``"given noise level"`` or ``"scaled by residual chi2 (s^2 = ...)"``.
     estimate : Estimate
@@ -138,13 +152,6 @@ class HandEyeResult:
         Final per-pose weights (user weights times robust weights).
     sigma_rot, sigma_trans : float
         Camera noise used (given, or estimated robustly from the residuals), rad and mm.
-    robot_sigma_rot : float
-        Robot rotation error used (errors in variables; stated, or estimated from how the
-        residuals' rotation and translation parts co-vary), rad per axis.
-    dof : float
-        Degrees of freedom behind the covariance's scale (inf: the noise was given): ``3 N - 6``,
-        those of the rotation or of the translation residuals alone, from which each part of
-        the noise level is estimated.
     conditioning : Conditioning
     closed_forms : list of ClosedForm
     check : CellCheck
@@ -152,12 +159,22 @@ class HandEyeResult:
         failure with ``check_convention="warn"``, its diagnosis.
     prepared : PreparedPoses
         The canonical input, with the largest re-orthonormalisation correction.
+    notes : list of str
+        Remarks on the fit (flagged poses, too few poses for the covariance, a misfit).
+    robot_sigma_rot : float
+        Robot rotation error used (errors in variables; stated, or estimated from how the
+        residuals' rotation and translation parts co-vary), rad per axis.
+    dof : float
+        Degrees of freedom behind the covariance's scale (inf: the noise was given): ``3 N - 6``,
+        those of the rotation or of the translation residuals alone, from which each part of
+        the noise level is estimated.
     """
 
-    x: np.ndarray
-    z: np.ndarray
-    x_name: str
-    z_name: str
+    setup: str
+    camera2flange: np.ndarray | None
+    target2base: np.ndarray | None
+    camera2base: np.ndarray | None
+    target2flange: np.ndarray | None
     covariance: np.ndarray
     covariance_basis: str
     estimate: Estimate
@@ -177,41 +194,104 @@ class HandEyeResult:
     dof: float = float("inf")
 
     @property
+    def camera2mount(self) -> np.ndarray:
+        """The camera's pose (4, 4), mm, in the frame it is fixed to: ``camera2flange``
+        (eye-in-hand) or ``camera2base`` (eye-to-hand)."""
+        return self.camera2flange if self.setup == "eye_in_hand" else self.camera2base
+
+    @property
+    def target2mount(self) -> np.ndarray:
+        """The target's pose (4, 4), mm, in the frame it is fixed to: ``target2base``
+        (eye-in-hand) or ``target2flange`` (eye-to-hand)."""
+        return self.target2base if self.setup == "eye_in_hand" else self.target2flange
+
+    @property
     def covariance_trusted(self) -> bool:
         """False below :data:`MIN_TRUSTED_POSES` poses (the coverage of the 95 % region is then
         well below 90 %; a note says so)."""
         return self.prepared.a.shape[0] >= MIN_TRUSTED_POSES
 
     def region_limit(self, level: float = 0.95, k: int = 6) -> float:
-        """Limit of the squared Mahalanobis distance of a ``k``-parameter block at ``level``:
+        """Limit of the squared Mahalanobis distance of a ``k``-parameter block at ``level``.
+
         ``chi2_k`` with a given noise level, ``k F(k, dof)`` with an estimated one (the scale of
-        the covariance is then estimated from ``dof`` residual degrees of freedom)."""
+        the covariance is then estimated from ``dof`` residual degrees of freedom).
+
+        Parameters
+        ----------
+        level : float
+            Coverage of the region, in (0, 1).
+        k : int
+            Parameters of the block (6 for one transform).
+
+        Returns
+        -------
+        float
+            The limit (dimensionless).
+
+        Raises
+        ------
+        None
+            An out-of-range ``level`` gives nan.
+        """
         from scipy.special import chdtri, fdtri
 
         if np.isinf(self.dof):
             return float(chdtri(k, 1.0 - level))
         return float(k * fdtri(k, self.dof, level))
 
-    def x_distance(self, x_true) -> float:
-        """Squared Mahalanobis distance of the ``X`` estimate from ``x_true`` (4, 4) under the
-        covariance of ``[theta_X, t_X]``: inside the 95 % region when at most
-        ``region_limit(0.95)``."""
-        xt = np.asarray(x_true, dtype=float)
-        theta = geo.matrix_to_rotvec(self.x[:3, :3].T @ xt[:3, :3])
-        e = np.concatenate([theta, xt[:3, 3] - self.x[:3, 3]])
+    def camera_distance(self, camera2mount_true) -> float:
+        """Squared Mahalanobis distance of :attr:`camera2mount` from a true pose.
+
+        Parameters
+        ----------
+        camera2mount_true : array_like, shape (4, 4)
+            The true ``camera2flange`` (eye-in-hand) or ``camera2base`` (eye-to-hand), mm.
+
+        Returns
+        -------
+        float
+            The distance under the covariance of ``[theta_camera, t_camera]`` (dimensionless):
+            inside the 95 % region when at most ``region_limit(0.95)``.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            If the covariance block is singular.
+        """
+        xt = np.asarray(camera2mount_true, dtype=float)
+        x = self.camera2mount
+        theta = geo.matrix_to_rotvec(x[:3, :3].T @ xt[:3, :3])
+        e = np.concatenate([theta, xt[:3, 3] - x[:3, 3]])
         return float(e @ np.linalg.solve(self.covariance[:6, :6], e))
 
     @property
     def std(self) -> np.ndarray:
-        """Standard deviations ``(12,)`` of ``[theta_X, t_X, theta_Z, t_Z]`` (rad, mm)."""
+        """Standard deviations ``(12,)`` of ``[theta_camera, t_camera, theta_target, t_target]``
+        (rad, mm)."""
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
     def point_covariance(self, point_camera) -> np.ndarray:
-        """Covariance ``(3, 3)`` (mm^2) of ``X @ p`` for a point ``p`` (mm) in the camera frame:
-        the predicted uncertainty of a tool or measured point mapped to the flange (or base)."""
+        """Predicted uncertainty of a point of the camera frame mapped to the flange (or base).
+
+        Parameters
+        ----------
+        point_camera : array_like, shape (3,)
+            A tool or measured point in the camera frame, mm.
+
+        Returns
+        -------
+        numpy.ndarray, shape (3, 3)
+            Covariance of ``camera2mount @ p``, mm^2.
+
+        Raises
+        ------
+        CalibrationError
+            If ``point_camera`` is not 3 finite numbers.
+        """
         p = geo.check_shape("point", point_camera, (3,))
         jac = np.zeros((3, 12))
-        jac[:, 0:3] = -self.x[:3, :3] @ geo.skew(p)
+        jac[:, 0:3] = -self.camera2mount[:3, :3] @ geo.skew(p)
         jac[:, 3:6] = np.eye(3)
         return jac @ self.covariance @ jac.T
 
@@ -304,7 +384,7 @@ def _check_cell(
     check = check_cell(prep.a, prep.b, x, res, w, limits, slack)
     if not check.failures or opt.check_convention == "off":
         return check
-    from calstudy.estimators.handeye_diagnose import diagnose
+    from calstudy.handeye.diagnose import diagnose
 
     reread = None
     if opt.rereadings is not None:
@@ -563,12 +643,12 @@ def _calibrate(
     cov, basis = _covariance(fit, opt)
     _check_fit(prep.ids, fit, opt, notes)
     flagged = _flag(prep.ids, score, opt.outlier_alpha, x, z, notes)
-    eye_in_hand = prep.setup == "eye_in_hand"
+    camera_name, target_name = SETUP_FRAMES[prep.setup]
+    solved = {"camera2flange": None, "target2base": None, "camera2base": None}
+    solved |= {"target2flange": None, camera_name: x, target_name: z}
     return HandEyeResult(
-        x=x,
-        z=z,
-        x_name="camera2flange" if eye_in_hand else "camera2base",
-        z_name="target2base" if eye_in_hand else "target2flange",
+        setup=prep.setup,
+        **solved,
         covariance=cov,
         covariance_basis=basis,
         estimate=fit.est,
@@ -589,48 +669,101 @@ def _calibrate(
     )
 
 
-_COMMON_DOC = """
+def _solve(methods: dict, form: str, prep: PreparedPoses, method: str, opt: _Options):
+    """The closed forms ``methods`` of an AX = XB or AX = ZB ``form`` as the start of
+    :func:`_calibrate` on the prepared poses."""
+    if method != "best" and method not in methods:
+        raise CalibrationError(
+            f"unknown {form} method {method!r}; use 'best' or one of {list(methods)}"
+        )
+    cond = motion_conditioning(prep.a)
+    forms = closed_forms(prep.a, prep.b, list(methods))
+    return _calibrate(prep, forms, method, opt, cond)
+
+
+def calibrate_handeye(
+    flange2base,
+    target2camera,
+    *,
+    method: str = "best",
+    setup: str = "eye_in_hand",
+    convention: str | Sequence[str] | None = None,
+    robot_unit: str = "mm",
+    camera_unit: str = "mm",
+    ortho_tol: float = ORTHO_TOL,
+    refine: bool = True,
+    sigma_rot: float | None = None,
+    sigma_trans: float | None = None,
+    weights=None,
+    robot_sigma_rot: float | None = None,
+    robust: str | None = None,
+    outlier_alpha: float = 1e-3,
+    check_convention: str = "raise",
+    rng: np.random.Generator | None = None,
+    ransac_samples: int = 200,
+    ids=None,
+    target_points=None,
+    pixels=None,
+    camera_matrix=None,
+    pixel_sigma: float | None = None,
+    misfit: str = "flag",
+    limits: CellLimits | None = None,
+    rereadings: Callable[[], dict] | None = None,
+) -> HandEyeResult:
+    """Hand-eye calibration AX = XB from measured robot and camera poses, with uncertainty.
+
+    Eye-in-hand: the camera is on the flange and sees a fixed target; returns ``camera2flange``
+    (and the target pose ``target2base`` as a by-product). Eye-to-hand: the camera is fixed and
+    the target is on the flange; returns ``camera2base`` (and ``target2flange``). The start is an
+    OpenCV ``calibrateHandEye`` closed form (Tsai, Park, Horaud, Andreff, Daniilidis), then
+    maximum likelihood on the SE(3) residuals of the target poses
+    (:func:`calstudy.handeye.refine.refine_ml`).
+
     Parameters
     ----------
-    flange2base : (N, 4, 4) array
+    flange2base : array_like, shape (N, 4, 4)
         Robot flange poses as stored (see ``convention``), translations in ``robot_unit``.
-    target2camera : (N, 4, 4) array
+    target2camera : array_like, shape (N, 4, 4)
         Target poses from the camera as stored, translations in ``camera_unit``.
     method : str
-        Closed form used as the start; ``"best"`` (default) tries all of them and starts from the
-        one with the smallest residual.
+        Closed form used as the start (AX = XB: ``"Tsai"``, ``"Park"``, ``"Horaud"``,
+        ``"Andreff"``, ``"Daniilidis"``; AX = ZB: ``"Shah"``, ``"Li"``); ``"best"`` (default)
+        tries all of them and starts from the one with the smallest residual.
     setup : {"eye_in_hand", "eye_to_hand"}
+        Camera on the flange seeing a fixed target, or camera fixed seeing a target on the
+        flange.
     convention : str or pair of str, optional
         Storage forms: ``"gripper2base"`` (default) or ``"base2gripper"``; ``"target2camera"``
         (default) or ``"camera2target"``.
     robot_unit, camera_unit : {"mm", "cm", "m", "in"}
+        Length unit of the stored robot and camera translations.
     ortho_tol : float
         Rotations off SO(3) by at most this (``max |R^T R - I|``) are re-projected; worse ones are
         refused.
     refine : bool
         Run the maximum-likelihood refinement (default) or return the closed form.
     sigma_rot, sigma_trans : float, optional
-        Noise of a measured target pose (rad, mm per axis). When omitted they are estimated
+        Noise of a measured target pose (rad and mm per axis). When omitted they are estimated
         robustly from the residuals with the robot's rotation error (errors in variables,
-        :func:`~calstudy.estimators.handeye_robust.eiv_sigmas`), the covariance is scaled by the
+        :func:`~calstudy.handeye.robust.eiv_sigmas`), the covariance is scaled by the
         residual chi-square and its regions use the F distribution
         (:meth:`HandEyeResult.region_limit`).
     robot_sigma_rot : float, optional
         The robot's rotation error, rad per axis, if known (its translation error adds to
         ``sigma_trans``); otherwise estimated with the camera's noise, or 0 (robot exact) when
         ``sigma_rot`` and ``sigma_trans`` are given.
-    weights : (N,) array, optional
-        Per-pose weights (0 drops a pose).
+    weights : array_like, shape (N,), optional
+        Per-pose weights, dimensionless (0 drops a pose).
     robust : {None, "huber", "cauchy", "ransac"}
         Down-weight outlier poses by iterative reweighting, or keep the poses consistent with the
         best of ``ransac_samples`` random pose triplets (needs ``rng``).
     outlier_alpha : float
-        False-alarm probability per pose of the outlier flag.
+        False-alarm probability per pose of the outlier flag, in (0, 1).
     check_convention : {"raise", "warn", "off"}
-        What to do when the fit is implausible (:func:`~calstudy.estimators.handeye_checks.\
+        What to do when the fit is implausible (:func:`~calstudy.handeye.checks.\
 check_cell`: translations outside the camera's range or the robot's reach, a pose noise no
         instrument gives, a target that moved during the series): refuse with the likely causes
-        tried and ranked (:func:`~calstudy.estimators.handeye_diagnose.diagnose`: storage
+        tried and ranked (:func:`~calstudy.handeye.diagnose.diagnose`: storage
         convention, transposed rotations, unit factors 10, 25.4 and 1000, shifted rows, rotation
         formats of the file), warn with them (a :class:`calstudy.CalibrationWarning`) and go on,
         or skip the check.
@@ -638,10 +771,14 @@ check_cell`: translations outside the camera's range or the robot's reach, a pos
         The plausible ranges and noise of the check (default :class:`CellLimits()`).
     rereadings : callable, optional
         ``{cause: (flange2base, target2camera)}`` of other readings of the same file's columns
-        for the diagnosis (:meth:`calstudy.estimators.posefile.PoseList.rereadings`; passed by
-        :meth:`~calstudy.estimators.posefile.PoseList.arguments`).
+        for the diagnosis (:meth:`calstudy.handeye.posefile.PoseList.rereadings`; passed by
+        :meth:`~calstudy.handeye.posefile.PoseList.arguments`).
     rng : numpy.random.Generator, optional
         Needed for ``robust="ransac"``.
+    ransac_samples : int
+        Random pose triplets tried by ``robust="ransac"``.
+    ids : array_like of int, shape (N,), optional
+        Pose ids used in messages and in ``flagged`` (default ``0 .. N - 1``).
     target_points, pixels, camera_matrix, pixel_sigma : optional
         Target points (M, 3) mm, their pixels (N, M, 2), K (3, 3) and the pixel noise (px): refine
         on the reprojection error instead of the target poses.
@@ -654,51 +791,22 @@ check_cell`: translations outside the camera's range or the robot's reach, a pos
     Returns
     -------
     HandEyeResult
+        The solved transforms under their frame names (``camera2flange`` and ``target2base``
+        eye-in-hand, ``camera2base`` and ``target2flange`` eye-to-hand) with their covariance,
+        per-pose residuals, flagged poses and the checks' findings.
 
     Raises
     ------
     CalibrationError
         Bad input (named pose and number), degenerate motions (duplicates, pure translations, one
-        rotation axis), an implausible fit with its likely causes (``check_convention="raise"``), a
-        requested
-        closed form inconsistent with the data, or a refinement that does not converge.
-"""
-
-
-def _entry_point(name: str, methods: dict, form: str, summary: str):
-    """A public calibration function: the closed forms ``methods`` (an AX = XB or AX = ZB
-    ``form``) as the start of :func:`_calibrate`; both entry points share this signature."""
-
-    def calibrate(
-        flange2base,
-        target2camera,
-        *,
-        method: str = "best",
-        setup: str = "eye_in_hand",
-        convention: str | Sequence[str] | None = None,
-        robot_unit: str = "mm",
-        camera_unit: str = "mm",
-        ortho_tol: float = ORTHO_TOL,
-        refine: bool = True,
-        sigma_rot: float | None = None,
-        sigma_trans: float | None = None,
-        weights=None,
-        robot_sigma_rot: float | None = None,
-        robust: str | None = None,
-        outlier_alpha: float = 1e-3,
-        check_convention: str = "raise",
-        rng: np.random.Generator | None = None,
-        ransac_samples: int = 200,
-        ids=None,
-        target_points=None,
-        pixels=None,
-        camera_matrix=None,
-        pixel_sigma: float | None = None,
-        misfit: str = "flag",
-        limits: CellLimits | None = None,
-        rereadings: Callable[[], dict] | None = None,
-    ) -> HandEyeResult:
-        prep = prepare_poses(
+        rotation axis), an implausible fit with its likely causes (``check_convention="raise"``),
+        a requested closed form inconsistent with the data, or a refinement that does not
+        converge.
+    """
+    return _solve(
+        OPENCV_METHODS,
+        "AX = XB",
+        prepare_poses(
             flange2base,
             target2camera,
             setup=setup,
@@ -707,14 +815,9 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             camera_unit=camera_unit,
             ortho_tol=ortho_tol,
             ids=ids,
-        )
-        if method != "best" and method not in methods:
-            raise CalibrationError(
-                f"unknown {form} method {method!r}; use 'best' or one of {list(methods)}"
-            )
-        cond = motion_conditioning(prep.a)
-        forms = closed_forms(prep.a, prep.b, list(methods))
-        options = _Options(
+        ),
+        method,
+        _Options(
             refine=refine,
             sigma_rot=sigma_rot,
             sigma_trans=sigma_trans,
@@ -732,36 +835,161 @@ def _entry_point(name: str, methods: dict, form: str, summary: str):
             misfit=misfit,
             limits=limits,
             rereadings=rereadings,
-        )
-        return _calibrate(prep, forms, method, options, cond)
-
-    calibrate.__name__ = calibrate.__qualname__ = name
-    calibrate.__doc__ = summary + _COMMON_DOC
-    return calibrate
+        ),
+    )
 
 
-calibrate_handeye = _entry_point(
-    "calibrate_handeye",
-    OPENCV_METHODS,
-    "AX = XB",
-    """Hand-eye calibration AX = XB from measured robot and camera poses, with uncertainty.
-
-    Eye-in-hand: the camera is on the flange and sees a fixed target; returns ``camera2flange``
-    (and the target pose ``target2base`` as a by-product). Eye-to-hand: the camera is fixed and
-    the target is on the flange; returns ``camera2base`` (and ``target2flange``). The start is an
-    OpenCV ``calibrateHandEye`` closed form (Tsai, Park, Horaud, Andreff, Daniilidis), then
-    maximum likelihood on the SE(3) residuals of the target poses (:func:`refine_ml`).
-""",
-)
-calibrate_robot_world_handeye = _entry_point(
-    "calibrate_robot_world_handeye",
-    OPENCV_RWHE_METHODS,
-    "AX = ZB",
+def calibrate_robot_world_handeye(
+    flange2base,
+    target2camera,
+    *,
+    method: str = "best",
+    setup: str = "eye_in_hand",
+    convention: str | Sequence[str] | None = None,
+    robot_unit: str = "mm",
+    camera_unit: str = "mm",
+    ortho_tol: float = ORTHO_TOL,
+    refine: bool = True,
+    sigma_rot: float | None = None,
+    sigma_trans: float | None = None,
+    weights=None,
+    robot_sigma_rot: float | None = None,
+    robust: str | None = None,
+    outlier_alpha: float = 1e-3,
+    check_convention: str = "raise",
+    rng: np.random.Generator | None = None,
+    ransac_samples: int = 200,
+    ids=None,
+    target_points=None,
+    pixels=None,
+    camera_matrix=None,
+    pixel_sigma: float | None = None,
+    misfit: str = "flag",
+    limits: CellLimits | None = None,
+    rereadings: Callable[[], dict] | None = None,
+) -> HandEyeResult:
     """Robot-world-hand-eye calibration AX = ZB: camera and target poses together.
 
     Solves ``A_i X = Z inv(B_i)`` for ``X = camera2flange`` and ``Z = target2base`` (eye-in-hand;
     ``camera2base`` and ``target2flange`` eye-to-hand) without forming relative motions. The start
     is OpenCV's ``calibrateRobotWorldHandEye`` (Shah, Li), then the same maximum-likelihood
     refinement as :func:`calibrate_handeye`.
-""",
-)
+
+    Parameters
+    ----------
+    flange2base : array_like, shape (N, 4, 4)
+        Robot flange poses as stored (see ``convention``), translations in ``robot_unit``.
+    target2camera : array_like, shape (N, 4, 4)
+        Target poses from the camera as stored, translations in ``camera_unit``.
+    method : str
+        Closed form used as the start (AX = XB: ``"Tsai"``, ``"Park"``, ``"Horaud"``,
+        ``"Andreff"``, ``"Daniilidis"``; AX = ZB: ``"Shah"``, ``"Li"``); ``"best"`` (default)
+        tries all of them and starts from the one with the smallest residual.
+    setup : {"eye_in_hand", "eye_to_hand"}
+        Camera on the flange seeing a fixed target, or camera fixed seeing a target on the
+        flange.
+    convention : str or pair of str, optional
+        Storage forms: ``"gripper2base"`` (default) or ``"base2gripper"``; ``"target2camera"``
+        (default) or ``"camera2target"``.
+    robot_unit, camera_unit : {"mm", "cm", "m", "in"}
+        Length unit of the stored robot and camera translations.
+    ortho_tol : float
+        Rotations off SO(3) by at most this (``max |R^T R - I|``) are re-projected; worse ones are
+        refused.
+    refine : bool
+        Run the maximum-likelihood refinement (default) or return the closed form.
+    sigma_rot, sigma_trans : float, optional
+        Noise of a measured target pose (rad and mm per axis). When omitted they are estimated
+        robustly from the residuals with the robot's rotation error (errors in variables,
+        :func:`~calstudy.handeye.robust.eiv_sigmas`), the covariance is scaled by the
+        residual chi-square and its regions use the F distribution
+        (:meth:`HandEyeResult.region_limit`).
+    robot_sigma_rot : float, optional
+        The robot's rotation error, rad per axis, if known (its translation error adds to
+        ``sigma_trans``); otherwise estimated with the camera's noise, or 0 (robot exact) when
+        ``sigma_rot`` and ``sigma_trans`` are given.
+    weights : array_like, shape (N,), optional
+        Per-pose weights, dimensionless (0 drops a pose).
+    robust : {None, "huber", "cauchy", "ransac"}
+        Down-weight outlier poses by iterative reweighting, or keep the poses consistent with the
+        best of ``ransac_samples`` random pose triplets (needs ``rng``).
+    outlier_alpha : float
+        False-alarm probability per pose of the outlier flag, in (0, 1).
+    check_convention : {"raise", "warn", "off"}
+        What to do when the fit is implausible (:func:`~calstudy.handeye.checks.\
+check_cell`: translations outside the camera's range or the robot's reach, a pose noise no
+        instrument gives, a target that moved during the series): refuse with the likely causes
+        tried and ranked (:func:`~calstudy.handeye.diagnose.diagnose`: storage
+        convention, transposed rotations, unit factors 10, 25.4 and 1000, shifted rows, rotation
+        formats of the file), warn with them (a :class:`calstudy.CalibrationWarning`) and go on,
+        or skip the check.
+    limits : CellLimits, optional
+        The plausible ranges and noise of the check (default :class:`CellLimits()`).
+    rereadings : callable, optional
+        ``{cause: (flange2base, target2camera)}`` of other readings of the same file's columns
+        for the diagnosis (:meth:`calstudy.handeye.posefile.PoseList.rereadings`; passed by
+        :meth:`~calstudy.handeye.posefile.PoseList.arguments`).
+    rng : numpy.random.Generator, optional
+        Needed for ``robust="ransac"``.
+    ransac_samples : int
+        Random pose triplets tried by ``robust="ransac"``.
+    ids : array_like of int, shape (N,), optional
+        Pose ids used in messages and in ``flagged`` (default ``0 .. N - 1``).
+    target_points, pixels, camera_matrix, pixel_sigma : optional
+        Target points (M, 3) mm, their pixels (N, M, 2), K (3, 3) and the pixel noise (px): refine
+        on the reprojection error instead of the target poses.
+    misfit : {"flag", "raise", "off"}
+        With ``sigma_rot`` and ``sigma_trans`` given (no robust loss), the whitened residual
+        ``chi2/dof`` is tested against its expected range; above it, ``"flag"`` adds the message
+        (naming the poses that disagree most) to ``notes`` with a
+        :class:`calstudy.CalibrationWarning`, ``"raise"`` raises :class:`CalibrationError`.
+
+    Returns
+    -------
+    HandEyeResult
+        The solved transforms under their frame names (``camera2flange`` and ``target2base``
+        eye-in-hand, ``camera2base`` and ``target2flange`` eye-to-hand) with their covariance,
+        per-pose residuals, flagged poses and the checks' findings.
+
+    Raises
+    ------
+    CalibrationError
+        Bad input (named pose and number), degenerate motions (duplicates, pure translations, one
+        rotation axis), an implausible fit with its likely causes (``check_convention="raise"``),
+        a requested closed form inconsistent with the data, or a refinement that does not
+        converge.
+    """
+    return _solve(
+        OPENCV_RWHE_METHODS,
+        "AX = ZB",
+        prepare_poses(
+            flange2base,
+            target2camera,
+            setup=setup,
+            convention=convention,
+            robot_unit=robot_unit,
+            camera_unit=camera_unit,
+            ortho_tol=ortho_tol,
+            ids=ids,
+        ),
+        method,
+        _Options(
+            refine=refine,
+            sigma_rot=sigma_rot,
+            sigma_trans=sigma_trans,
+            weights=weights,
+            robot_sigma_rot=robot_sigma_rot,
+            robust=robust,
+            outlier_alpha=outlier_alpha,
+            check_convention=check_convention,
+            rng=rng,
+            ransac_samples=ransac_samples,
+            target_points=target_points,
+            pixels=pixels,
+            camera_matrix=camera_matrix,
+            pixel_sigma=pixel_sigma,
+            misfit=misfit,
+            limits=limits,
+            rereadings=rereadings,
+        ),
+    )

@@ -1,19 +1,19 @@
 """Diagnosis of an implausible hand-eye fit: the common reading mistakes, tried and ranked.
 
-Run by :func:`calstudy.estimators.handeye_poses.calibrate_handeye` only after
-:func:`calstudy.estimators.handeye_checks.check_cell` failed. Each candidate re-reads the
+Run by :func:`calstudy.handeye.calibrate.calibrate_handeye` only after
+:func:`calstudy.handeye.checks.check_cell` failed. Each candidate re-reads the
 canonical poses (:func:`readings`) or the file's raw columns (``rereadings`` of
-:meth:`calstudy.estimators.posefile.PoseList.rereadings`): storage inverted, rotations
+:meth:`calstudy.handeye.posefile.PoseList.rereadings`): storage inverted, rotations
 transposed, unit factors 10, 25.4 and 1000 either way, camera rows shifted against the robot rows,
 the target moved once during the series; from a pose-list file also quaternions in x, y, z, w
 order, rotation vectors in degrees, Euler angles of another order. Each is fitted by a closed
 form on the well-spread poses and scored by the robust noise level of its residuals against the
-plausible one (:func:`calstudy.estimators.handeye_checks.noise_ratio`) and by the ranges; the
+plausible one (:func:`calstudy.handeye.checks.noise_ratio`) and by the ranges; the
 ranking names what fits. Nothing is corrected: the caller refuses (or warns) with the ranking.
 
 Also independent of ``X``: the rotation angle of a motion is the same seen by the robot and by
 the camera (``angle(inv(A_i) A_j) = angle(B_i inv(B_j))``); its median disagreement over the pairs
-of :func:`~calstudy.estimators.handeye_inputs.motion_pairs` tells rotation trouble (pairing,
+of :func:`~calstudy.handeye.inputs.motion_pairs` tells rotation trouble (pairing,
 rotation format) from translation trouble (units, a moved target) when no reading fits.
 """
 
@@ -26,10 +26,10 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye import opencv_handeye
-from calstudy.estimators.handeye_checks import CellLimits, noise_ratio, range_failures
-from calstudy.estimators.handeye_inputs import motion_pairs
-from calstudy.estimators.handeye_refine import (
+from calstudy.estimators.axxb import opencv_handeye
+from calstudy.handeye.checks import CellLimits, noise_ratio, range_failures
+from calstudy.handeye.inputs import motion_pairs
+from calstudy.handeye.refine import (
     check_proper,
     pose_residuals,
     pose_scale,
@@ -162,7 +162,7 @@ def diagnose(
     rereadings : callable, optional
         Returns ``{cause: (a, b)}`` of canonical poses re-read from the raw file columns.
     break_after : int
-        Row after which :func:`~calstudy.estimators.handeye_checks.series_break` saw the largest
+        Row after which :func:`~calstudy.handeye.checks.series_break` saw the largest
         step (-1: none); a target moved there is tried.
 
     Returns

@@ -1,10 +1,10 @@
 """Hand-eye residuals, closed forms and maximum-likelihood refinement for ``A_i X B_i = Z``.
 
-The pieces :func:`calstudy.estimators.handeye_poses.calibrate_handeye` is made of: per-pose SE(3)
+The pieces :func:`calstudy.handeye.calibrate.calibrate_handeye` is made of: per-pose SE(3)
 residuals of the target pose, OpenCV's closed forms scored by them, the maximum-likelihood
 refinement on those residuals (:func:`refine_ml`) or on the reprojection error
 (:func:`refine_reprojection`), and the Cramer-Rao bound (:func:`handeye_crb`). Poses are in the
-canonical form of :class:`calstudy.estimators.handeye_inputs.PreparedPoses` (mm).
+canonical form of :class:`calstudy.handeye.inputs.PreparedPoses` (mm).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.estimation import Estimate, covariance_from_jacobian
-from calstudy.estimators.handeye import (
+from calstudy.estimators.axxb import (
     DEGENERATE_ROTATION,
     check_rotation_diversity,
     opencv_handeye,
@@ -42,53 +42,9 @@ PARAM_NAMES = ["X_rx", "X_ry", "X_rz", "X_tx", "X_ty", "X_tz"] + [
 ]
 
 
-# ----------------------------------------------------------------------------------------------
-# SO(3) maps and Jacobians, batched
-
-
 def _so3_jr(phi: np.ndarray) -> np.ndarray:
     """Right Jacobian of SO(3), ``exp(phi + e) = exp(phi) exp(Jr(phi) e)``: (N, 3) -> (N, 3, 3)."""
     return geo.so3_left_jacobian(-np.atleast_2d(phi))
-
-
-#: above this angle (rad) the axis is taken from scipy (the skew part vanishes near pi)
-_LOG_NEAR_PI = np.pi - 1e-2
-
-
-def log_so3(rot: np.ndarray) -> np.ndarray:
-    """Rotation vectors ``(N, 3)`` of rotation matrices ``(..., 3, 3)`` (proper rotations).
-
-    ``v * a / |v|`` with ``v`` the skew part and ``a`` the angle of
-    :func:`calstudy.core.geometry.rotation_angle` (accurate at every angle; a fifth of the cost
-    of scipy's conversion, which the refinement calls at every evaluation); within 0.01 rad of
-    pi, where the skew part loses the axis, scipy's conversion.
-    """
-    r = rot.reshape(-1, 3, 3)
-    v = np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], 1)
-    s = np.sqrt(np.sum(v * v, axis=1))
-    ang = np.arctan2(s, r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2] - 1.0)
-    out = v * np.where(s > 1e-300, ang / np.maximum(s, 1e-300), 0.5)[:, None]
-    far = ang > _LOG_NEAR_PI
-    if np.any(far):
-        from scipy.spatial.transform import Rotation
-
-        out[far] = Rotation.from_matrix(r[far]).as_rotvec()
-    return out
-
-
-def _exp_so3(rotvec: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(1, 3, 3)`` of one rotation vector (Rodrigues' formula, series below
-    1e-4 rad): the refinement calls it at every evaluation, where scipy's conversion of a
-    single vector costs more than the formula."""
-    v = np.asarray(rotvec, dtype=float).reshape(3)
-    th2 = float(v @ v)
-    k = geo.skew(v)
-    if th2 < 1e-8:
-        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
-    else:
-        th = np.sqrt(th2)
-        a, b = np.sin(th) / th, (1.0 - np.cos(th)) / th2
-    return (np.eye(3) + a * k + b * (k @ k))[None]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -105,7 +61,7 @@ def pose_residuals(a, b, x, z) -> np.ndarray:
     """Per-pose residuals ``(N, 6)``: ``[t_B - t_pred (mm, camera frame), log(R_pred^T R_B) (rad)]``
     of the measured ``B_i`` against the prediction ``inv(X) inv(A_i) Z``."""
     pred = geo.invert(x) @ geo.invert(a) @ z
-    rot = log_so3(np.swapaxes(pred[:, :3, :3], 1, 2) @ b[:, :3, :3])
+    rot = geo.so3_log(np.swapaxes(pred[:, :3, :3], 1, 2) @ b[:, :3, :3])
     return np.concatenate([b[:, :3, 3] - pred[:, :3, 3], rot], axis=1)
 
 
@@ -201,7 +157,7 @@ def _opencv_rwhe(a: np.ndarray, b: np.ndarray, method: str) -> tuple[np.ndarray,
     """``(X, Z)`` by ``cv2.calibrateRobotWorldHandEye``: it solves ``B = inv(X) inv(A) Z`` and
     returns ``inv(Z)`` ("base2world") and ``inv(X)`` ("gripper2cam"). Degenerate motions (pure
     translations, rotations about one axis, a repeated pose) are refused first, as by
-    :func:`calstudy.estimators.handeye.opencv_handeye`: OpenCV would return a wrong answer."""
+    :func:`calstudy.estimators.axxb.opencv_handeye`: OpenCV would return a wrong answer."""
     check_rotation_diversity(a, DEGENERATE_ROTATION)
     ainv = geo.invert(a)
     with quiet_opencv():
@@ -321,14 +277,14 @@ class PoseProblem:
         return np.concatenate([np.zeros(3), geo.invert(x)[:3, 3], np.zeros(3), z[:3, 3]])
 
     def unpack(self, p) -> tuple[np.ndarray, np.ndarray]:
-        ry = _exp_so3(p[0:3])[0] @ self.ry0
-        rz = self.rz0 @ _exp_so3(p[6:9])[0]
+        ry = geo.so3_exp(p[0:3])[0] @ self.ry0
+        rz = self.rz0 @ geo.so3_exp(p[6:9])[0]
         x = geo.invert(geo.make_transform(ry, p[3:6]))
         return x, geo.make_transform(rz, p[9:12])
 
     def _predict(self, p):
-        ry = _exp_so3(p[0:3])[0] @ self.ry0
-        rz = self.rz0 @ _exp_so3(p[6:9])[0]
+        ry = geo.so3_exp(p[0:3])[0] @ self.ry0
+        rz = self.rz0 @ geo.so3_exp(p[6:9])[0]
         rc, tc = self.c[:, :3, :3], self.c[:, :3, 3]
         r_hat = ry @ rc @ rz
         u = (rc @ p[9:12] + tc) @ ry.T
@@ -336,7 +292,7 @@ class PoseProblem:
 
     def residuals(self, p) -> np.ndarray:
         _, r_hat, _, t_hat = self._predict(p)
-        e = log_so3(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
+        e = geo.so3_log(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
         r = np.concatenate(
             [(self.b[:, :3, 3] - t_hat) * self.w_trans[:, None], e * self.w_rot[:, None]], 1
         )
@@ -347,7 +303,7 @@ class PoseProblem:
     def jacobian(self, p) -> np.ndarray:
         ry, r_hat, u, _ = self._predict(p)
         n = r_hat.shape[0]
-        e = log_so3(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
+        e = geo.so3_log(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
         jl_y = _so3_jr(p[0:3])[0].T
         jr_z = _so3_jr(p[6:9])[0]
         jl_inv_e = np.swapaxes(geo.so3_right_jacobian_inverse(e), 1, 2)

@@ -2,7 +2,7 @@
 
 A robust noise level from per-pose residuals (:func:`robust_sigmas`), the per-pose outlier
 score and its flag limit, the weights of the Huber and Cauchy losses, and RANSAC over pose
-triplets (:func:`ransac_inliers`), as :func:`calstudy.estimators.handeye_poses.calibrate_handeye`
+triplets (:func:`ransac_inliers`), as :func:`calstudy.handeye.calibrate.calibrate_handeye`
 uses them.
 """
 
@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye import opencv_handeye
-from calstudy.estimators.handeye_refine import (
+from calstudy.estimators.axxb import opencv_handeye
+from calstudy.handeye.refine import (
     check_proper,
     pose_residuals,
     pose_scale,
@@ -26,8 +26,30 @@ CHI2_3_MEDIAN = 2.3659738843753377
 
 
 def outlier_limit(alpha: float = 1e-3) -> float:
-    """Outlier flag limit: the ``1 - alpha`` quantile of chi-square with 6 degrees of freedom."""
+    """Outlier flag limit: the ``1 - alpha`` quantile of chi-square with 6 degrees of freedom.
+
+    A pose whose whitened squared residual (``HandEyeResult.outlier_score``) exceeds it is
+    flagged.
+
+    Parameters
+    ----------
+    alpha : float
+        False-alarm probability per pose, in (0, 1).
+
+    Returns
+    -------
+    float
+        The limit (dimensionless).
+
+    Raises
+    ------
+    CalibrationError
+        If ``alpha`` is not in (0, 1).
+    """
     from scipy.special import chdtri  # chi2.isf without importing scipy.stats
+
+    if not 0.0 < alpha < 1.0:
+        raise CalibrationError(f"alpha = {alpha!r}: a false-alarm probability must be in (0, 1)")
 
     return float(chdtri(6, alpha))
 
@@ -62,7 +84,7 @@ def eiv_sigmas(res: np.ndarray, g_t: np.ndarray, g_r: np.ndarray, alpha: float =
     mm, rad per axis) from per-pose residuals ``(N, 6)`` (errors in variables).
 
     A robot rotation error ``delta`` moves the translation residual by ``g_t delta`` and the
-    rotation residual by ``g_r delta`` (:func:`~calstudy.estimators.handeye_refine.\
+    rotation residual by ``g_r delta`` (:func:`~calstudy.handeye.refine.\
 robot_error_map`); the camera's noise moves them independently. So the covariance of the
     translation and rotation residuals is ``robot_sigma_rot^2 g_t g_r^T`` alone, and its moment
     estimate over the inlier poses (:func:`robust_sigmas`' inliers) gives ``robot_sigma_rot``
@@ -75,7 +97,7 @@ robot_error_map`); the camera's noise moves them independently. So the covarianc
     res : (N, 6) array
         Per-pose residuals ``[t (mm), rot (rad)]``.
     g_t, g_r : (N, 3, 3) arrays
-        The maps of :func:`~calstudy.estimators.handeye_refine.robot_error_map` at the fit.
+        The maps of :func:`~calstudy.handeye.refine.robot_error_map` at the fit.
     alpha : float
         False-alarm probability of the inlier test.
 

@@ -9,8 +9,8 @@ import pytest
 from support import ci_parameters, run
 
 from calstudy.core import geometry as geo
-from calstudy.estimators.handeye_sim import simulate_cell
-from calstudy.estimators.posefile import write_pose_list
+from calstudy.handeye.posefile import write_pose_list
+from calstudy.handeye.simulate import simulate_cell
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOK = ROOT / "notebooks" / "06_handeye_your_cell.ipynb"

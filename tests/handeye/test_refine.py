@@ -7,11 +7,11 @@ from support import HANDEYE_SIGMA_TRANS as SIGMA_TRANS
 from support import handeye_cell as _cell
 
 from calstudy import CalibrationError
+from calstudy import handeye as he
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye as he
-from calstudy.estimators import handeye_inputs as hi
-from calstudy.estimators import handeye_poses as hp
-from calstudy.estimators import handeye_refine as hr
+from calstudy.handeye import calibrate as hp
+from calstudy.handeye import inputs as hi
+from calstudy.handeye import refine as hr
 
 # ----------------------------------------------------------------------------------------------
 # the refinement: Jacobian, Cramer-Rao bound
@@ -93,7 +93,7 @@ def test_inconsistent_closed_form_is_refused(monkeypatch):
 
 
 def test_robot_error_map_is_the_first_order_change_of_the_residuals():
-    from calstudy.estimators.handeye_refine import pose_residuals, robot_error_map
+    from calstudy.handeye.refine import pose_residuals, robot_error_map
 
     cell = _cell(31, n=8, noise=False)
     a, x, z = cell.flange2base, cell.camera2flange, cell.target2base
@@ -108,7 +108,7 @@ def test_robot_error_map_is_the_first_order_change_of_the_residuals():
 
 
 def test_eiv_sigmas_separate_the_robot_from_the_camera():
-    from calstudy.estimators import handeye_poses as hp
+    from calstudy.handeye import calibrate as hp
 
     rng = np.random.default_rng(5)
     cell = _cell(32, n=300)
@@ -122,7 +122,7 @@ def test_eiv_sigmas_separate_the_robot_from_the_camera():
 
 
 def test_closed_forms_start_from_a_fixed_number_of_well_spread_poses():
-    from calstudy.estimators.handeye_refine import START_POSES, spread_subset
+    from calstudy.handeye.refine import START_POSES, spread_subset
 
     cell = _cell(33, n=300)
     sub = spread_subset(cell.flange2base)

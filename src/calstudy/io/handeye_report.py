@@ -1,6 +1,6 @@
 """Tables, figure and Monte Carlo check for a hand-eye calibration of one's own cell (notebook 06).
 
-Thin helpers over :mod:`calstudy.estimators.handeye_poses`: the example cell the notebook runs on
+Thin helpers over the door :mod:`calstudy.handeye`: the example cell the notebook runs on
 by default, the method comparison, the estimate with its uncertainty, the per-pose residuals, and
 the predicted against the simulated accuracy at a tool point.
 """
@@ -16,9 +16,19 @@ import pandas as pd
 
 from calstudy.core import geometry as geo
 from calstudy.core.montecarlo import Experiment
-from calstudy.estimators import handeye_poses as hp
-from calstudy.estimators.handeye_sim import SimulatedCell, simulate_cell
-from calstudy.estimators.posefile import PoseList, read_pose_list, write_pose_list
+from calstudy.handeye import (
+    SETUP_FRAMES,
+    HandEyeResult,
+    PoseList,
+    SimulatedCell,
+    calibrate_handeye,
+    calibrate_robot_world_handeye,
+    plan_poses,
+    read_pose_list,
+    simulate_cell,
+    write_pose_list,
+)
+from calstudy.handeye.plan import point_jacobian, point_rms, pose_information
 
 
 def example_cell(
@@ -43,7 +53,7 @@ def example_cell(
     )
 
 
-def input_table(pose_list: PoseList, result: hp.HandEyeResult, source: str) -> pd.DataFrame:
+def input_table(pose_list: PoseList, result: HandEyeResult, source: str) -> pd.DataFrame:
     """One row describing the input: source, poses, conventions, units, SO(3) correction."""
     prep = result.prepared
     return pd.DataFrame(
@@ -60,8 +70,8 @@ def input_table(pose_list: PoseList, result: hp.HandEyeResult, source: str) -> p
     )
 
 
-def conditioning_table(result: hp.HandEyeResult) -> pd.DataFrame:
-    """The conditioning of the motions (:class:`~calstudy.estimators.handeye_inputs.Conditioning`)
+def conditioning_table(result: HandEyeResult) -> pd.DataFrame:
+    """The conditioning of the motions (:class:`~calstudy.handeye.inputs.Conditioning`)
     as one row."""
     c = result.conditioning
     return pd.DataFrame([vars(c)])
@@ -109,7 +119,7 @@ def methods_table(results: dict, truth_x: np.ndarray | None = None) -> pd.DataFr
                 "rms_rot_deg": rot,
                 "rms_trans_mm": trans,
                 "refused": "",
-                "x": res.x,
+                "x": res.camera2mount,
             }
         )
     df = pd.DataFrame(rows)
@@ -122,12 +132,15 @@ def methods_table(results: dict, truth_x: np.ndarray | None = None) -> pd.DataFr
     return df.drop(columns="x")
 
 
-def estimate_table(result: hp.HandEyeResult) -> pd.DataFrame:
-    """``X`` and ``Z`` with standard deviations: translation (mm) and rotation vector (deg), the
-    rotation std about the axes of the estimated frame (``R = R_est exp(theta)``)."""
+def estimate_table(result: HandEyeResult) -> pd.DataFrame:
+    """The camera's and the target's pose with standard deviations: translation (mm) and
+    rotation vector (deg), the rotation std about the axes of the estimated frame
+    (``R = R_est exp(theta)``)."""
     std = result.std
     rows = []
-    for name, t, off in ((result.x_name, result.x, 0), (result.z_name, result.z, 6)):
+    names = SETUP_FRAMES[result.setup]
+    transforms = (result.camera2mount, result.target2mount)
+    for name, t, off in zip(names, transforms, (0, 6), strict=True):
         rv = np.rad2deg(geo.matrix_to_rotvec(t[:3, :3]))
         for k, axis in enumerate("xyz"):
             rows.append(
@@ -152,7 +165,7 @@ def estimate_table(result: hp.HandEyeResult) -> pd.DataFrame:
     return df
 
 
-def pose_table(result: hp.HandEyeResult) -> pd.DataFrame:
+def pose_table(result: HandEyeResult) -> pd.DataFrame:
     """Per-pose residual (mm, deg), outlier score, flag and final weight."""
     res = result.residuals
     return pd.DataFrame(
@@ -203,14 +216,14 @@ class ToolPointCell:
     given_sigmas: bool
 
 
-def tool_point_cell(result: hp.HandEyeResult, point_camera, given_sigmas: bool) -> ToolPointCell:
+def tool_point_cell(result: HandEyeResult, point_camera, given_sigmas: bool) -> ToolPointCell:
     """The scenario of :func:`tool_point_trial` from a calibration ``result``."""
     keep = ~np.isin(result.prepared.ids, result.flagged)
     a = result.prepared.a[keep]
     return ToolPointCell(
         a=a,
-        b_true=geo.invert(result.x) @ geo.invert(a) @ result.z,
-        x=result.x,
+        b_true=geo.invert(result.camera2mount) @ geo.invert(a) @ result.target2mount,
+        x=result.camera2mount,
         point=np.asarray(point_camera, dtype=float),
         sigma_rot=float(result.sigma_rot),
         sigma_trans=float(result.sigma_trans),
@@ -223,15 +236,15 @@ def tool_point_trial(cell: ToolPointCell, rng: np.random.Generator) -> dict:
     hand-eye fitted again, and the tool point's deviation from the estimate's (mm)."""
     b = geo.perturb(cell.b_true, cell.sigma_rot, cell.sigma_trans, rng)
     sigmas = {"sigma_rot": cell.sigma_rot, "sigma_trans": cell.sigma_trans}
-    fit = hp.calibrate_handeye(
+    fit = calibrate_handeye(
         cell.a, b, setup="eye_in_hand", check_convention="off",
         **(sigmas if cell.given_sigmas else {}),
     )
-    d = geo.apply(fit.x, cell.point) - geo.apply(cell.x, cell.point)
+    d = geo.apply(fit.camera2mount, cell.point) - geo.apply(cell.x, cell.point)
     return {"dx_mm": float(d[0]), "dy_mm": float(d[1]), "dz_mm": float(d[2])}
 
 
-def tool_point_summary(result: hp.HandEyeResult, point_camera, trials: pd.DataFrame | None):
+def tool_point_summary(result: HandEyeResult, point_camera, trials: pd.DataFrame | None):
     """Predicted (:meth:`HandEyeResult.point_covariance`) against simulated accuracy of a tool
     point mapped by ``X``: std along x, y, z and the RMS radius, mm; the simulated row from the
     rows of :func:`tool_point_trial` (none if ``trials`` is None or empty)."""
@@ -252,7 +265,36 @@ def cell_sigmas(sigma_rot_rad: float, sigma_trans_mm: float) -> dict:
     return {}
 
 
+@dataclass(frozen=True)
+class CellCalibration:
+    """The notebook's calibration of one cell.
+
+    Attributes
+    ----------
+    poses : PoseList
+        The pose list calibrated (the user's file, or the synthetic cell read back).
+    source : str
+        Where the poses come from, for the report.
+    cell : SimulatedCell or None
+        The synthetic cell, or None for a user's list.
+    truth : (4, 4) array or None
+        The synthetic cell's ``camera2flange`` (mm), or None.
+    fits : dict
+        ``{label: HandEyeResult}``: plain ML, robust ML and the robust AX = ZB fit.
+    robust : HandEyeResult
+        The robust ML fit, the one the report describes.
+    """
+
+    poses: PoseList
+    source: str
+    cell: SimulatedCell | None
+    truth: np.ndarray | None
+    fits: dict
+    robust: HandEyeResult
+
+
 def calibrate_cell(
+    *,
     seed: int,
     poses_csv: str,
     setup: str,
@@ -261,12 +303,36 @@ def calibrate_cell(
     outlier: tuple[float, float],
     sigmas: dict,
     robust: str | None,
-) -> dict:
+) -> CellCalibration:
     """The notebook's calibration, as one recipe: the pose list (the user's file, or the
     synthetic cell written to a pose list and read back), the plain and robust ML hand-eye and
-    the robot-world-hand-eye fit. Returns a dict with ``poses``, ``source``, ``cell`` (the
-    synthetic :class:`SimulatedCell`, or None for a user's list), ``truth`` (its camera2flange,
-    or None) and ``fits``."""
+    the robot-world-hand-eye fit.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the synthetic cell and of RANSAC.
+    poses_csv : str
+        The user's pose list; empty for the synthetic cell.
+    setup : {"eye_in_hand", "eye_to_hand"}
+    n_poses, n_duplicates : int
+        Synthetic cell: views, and repeated orientations among them.
+    outlier : (float, float)
+        Synthetic cell: the last pose's offset, mm and deg (0, 0: none).
+    sigmas : dict
+        The noise keywords of :func:`cell_sigmas`.
+    robust : {None, "huber", "cauchy", "ransac"}
+
+    Returns
+    -------
+    CellCalibration
+
+    Raises
+    ------
+    CalibrationError
+        From :func:`calstudy.handeye.read_pose_list` and
+        :func:`calstudy.handeye.calibrate_handeye`.
+    """
     cell = None
     if poses_csv:
         poses, source, truth = read_pose_list(poses_csv), f"user pose list {poses_csv}", None
@@ -279,18 +345,15 @@ def calibrate_cell(
             )
             poses = read_pose_list(path)
         source, truth = "synthetic cell", cell.camera2flange
-    plain = hp.calibrate_handeye(**poses.arguments(), setup=setup, **sigmas)
-    robust_fit = hp.calibrate_handeye(
+    plain = calibrate_handeye(**poses.arguments(), setup=setup, **sigmas)
+    robust_fit = calibrate_handeye(
         **poses.arguments(), setup=setup, robust=robust, rng=np.random.default_rng(seed), **sigmas
     )
-    rwhe = hp.calibrate_robot_world_handeye(
+    rwhe = calibrate_robot_world_handeye(
         **poses.arguments(), setup=setup, robust=robust, rng=np.random.default_rng(seed), **sigmas
     )
     fits = {"ML": plain, f"ML, {robust}": robust_fit, f"AX = ZB ML, {robust}": rwhe}
-    return {
-        "poses": poses, "source": source, "cell": cell, "truth": truth, "fits": fits,
-        "robust": robust_fit,
-    }
+    return CellCalibration(poses, source, cell, truth, fits, robust_fit)
 
 
 def tool_point_experiment(
@@ -311,39 +374,45 @@ def tool_point_experiment(
     from the notebook's parameters alone (it repeats the calibration to get the estimate)."""
     sigmas = cell_sigmas(sigma_rot_rad, sigma_trans_mm)
     fit = calibrate_cell(
-        seed, poses_csv, setup, n_poses, n_duplicates, (outlier_mm, outlier_deg), sigmas, robust
-    )["robust"]
+        seed=seed,
+        poses_csv=poses_csv,
+        setup=setup,
+        n_poses=n_poses,
+        n_duplicates=n_duplicates,
+        outlier=(outlier_mm, outlier_deg),
+        sigmas=sigmas,
+        robust=robust,
+    ).robust
     cell = tool_point_cell(fit, tool_point_mm, bool(sigmas))
     return Experiment("tool_point", tool_point_trial, cell, n_trials)
 
 
 def plan_table(
-    result: hp.HandEyeResult, point_camera, pose_counts=(6, 10, 15), seed: int = 0
+    result: HandEyeResult, point_camera, pose_counts=(6, 10, 15), seed: int = 0
 ) -> pd.DataFrame:
-    """The plan of :func:`calstudy.estimators.handeye_plan.plan_poses` among the poses of a
+    """The plan of :func:`calstudy.handeye.plan.plan_poses` among the poses of a
     calibration (flagged ones left out), with its estimate as the nominal ``X``, ``Z`` and its
     noise level: per pose count, the predicted RMS error at the tool point (mm) of the planned
     poses, the median over 200 random choices of as many, and of all the poses kept."""
-    from calstudy.estimators import handeye_plan as hplan
-
     keep = ~np.isin(result.prepared.ids, result.flagged)
     a = result.prepared.a[keep]
     point = np.asarray(point_camera, dtype=float)
     noise = (result.sigma_rot, result.sigma_trans, result.robot_sigma_rot)
-    infos = hplan.pose_information(a, result.x, result.z, *noise)
-    pj = hplan.point_jacobian(result.x, point)
+    x, z = result.camera2mount, result.target2mount
+    infos = pose_information(a, x, z, *noise)
+    pj = point_jacobian(x, point)
     rng = np.random.default_rng(seed)
     rows = []
     for n in (c for c in pose_counts if c <= len(a)):
-        plan = hplan.plan_poses(a, result.x, result.z, n, noise[0], noise[1], point, noise[2])
+        plan = plan_poses(a, x, z, n, noise[0], noise[1], point, noise[2])
         picks = np.array([rng.choice(len(a), n, replace=False) for _ in range(200)])
-        random = hplan.point_rms(infos[picks].sum(axis=1), pj)
+        random = point_rms(infos[picks].sum(axis=1), pj)
         rows.append(
             {
                 "n_poses": n,
                 "planned_rms_mm": plan.predicted_rms_mm,
                 "random_median_rms_mm": float(np.median(random)),
-                "all_poses_rms_mm": float(hplan.point_rms(infos.sum(axis=0), pj)),
+                "all_poses_rms_mm": float(point_rms(infos.sum(axis=0), pj)),
                 "planned_ids": " ".join(str(i) for i in result.prepared.ids[keep][plan.chosen]),
             }
         )

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from calstudy import CalibrationError
+from calstudy import handeye as he
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye as he
-from calstudy.estimators import sphere_csv
+from calstudy.handeye import sphere, sphere_csv
 
 SENSOR2FLANGE = geo.make_transform(
     geo.euler_zyx_to_matrix(10.0, 50.0, -5.0), np.array([-46.0, -4.5, 413.0])
@@ -43,17 +43,17 @@ def test_sphere_handeye_noise_free_exact():
     est = he.sphere_handeye(trans, _centres(trans), rot, _centres(rot))
     assert geo.rotation_error(est.value, SENSOR2FLANGE) < 1e-9
     assert geo.translation_error(est.value, SENSOR2FLANGE) < 1e-9
-    x_b = he.sphere_centre_in_base(rot, _centres(rot), est.value)
+    x_b = sphere.sphere_centre_in_base(rot, _centres(rot), est.value)
     np.testing.assert_allclose(x_b, X_B, atol=1e-9)
 
 
 def test_uncentred_procrustes_needs_only_three_positions():
     rng = np.random.default_rng(2)
     trans, rot = _poses(rng, n_trans=3)
-    r_f = he.rotation_from_translations(trans, _centres(trans), center=False)
+    r_f = sphere.rotation_from_translations(trans, _centres(trans), center=False)
     assert geo.rotation_error(r_f, SENSOR2FLANGE) < 1e-9
     with pytest.raises(CalibrationError, match="at least 4 positions; got 3"):
-        he.rotation_from_translations(trans, _centres(trans), center=True)
+        sphere.rotation_from_translations(trans, _centres(trans), center=True)
 
 
 def test_ml_refinement_noise_free_and_crb():
@@ -153,11 +153,11 @@ def test_sphere_method_agrees_with_opencv_on_same_poses():
 def test_pure_translations_only_leave_t_undefined():
     rng = np.random.default_rng(8)
     trans, _ = _poses(rng, n_trans=6)
-    r_f = he.rotation_from_translations(trans, _centres(trans))
+    r_f = sphere.rotation_from_translations(trans, _centres(trans))
     with pytest.raises(
         CalibrationError, match="T_F is undefined: the 6 moves are pure translations"
     ):
-        he.translation_from_rotations(trans, _centres(trans), r_f)
+        sphere.translation_from_rotations(trans, _centres(trans), r_f)
 
 
 def test_rotations_about_one_axis_are_rank_deficient():
@@ -172,7 +172,7 @@ def test_collinear_translations_rejected():
     trans, _ = _poses(rng)
     trans[:, :3, 3] = trans[0, :3, 3] + np.outer(np.arange(4.0), [1.0, 2.0, 0.5])
     with pytest.raises(CalibrationError, match="fewer than 3 non-collinear translations"):
-        he.rotation_from_translations(trans, _centres(trans))
+        sphere.rotation_from_translations(trans, _centres(trans))
 
 
 def test_translations_with_rotation_rejected():
@@ -180,7 +180,7 @@ def test_translations_with_rotation_rejected():
     trans, rot = _poses(rng)
     trans[2] = rot[0]
     with pytest.raises(CalibrationError, match="not pure translations: orientation of move 2"):
-        he.rotation_from_translations(trans, _centres(trans))
+        sphere.rotation_from_translations(trans, _centres(trans))
 
 
 def test_non_finite_and_shapes_and_rotations():
@@ -189,35 +189,17 @@ def test_non_finite_and_shapes_and_rotations():
     centres = _centres(trans)
     centres[1, 2] = np.nan
     with pytest.raises(CalibrationError, match=r"non-finite value \(nan\) at index \(1, 2\)"):
-        he.rotation_from_translations(trans, centres)
+        sphere.rotation_from_translations(trans, centres)
     with pytest.raises(CalibrationError, match=r"shape \(4, 2\); expected \(4, 3\)"):
-        he.rotation_from_translations(trans, _centres(trans)[:, :2])
+        sphere.rotation_from_translations(trans, _centres(trans)[:, :2])
     bad = trans.copy()
     bad[0, :3, :3] *= 1.01
     with pytest.raises(CalibrationError, match="not orthonormal"):
-        he.rotation_from_translations(bad, _centres(trans))
+        sphere.rotation_from_translations(bad, _centres(trans))
     with pytest.raises(CalibrationError, match="unknown hand-eye method 'Foo'"):
         he.opencv_handeye(rot, rot, "Foo")
     with pytest.raises(CalibrationError, match="at least 3 poses; got 2"):
         he.opencv_handeye(rot[:2], rot[:2], "Tsai")
-
-
-# --------------------------------------------------------------------------- Eq. 23
-
-
-def test_stationary_chain_noise_free_exact():
-    rng = np.random.default_rng(13)
-    flange2base = geo.make_transform(geo.random_rotation(rng), rng.uniform(-900, 900, 3))
-    front2sensor = geo.make_transform(geo.rotvec_to_matrix([np.pi, 0, 0]), [0, 0, 250.0])
-    back2front = geo.make_transform(geo.rotvec_to_matrix([np.pi, 0, 0]), [0, 0, -8.0])
-    statcam2base = geo.make_transform(geo.random_rotation(rng), rng.uniform(-900, 900, 3))
-    front2base = flange2base @ SENSOR2FLANGE @ front2sensor
-    back2statcam = geo.invert(statcam2base) @ front2base @ back2front
-    est = he.stationary_sensor_to_base(
-        flange2base, SENSOR2FLANGE, front2sensor, back2statcam, back2front
-    )
-    assert geo.rotation_error(est, statcam2base) < 1e-9
-    assert geo.translation_error(est, statcam2base) < 1e-9
 
 
 # --------------------------------------------------------------------------- user CSV
@@ -311,26 +293,6 @@ def test_tsai_diversity_check_refuses_one_axis_and_no_rotation():
         else:
             with pytest.raises(CalibrationError, match="turn about one axis"):
                 he.check_rotation_diversity(flange, he.MIN_PAIR_ROTATION)
-
-
-def test_base_to_base_chains_two_robots():
-    """Eq. 11: two robots whose cameras see one world frame give the transform between their
-    bases, for any number of poses per robot; unequal pose counts are rejected."""
-    rng = np.random.default_rng(22)
-    def pose(n, scale):
-        return geo.make_transform(geo.random_rotation(rng, n), rng.uniform(-scale, scale, (n, 3)))
-
-    world2base, cam2flange = pose(2, 900.0), pose(2, 100.0)
-    args = []
-    for a, n in ((0, 3), (1, 5)):
-        flange2base = pose(n, 900.0)
-        world2cam = geo.invert(flange2base @ cam2flange[a]) @ world2base[a]
-        args += [flange2base, cam2flange[a], world2cam]
-    truth = world2base[0] @ geo.invert(world2base[1])
-    np.testing.assert_allclose(he.base_to_base(*args), truth, atol=1e-9)
-    args[2] = args[2][:2]
-    with pytest.raises(CalibrationError, match="3 flange poses but 2 camera poses"):
-        he.base_to_base(*args)
 
 
 def test_rotation_check_refuses_bad_shapes_and_angles():

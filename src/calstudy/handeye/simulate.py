@@ -1,7 +1,7 @@
 """A simulated eye-in-hand cell: synthetic hand-eye pose lists with the truth.
 
 The study's standard hand-eye scenario (:func:`simulate_cell`), drawn with the noise model of
-:func:`calstudy.estimators.handeye_refine.refine_ml`; used by the tests, the benchmark and the
+:func:`calstudy.handeye.refine.refine_ml`; used by the tests, the benchmark and the
 example cell of notebook 06.
 """
 
@@ -41,14 +41,17 @@ class SimulatedCell:
     outliers: np.ndarray
 
 
-#: true camera2flange of the simulated cell: camera 120 mm ahead of the flange, tilted 15 deg
-CELL_CAMERA2FLANGE = geo.make_transform(
-    geo.euler_zyx_to_matrix(90.0, 15.0, 0.0), np.array([40.0, -25.0, 120.0])
-)
-#: true target2base: a target on the table 800 mm in front of the robot
-CELL_TARGET2BASE = geo.make_transform(
-    geo.euler_zyx_to_matrix(30.0, 0.0, 180.0), np.array([800.0, 100.0, 20.0])
-)
+def _cell_truth() -> tuple[np.ndarray, np.ndarray]:
+    """The simulated cell's true ``camera2flange`` (camera 120 mm ahead of the flange, tilted
+    15 deg) and ``target2base`` (a target on the table 800 mm in front of the robot); built
+    when a cell is drawn, so that importing the door does not load scipy's rotations."""
+    camera2flange = geo.make_transform(
+        geo.euler_zyx_to_matrix(90.0, 15.0, 0.0), np.array([40.0, -25.0, 120.0])
+    )
+    target2base = geo.make_transform(
+        geo.euler_zyx_to_matrix(30.0, 0.0, 180.0), np.array([800.0, 100.0, 20.0])
+    )
+    return camera2flange, target2base
 
 
 def _camera_poses(rng, z, n_poses, distance_mm, max_tilt_deg, max_roll_deg) -> np.ndarray:
@@ -95,11 +98,13 @@ def simulate_cell(
     Parameters
     ----------
     rng : numpy.random.Generator
+        Source of every random draw.
     n_poses : int
+        Poses drawn (before ``n_duplicate_orientations``).
     sigma_rot, sigma_trans : float
         Camera pose noise, rad and mm per axis.
     distance_mm, max_tilt_deg, max_roll_deg : float
-        Viewing geometry.
+        Viewing geometry: mm, deg, deg.
     n_duplicate_orientations : int
         That many extra poses repeat the orientation of earlier ones with the flange moved by up to
         50 mm (common in taught pose lists).
@@ -111,10 +116,16 @@ def simulate_cell(
     Returns
     -------
     SimulatedCell
+        The true ``camera2flange`` and ``target2base`` and the pose lists (mm).
+
+    Raises
+    ------
+    CalibrationError
+        For fewer than 3 poses.
     """
     if n_poses < 3:
         raise CalibrationError(f"a simulated cell needs at least 3 poses; got {n_poses}")
-    x, z = CELL_CAMERA2FLANGE, CELL_TARGET2BASE
+    x, z = _cell_truth()
     cam2base = _camera_poses(rng, z, n_poses, distance_mm, max_tilt_deg, max_roll_deg)
     flange = cam2base @ geo.invert(x)
     if n_duplicate_orientations:

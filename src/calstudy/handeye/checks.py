@@ -1,6 +1,6 @@
 """Plausibility of a hand-eye fit: instrument ranges, noise level, a break in the series.
 
-Every calibration of :func:`calstudy.estimators.handeye_poses.calibrate_handeye` ends with
+Every calibration of :func:`calstudy.handeye.calibrate.calibrate_handeye` ends with
 :func:`check_cell`, whatever the noise options: a fit can be exact on paper and still wrong
 because the input was misread (rotations transposed, quaternions in another order, a unit
 mix, rows shifted against each other, a target knocked halfway through). Three checks, each
@@ -16,7 +16,7 @@ cheap (linear in the pose count):
    :data:`MIN_STEP` times the per-pose scatter (taken from successive differences, which a
    single step does not inflate); series of :data:`BREAK_MIN_POSES` poses or more.
 
-A failed check is diagnosed by :mod:`calstudy.estimators.handeye_diagnose` (only then).
+A failed check is diagnosed by :mod:`calstudy.handeye.diagnose` (only then).
 """
 
 from __future__ import annotations
@@ -25,9 +25,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye_refine import log_so3, pose_scale
-from calstudy.estimators.handeye_robust import outlier_limit, robust_sigmas
+from calstudy.handeye.refine import pose_scale
+from calstudy.handeye.robust import outlier_limit, robust_sigmas
 
 #: false-alarm probability of the time-order break test over the whole series
 BREAK_ALPHA = 1e-4
@@ -165,7 +166,7 @@ def series_break(a, b, x, scale_mm: float, weights=None) -> tuple[int, float, fl
     if n < BREAK_MIN_POSES:
         return -1, 0.0, 0.0, 0.0
     zs = a[idx] @ x @ b[idx]
-    rot = log_so3(np.einsum("ji,njk->nik", zs[0, :3, :3], zs[:, :3, :3])) * scale_mm
+    rot = geo.so3_log(np.einsum("ji,njk->nik", zs[0, :3, :3], zs[:, :3, :3])) * scale_mm
     v = np.concatenate([zs[:, :3, 3], rot], 1)
     d2 = np.sum(np.diff(v, axis=0) ** 2, 1)
     # successive differences: 2 s^2 chi2(6) each; their median is not moved by one step

@@ -8,14 +8,18 @@ The schema is in the README ("Your own measurements: hand-eye CSV schema").
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from calstudy.core import geometry as geo
-from calstudy.core import schema
-from calstudy.core.config import check_ids
 from calstudy.core.errors import CalibrationError
+from calstudy.core.userfile import (
+    ANGLE_UNITS,
+    LENGTH_UNITS,
+    check_ids,
+    parse_number,
+    read_csv_table,
+)
 
 #: largest orientation spread (rad) accepted among moves that should be pure translations
 
@@ -42,12 +46,40 @@ class SphereMeasurements:
     centres: np.ndarray
 
     def select(self, group: str) -> tuple[np.ndarray, np.ndarray]:
-        """Flange poses and centres of one group."""
+        """Flange poses and centres of one group.
+
+        Parameters
+        ----------
+        group : {"translation", "rotation"}
+            The group of rows.
+
+        Returns
+        -------
+        flange2base : numpy.ndarray, shape (n, 4, 4)
+            The group's flange poses, mm.
+        centres : numpy.ndarray, shape (n, 3)
+            The group's measured centres in the sensor frame, mm.
+
+        Raises
+        ------
+        None
+        """
         mask = self.group == group
         return self.flange2base[mask], self.centres[mask]
 
     def to_frame(self):
-        """The measurements as a DataFrame in the CSV schema (KUKA A, B, C angles in degrees)."""
+        """The measurements as a DataFrame in the CSV schema.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Columns ``id, group, x, y, z`` (mm), ``a, b, c`` (KUKA angles, deg),
+            ``sx, sy, sz`` (mm).
+
+        Raises
+        ------
+        None
+        """
         import pandas as pd
 
         abc = geo.matrix_to_euler_zyx(self.flange2base[:, :3, :3])
@@ -69,27 +101,13 @@ class SphereMeasurements:
         )
 
 
-#: the unit suffixes a column name may declare, and the factor to mm or degrees
-_LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
-_ANGLE_UNITS = {"deg": 1.0, "rad": 180.0 / np.pi}
+#: the angle unit suffixes a column name may declare, in degrees per unit (the schema's unit;
+#: lengths are in mm, :data:`calstudy.core.userfile.LENGTH_UNITS`)
+_DEGREES_PER = {unit: rad / ANGLE_UNITS["deg"] for unit, rad in ANGLE_UNITS.items()}
 #: positions whose largest magnitude is below this (mm) are suspected to be metres when the
 #: other group of lengths reaches :data:`_MM_TYPICAL`
 _METRE_SUSPECT = 10.0
 _MM_TYPICAL = 100.0
-
-
-class _SphereRow(schema.Schema):
-    id: float
-    group: Literal["translation", "rotation"]
-    x: schema.Finite
-    y: schema.Finite
-    z: schema.Finite
-    a: schema.Finite
-    b: schema.Finite
-    c: schema.Finite
-    sx: schema.Finite
-    sy: schema.Finite
-    sz: schema.Finite
 
 
 def _sphere_columns(path, header: list[str]) -> tuple[dict[str, str], dict[str, float]]:
@@ -98,7 +116,7 @@ def _sphere_columns(path, header: list[str]) -> tuple[dict[str, str], dict[str, 
     mapping, factors = {}, {}
     groups = {"xyz": ("x", "y", "z"), "abc": ("a", "b", "c"), "sxyz": ("sx", "sy", "sz")}
     for group, cols in groups.items():
-        units = _ANGLE_UNITS if group == "abc" else _LENGTH_UNITS
+        units = _DEGREES_PER if group == "abc" else LENGTH_UNITS
         found = set()
         for col in cols:
             names = [col] + [f"{col}_{u}" for u in units]
@@ -158,6 +176,27 @@ def _check_units(path, values: np.ndarray, factors: dict[str, float]) -> None:
             )
 
 
+def _cells(path, header: list[str], rows, mapping: dict[str, str]):
+    """The numeric columns ``(N, 10)`` (id, x, y, z, a, b, c, sx, sy, sz as written) and the
+    groups ``(N,)``; the first bad cell, row by row in schema order, is named."""
+    index = {col: header.index(mapping[col]) for col in SPHERE_CSV_COLUMNS}
+    numeric = [c for c in SPHERE_CSV_COLUMNS if c != "group"]
+    values = np.empty((len(rows), len(numeric)))
+    for i, (line, cells) in enumerate(rows):
+        for col in SPHERE_CSV_COLUMNS:
+            text = cells[index[col]]
+            if col == "group":
+                if text not in SPHERE_CSV_GROUPS:
+                    raise CalibrationError(
+                        f"{path}: row {line}, column 'group': {text!r} is not one of "
+                        f"{' or '.join(repr(g) for g in SPHERE_CSV_GROUPS)}"
+                    )
+            else:
+                values[i, numeric.index(col)] = parse_number(path, line, col, text)
+    groups = np.array([cells[index["group"]] for _, cells in rows])
+    return values, groups
+
+
 def read_sphere_measurements(path) -> SphereMeasurements:
     """Read a user's fixed-sphere measurements from CSV (schema in the README).
 
@@ -176,6 +215,17 @@ def read_sphere_measurements(path) -> SphereMeasurements:
     all below 10 while the other lengths reach 100 or more look like metres (both refused with
     the suspicion stated).
 
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The CSV file.
+
+    Returns
+    -------
+    SphereMeasurements
+        Ids, groups, flange poses (N, 4, 4) in mm and the measured centres (N, 3) in mm, units
+        converted.
+
     Raises
     ------
     FileNotFoundError
@@ -183,15 +233,11 @@ def read_sphere_measurements(path) -> SphereMeasurements:
     CalibrationError
         On any of the checks above.
     """
-    header, rows = schema.read_csv_table(path, "fixed-sphere measurement file")
+    header, rows = read_csv_table(path, "fixed-sphere measurement file")
     if not rows:
         raise CalibrationError(f"{path}: no measurement rows")
     mapping, factors = _sphere_columns(path, header)
-    renamed = [next((k for k, v in mapping.items() if v == h), "") for h in header]
-    records = schema.validate_rows(_SphereRow, renamed, rows, path)
-    numeric = [c for c in SPHERE_CSV_COLUMNS if c != "group"]
-    values = np.array([[getattr(r, c) for c in numeric] for r in records], dtype=float)
-    groups = np.array([r.group for r in records])
+    values, groups = _cells(path, header, rows, mapping)
     absent = [g for g in ("translation", "rotation") if not np.any(groups == g)]
     if absent:
         raise CalibrationError(
@@ -213,5 +259,22 @@ def read_sphere_measurements(path) -> SphereMeasurements:
 
 
 def write_sphere_measurements(measurements: SphereMeasurements, path) -> None:
-    """Write measurements in the CSV schema of :func:`read_sphere_measurements` (full precision)."""
+    """Write measurements in the CSV schema of :func:`read_sphere_measurements` (full precision).
+
+    Parameters
+    ----------
+    measurements : SphereMeasurements
+        The measurements (mm, flange angles in deg).
+    path : str or pathlib.Path
+        The file to write.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written.
+    """
     measurements.to_frame().to_csv(path, index=False, float_format="%.10f")

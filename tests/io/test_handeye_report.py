@@ -6,13 +6,22 @@ from __future__ import annotations
 import numpy as np
 
 from calstudy.core.montecarlo import run, trial_rows
-from calstudy.estimators import handeye_cell as hc
+from calstudy.io import handeye_report as hc
 
 
 def test_predicted_tool_point_accuracy_matches_recalibrations():
     exp = hc.tool_point_experiment(n_trials=60, tool_point_mm=[0.0, 0.0, 500.0], seed=6)
     trials = run(exp, 6, n_jobs=1, progress=False)
-    fit = hc.calibrate_cell(6, "", "eye_in_hand", 20, 3, (68.0, 1.8), {}, "cauchy")["robust"]
+    fit = hc.calibrate_cell(
+        seed=6,
+        poses_csv="",
+        setup="eye_in_hand",
+        n_poses=20,
+        n_duplicates=3,
+        outlier=(68.0, 1.8),
+        sigmas={},
+        robust="cauchy",
+    ).robust
     table = hc.tool_point_summary(fit, [0.0, 0.0, 500.0], trials).set_index("kind")
     predicted, simulated = table.loc["predicted", "rms_mm"], table.loc["simulated", "rms_mm"]
     # 60 draws estimate an RMS to about 1/sqrt(2 * 60 / 3) = 16 %: a 40 % band cannot be met by

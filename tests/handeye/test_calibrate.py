@@ -8,7 +8,7 @@ from support import handeye_cell as _cell
 
 from calstudy import CalibrationError
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye_poses as hp
+from calstudy.handeye import calibrate as hp
 
 
 def _errors(x, truth):
@@ -23,11 +23,11 @@ def _errors(x, truth):
 def test_noise_free_recovery(solver):
     cell = _cell(1, noise=False)
     res = solver(cell.flange2base, cell.target2camera)
-    rot, trans = _errors(res.x, cell.camera2flange)
+    rot, trans = _errors(res.camera2flange, cell.camera2flange)
     assert rot < 1e-8 and trans < 1e-8
-    rot, trans = _errors(res.z, cell.target2base)
+    rot, trans = _errors(res.target2base, cell.target2base)
     assert rot < 1e-8 and trans < 1e-8
-    assert res.x_name == "camera2flange" and res.z_name == "target2base"
+    assert res.setup == "eye_in_hand" and res.camera2base is None and res.target2flange is None
     assert res.method.endswith("+ ML") and res.flagged == []
 
 
@@ -38,9 +38,10 @@ def test_noise_free_eye_to_hand():
     res = hp.calibrate_handeye(
         geo.invert(cell.flange2base), cell.target2camera, setup="eye_to_hand"
     )
-    assert res.x_name == "camera2base" and res.z_name == "target2flange"
-    assert max(_errors(res.x, cell.camera2flange)) < 1e-8
-    assert max(_errors(res.z, cell.target2base)) < 1e-8
+    assert res.camera2flange is None and res.target2base is None
+    assert max(_errors(res.camera2base, cell.camera2flange)) < 1e-8
+    assert max(_errors(res.target2flange, cell.target2base)) < 1e-8
+    assert res.camera2mount is res.camera2base and res.target2mount is res.target2flange
 
 
 def test_reprojection_refinement_noise_free():
@@ -60,7 +61,7 @@ def test_reprojection_refinement_noise_free():
         pixel_sigma=0.1,
     )
     assert "reprojection" in res.method
-    assert max(_errors(res.x, cell.camera2flange)) < 1e-8
+    assert max(_errors(res.camera2flange, cell.camera2flange)) < 1e-8
 
 
 # ----------------------------------------------------------------------------------------------
@@ -77,7 +78,7 @@ def test_ml_beats_the_best_closed_form():
         res = hp.calibrate_handeye(
             cell.flange2base, cell.target2camera, sigma_rot=SIGMA_ROT, sigma_trans=SIGMA_TRANS
         )
-        ml.append(_errors(res.x, cell.camera2flange))
+        ml.append(_errors(res.camera2flange, cell.camera2flange))
         cf.append([_errors(c.x, cell.camera2flange) for c in res.closed_forms])
     ml_med = np.median(np.array(ml), axis=0)
     cf_med = np.median(np.array(cf), axis=0).min(axis=0)
@@ -111,7 +112,7 @@ def test_planted_outlier_is_flagged_and_robust_options_resist_it():
     assert plain.flagged == [120]
     assert plain.outlier_score[-1] > 100 * np.median(plain.outlier_score)
     clean = _errors(
-        hp.calibrate_handeye(cell.flange2base[:-1], cell.target2camera[:-1]).x,
+        hp.calibrate_handeye(cell.flange2base[:-1], cell.target2camera[:-1]).camera2flange,
         cell.camera2flange,
     )
     for robust in ("huber", "cauchy", "ransac"):
@@ -124,9 +125,9 @@ def test_planted_outlier_is_flagged_and_robust_options_resist_it():
         )
         assert res.flagged == [120], robust
         assert res.weights[-1] < 0.05, robust
-        rot, trans = _errors(res.x, cell.camera2flange)
+        rot, trans = _errors(res.camera2flange, cell.camera2flange)
         assert trans < 2 * clean[1] + 0.05, robust
-    assert _errors(plain.x, cell.camera2flange)[1] > 2 * clean[1]
+    assert _errors(plain.camera2flange, cell.camera2flange)[1] > 2 * clean[1]
     with pytest.raises(CalibrationError, match="pass rng"):
         hp.calibrate_handeye(cell.flange2base, cell.target2camera, robust="ransac")
 

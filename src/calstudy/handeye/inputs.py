@@ -3,7 +3,7 @@
 Storage conventions, units and near-orthonormal rotations (:func:`prepare_poses`) and the spread
 of the robot motions (:func:`motion_conditioning`, on a linear number of pose pairs). Whether the
 declared conventions and units fit is judged after the fit
-(:mod:`~calstudy.estimators.handeye_checks`).
+(:mod:`~calstudy.handeye.checks`).
 """
 
 from __future__ import annotations
@@ -15,10 +15,8 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye_refine import (
-    log_so3,
-    spread_subset,
-)
+from calstudy.core.userfile import LENGTH_UNITS
+from calstudy.handeye.refine import spread_subset
 
 #: largest ``max |R^T R - I|`` re-projected to SO(3) silently: rotation entries rounded to 4
 #: decimals are off by up to about 1.7e-4, single-precision ones by 1e-7
@@ -27,8 +25,6 @@ ORTHO_TOL = 1e-3
 MIN_ROTATION = np.deg2rad(2.0)
 #: smallest ratio of the 2nd to the 1st singular value of the relative rotation vectors
 MIN_AXIS_SPREAD = 0.05
-#: translation units accepted, in mm
-UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 #: storage forms of the robot poses (the first two are what the study uses)
 ROBOT_CONVENTIONS = {
     "gripper2base": False,
@@ -102,9 +98,11 @@ def parse_convention(convention: str | Sequence[str] | None) -> tuple[str, str]:
 
 def unit_factor(which: str, unit: str) -> float:
     """Millimetres per ``unit``; CalibrationError naming ``which`` side for an unknown unit."""
-    if unit not in UNITS_MM:
-        raise CalibrationError(f"unknown {which} unit {unit!r}; use one of {', '.join(UNITS_MM)}")
-    return UNITS_MM[unit]
+    if unit not in LENGTH_UNITS:
+        raise CalibrationError(
+            f"unknown {which} unit {unit!r}; use one of {', '.join(LENGTH_UNITS)}"
+        )
+    return LENGTH_UNITS[unit]
 
 
 def _reorthonormalise(name: str, poses: np.ndarray, ids: np.ndarray, tol: float):
@@ -317,7 +315,7 @@ def motion_conditioning(a: np.ndarray) -> Conditioning:
     si, sj = np.triu_indices(len(sub), 1)
     i, j = np.concatenate([i, sub[si]]), np.concatenate([j, sub[sj]])
     rel = np.einsum("nji,njk->nik", a[i, :3, :3], a[j, :3, :3])
-    rv = log_so3(rel)
+    rv = geo.so3_log(rel)
     ang = np.linalg.norm(rv, axis=1)
     if ang.max() < MIN_ROTATION:
         raise CalibrationError(

@@ -5,7 +5,7 @@ Given nominal ``X`` (camera2flange, e.g. from the bracket drawing) and ``Z`` (ta
 each candidate flange pose ``A_i`` predicts the target pose the camera will see,
 ``B_i = inv(X) inv(A_i) Z``, and with the camera's noise (and the robot's rotation error) the
 information ``J_i^T J_i`` that pose adds to the maximum-likelihood fit of
-:func:`calstudy.estimators.handeye_refine.refine_ml` (the same whitened Jacobian). Poses are added
+:func:`calstudy.handeye.refine.refine_ml` (the same whitened Jacobian). Poses are added
 greedily, each time the one that most reduces the predicted variance of the tool point mapped by
 ``X`` (an A-optimal design for that point); the plan reports the predicted RMS error there, which
 the Cramer-Rao bound of the chosen poses gives. ``benchmarks/bench_handeye_plan.py`` checks the
@@ -20,7 +20,7 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.handeye_refine import whitened_at
+from calstudy.handeye.refine import whitened_at
 
 #: a small prior information (per parameter, in whitened units) that keeps the greedy start
 #: defined before the chosen poses determine all 12 parameters
@@ -49,7 +49,7 @@ class PosePlan:
 
 def point_jacobian(x: np.ndarray, point_camera: np.ndarray) -> np.ndarray:
     """``(3, 12)`` derivative of ``X @ p`` by ``[theta_X, t_X, theta_Z, t_Z]`` (the public
-    coordinates of :class:`~calstudy.estimators.handeye_poses.HandEyeResult`)."""
+    coordinates of :class:`~calstudy.handeye.calibrate.HandEyeResult`)."""
     jac = np.zeros((3, 12))
     jac[:, 0:3] = -x[:3, :3] @ geo.skew(point_camera)
     jac[:, 3:6] = np.eye(3)

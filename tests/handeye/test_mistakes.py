@@ -10,11 +10,11 @@ import pytest
 from support import handeye_cell as _cell
 
 from calstudy import CalibrationError, CalibrationWarning
+from calstudy import handeye as he
 from calstudy.core import geometry as geo
-from calstudy.estimators import handeye as he
-from calstudy.estimators import handeye_poses as hp
-from calstudy.estimators.handeye_checks import CellLimits
-from calstudy.estimators.posefile import read_pose_list, write_pose_list
+from calstudy.handeye import calibrate as hp
+from calstudy.handeye.checks import CellLimits
+from calstudy.handeye.posefile import read_pose_list, write_pose_list
 
 N = 20
 
@@ -183,7 +183,7 @@ def test_rotations_rounded_to_4_decimals_are_reprojected():
     cell = _cell(43, n=N, round_rotations=4)
     res = hp.calibrate_handeye(cell.flange2base, cell.target2camera)
     assert 1e-6 < res.prepared.max_correction < 1e-4
-    assert np.rad2deg(geo.rotation_error(res.x, cell.camera2flange)) < 0.1
+    assert np.rad2deg(geo.rotation_error(res.camera2flange, cell.camera2flange)) < 0.1
 
 
 def test_opencv_logs_nothing_on_stderr(capfd):
