@@ -4,6 +4,7 @@ then estimated, with Satterthwaite's degrees of freedom)."""
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -11,7 +12,8 @@ import pytest
 from scipy.stats import binom, chi2, norm
 
 from calstudy import CalibrationError
-from calstudy.papers.selfcal.experiments import interval_coverage
+from calstudy.core.errors import CalibrationWarning
+from calstudy.papers.selfcal.experiments import _probe_rows, interval_coverage
 from calstudy.papers.selfcal.measured import identify_cell
 from calstudy.papers.selfcal.simulate import draw_station, simulate
 
@@ -81,3 +83,19 @@ def test_estimated_noise_widens_the_intervals_and_the_region(cell):
             fit.half_widths(level)
         with pytest.raises(CalibrationError, match=f"level = {level}: a probability"):
             fit.region_limit(level)
+
+
+def test_one_point_probe_without_declared_noise_has_one_variance(cell, scenario):
+    """Every pose its own tracker reading: nothing is shared, one variance is estimated and the
+    intervals are Student's t with n - p degrees of freedom (exact for a linear model)."""
+    station, meas = cell
+    probe = _probe_rows(scenario, station, meas, np.random.default_rng(1))
+    bare = replace(probe, cov=None, tracker_cov=None, C_true=None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", CalibrationWarning)
+        fit = identify_cell(bare, station.nominal_params)
+    n, p = 3 * len(bare), fit.n_identified
+    assert p == 27
+    np.testing.assert_allclose(fit.dof[fit.free], n - p, rtol=1e-9)
+    assert fit.region_dof == pytest.approx(n - p, rel=1e-9)
+    assert np.isnan(fit.dof[~fit.free]).all() and np.isnan(fit.half_widths()[~fit.free]).all()

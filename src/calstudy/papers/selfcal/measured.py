@@ -783,8 +783,11 @@ def identify_cell(
     first fit do not push good measurements over the threshold; at the end a measurement set
     aside whose residual is within the threshold at the final fit is taken back (one refit).
     With ``noise`` the fit is maximum likelihood and the covariance follows from the declared
-    noise; without, least squares and the covariance from the residuals, with the tracker error
-    shared by the views of one sphere (:func:`shared_error_covariance`).
+    noise (normal intervals, chi-square region); without, least squares and the covariance from
+    the residuals, with the tracker error shared by the views of one sphere
+    (:func:`shared_error_covariance`, REML), and intervals and region from Student's t and F with
+    the degrees of freedom of those two estimated variances (:attr:`CellFit.dof`,
+    :meth:`CellFit.half_widths`, :meth:`CellFit.region_limit`).
 
     Parameters
     ----------
