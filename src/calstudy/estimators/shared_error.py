@@ -60,7 +60,7 @@ class SharedErrorFit:
         return np.tensordot(self.variances, self.parts, axes=1)
 
     def _satterthwaite(self, directions: np.ndarray) -> np.ndarray:
-        g = np.einsum("ki,cij,kj->kc", directions, self.parts, directions)  # (k, 2)
+        g = np.stack([np.sum((directions @ part) * directions, axis=1) for part in self.parts], 1)
         var = g @ self.variances
         spread = np.einsum("kc,cd,kd->k", g, self.variances_covariance, g)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -118,7 +118,9 @@ def _profile(ratio: float, w2: np.ndarray, g: np.ndarray) -> tuple[float, float]
 def _best_ratio(w2: np.ndarray, g: np.ndarray) -> float:
     """The variance ratio of largest restricted likelihood: a log grid (and 0), then Brent."""
     grid = np.concatenate([[0.0], np.logspace(*RATIO_LOG10_RANGE, _GRID)])
-    values = [_profile(t, w2, g)[0] for t in grid]
+    scale = 1.0 + grid[:, None] * g  # (grid, n - p)
+    own = np.sum(w2 / scale, axis=1) / len(w2)
+    values = np.sum(np.log(scale), axis=1) + len(w2) * np.log(own)
     k = int(np.argmin(values))
     if k == 0:
         return 0.0
@@ -129,7 +131,7 @@ def _best_ratio(w2: np.ndarray, g: np.ndarray) -> float:
         lambda u: _profile(math.exp(u), w2, g)[0],
         bounds=(lo, hi),
         method="bounded",
-        options={"xatol": 1e-10},
+        options={"xatol": 1e-9},
     )
     return math.exp(res.x) if res.fun < values[k] else float(grid[k])
 
