@@ -45,7 +45,6 @@ def probe(scenario):
     return interval_coverage(scenario, N_CELLS, probe=True)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("noise", NOISES)
 def test_one_point_probe_covers_95_percent(probe, noise):
     inside, region = probe[noise]
