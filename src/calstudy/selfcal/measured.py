@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError, CalibrationWarning
@@ -58,6 +59,7 @@ from calstudy.core.userfile import (
     parse_number,
     read_csv_table,
 )
+from calstudy.estimators.shared_error import SharedErrorFit, shared_error_fit
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import load_robot
 from calstudy.models.urdf import robot_from_urdf
@@ -586,6 +588,13 @@ class CellFit:
     notes : list of str
         What the fit fixed and why, and any rank warning (also issued as a
         :class:`~calstudy.core.errors.CalibrationWarning`).
+    dof : (30,) degrees of freedom of each identified parameter's variance: inf with declared
+        noise (normal intervals), else Satterthwaite's (Student's t intervals: the two variances
+        come from the residuals); NaN for the fixed parameters.
+    region_dof : float
+        Denominator degrees of freedom of the joint region of the identified parameters: inf
+        with declared noise (chi-square), else that of the F approximation of Fai and Cornelius
+        (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.region_dof`).
     """
 
     fit: Identification
@@ -598,6 +607,8 @@ class CellFit:
     free: np.ndarray
     identifiability: pd.DataFrame
     notes: list[str]
+    dof: np.ndarray
+    region_dof: float
 
     @property
     def params(self) -> np.ndarray:
@@ -611,6 +622,42 @@ class CellFit:
     def n_identified(self) -> int:
         """Parameters identified (the rank of the kept poses at the fit)."""
         return int(self.free.sum())
+
+    def half_widths(self, level: float = 0.95) -> np.ndarray:
+        """Half-widths (30,) of the ``level`` intervals of the parameters, mm and rad: the standard
+        deviation times the normal quantile (declared noise) or Student's t with :attr:`dof`;
+        NaN for the fixed parameters."""
+        _check_level(level)
+        std = np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+        with np.errstate(invalid="ignore"):
+            quantile = np.where(
+                np.isinf(self.dof),
+                stats.norm.ppf(0.5 + level / 2),
+                stats.t.ppf(0.5 + level / 2, self.dof),
+            )
+        return np.where(self.free, quantile * std, np.nan)
+
+    def region_limit(self, level: float = 0.95) -> float:
+        """The bound of ``d^T C^-1 d`` (``d`` the identified parameters' error, ``C`` their
+        covariance) of the joint ``level`` region: the chi-square quantile with as many degrees of
+        freedom as parameters identified (declared noise), else ``p F(p, region_dof)``."""
+        _check_level(level)
+        p = self.n_identified
+        if math.isinf(self.region_dof):
+            return float(stats.chi2.ppf(level, p))
+        return float(p * stats.f.ppf(level, p, self.region_dof))
+
+    def in_region(self, params, level: float = 0.95) -> bool:
+        """Whether ``params`` (30,) lie within the joint ``level`` region of the identified
+        parameters (angles compared modulo a turn; the fixed parameters are not compared)."""
+        d = angle_wrap(np.asarray(params, float) - self.params)[self.free]
+        c = self.covariance[np.ix_(self.free, self.free)]
+        return bool(d @ np.linalg.solve(c, d) <= self.region_limit(level))
+
+
+def _check_level(level: float) -> None:
+    if not 0.0 < level < 1.0:
+        raise CalibrationError(f"level = {level}: a probability strictly between 0 and 1")
 
 
 def subset(meas: Measurements, keep) -> Measurements:
@@ -770,8 +817,11 @@ def identify_measurements(
     first fit do not push good measurements over the threshold; at the end a measurement set
     aside whose residual is within the threshold at the final fit is taken back (one refit).
     With ``noise`` the fit is maximum likelihood and the covariance follows from the declared
-    noise; without, least squares and the covariance from the residuals, with the tracker error
-    shared by the views of one sphere (:func:`shared_error_covariance`).
+    noise (normal intervals, chi-square region); without, least squares and the covariance from
+    the residuals, with the tracker error shared by the views of one sphere
+    (:func:`shared_error_covariance`, REML), and intervals and region from Student's t and F with
+    the degrees of freedom of those two estimated variances (:attr:`CellFit.dof`,
+    :meth:`CellFit.half_widths`, :meth:`CellFit.region_limit`).
 
     Parameters
     ----------
@@ -893,26 +943,41 @@ def identify_measurements(
     if weighted:
         cov[np.ix_(free, free)] = fit.estimate.covariance
         basis = DECLARED
+        dof, region_dof = np.where(free, math.inf, np.nan), math.inf
     else:
         r = e[keep].ravel()  # the residuals of the kept rows at the fit
-        cov[np.ix_(free, free)] = shared_error_covariance(jac[:, free], r, kept.sphere)
+        shared = shared_error_covariance(jac[:, free], r, kept.sphere)
+        cov[np.ix_(free, free)] = shared.covariance
+        dof = np.full(N_PARAMS, np.nan)
+        dof[free] = shared.dof()
+        region_dof = shared.region_dof()
         basis = RESIDUAL
     return CellFit(
-        fit, cov, basis, sigma, residuals, float(s[0] / s[-1]), rounds, free, table, notes
+        fit,
+        cov,
+        basis,
+        sigma,
+        residuals,
+        float(s[0] / s[-1]),
+        rounds,
+        free,
+        table,
+        notes,
+        dof,
+        region_dof,
     )
 
 
-def shared_error_covariance(jac: np.ndarray, residuals: np.ndarray, sphere) -> np.ndarray:
+def shared_error_covariance(jac: np.ndarray, residuals: np.ndarray, sphere) -> SharedErrorFit:
     """Covariance of least-squares parameters when each view has its own error and all views of
     a sphere share the error of its one tracker reading, both variances estimated from the
     residuals.
 
-    The residual covariance is modelled as ``s_e^2 I + s_t^2 S`` (``S`` joins the three axes of
-    two views of the same sphere); with ``M = I - J (J^T J)^-1 J^T`` the expected values of
-    ``r^T r`` and ``r^T S r`` are linear in the two variances (``tr(M V)`` and ``tr(M S M V)``),
-    which the observed values solve (method of moments; ``s_t^2`` clipped at 0). The
-    covariance is then the sandwich ``(J^T J)^-1 J^T V J (J^T J)^-1``: unlike ``s^2 (J^T J)^-1``
-    it does not treat the views of one sphere as independent.
+    The residual covariance is modelled as ``s_e^2 I + s_t^2 S`` (``S`` joins the same axis of two
+    views of the same sphere); :func:`calstudy.estimators.shared_error.shared_error_fit` estimates
+    the two variances by REML and gives the sandwich ``(J^T J)^-1 J^T V J (J^T J)^-1``: unlike
+    ``s^2 (J^T J)^-1`` it does not treat the views of one sphere as independent. With a few
+    spheres the shared variance is uncertain; the fit's degrees of freedom say how much.
 
     Parameters
     ----------
@@ -922,25 +987,19 @@ def shared_error_covariance(jac: np.ndarray, residuals: np.ndarray, sphere) -> n
 
     Returns
     -------
-    (p, p) covariance, mm and rad.
+    SharedErrorFit
+        ``covariance`` (p, p) in mm and rad, the two variances (mm^2) and the degrees of freedom
+        of intervals (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.dof`) and of the
+        joint region (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.region_dof`).
+
+    Raises
+    ------
+    CalibrationError
+        No residual degrees of freedom (``3 m <= p``), shapes that disagree.
     """
-    jac = np.asarray(jac, float)
-    r = np.asarray(residuals, float)
     sphere = np.asarray(sphere)
-    n, p = jac.shape
-    same = np.kron((sphere[:, None] == sphere[None, :]).astype(float), np.eye(3))
-    q, _ = np.linalg.qr(jac)
-    resid_maker = np.eye(n) - q @ q.T
-    ms = resid_maker @ same
-    msm = ms @ resid_maker
-    a = np.array([[np.trace(resid_maker), np.trace(ms)], [np.trace(msm), np.sum(msm * same)]])
-    b = np.array([r @ r, r @ same @ r])
-    var_e, var_t = np.linalg.solve(a, b)
-    if var_t <= 0 or var_e <= 0:
-        var_t, var_e = 0.0, float(r @ r) / (n - p)
-    v = var_e * np.eye(n) + var_t * same
-    info_inv = np.linalg.inv(jac.T @ jac)
-    return info_inv @ (jac.T @ v @ jac) @ info_inv
+    groups = (3 * sphere[:, None] + np.arange(3)).ravel()  # one tracker error per sphere and axis
+    return shared_error_fit(jac, residuals, groups)
 
 
 def _shifted_rms(a: np.ndarray, b: np.ndarray) -> float:
@@ -1007,9 +1066,10 @@ def check_sensor_columns(meas: Measurements, start, model: GlobalModel | None = 
 
 
 def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
-    """Per parameter: nominal, identified, change and standard deviation (mm or deg), with the
-    ``status`` of :attr:`CellFit.identifiability` and the ``combination`` a parameter fixed as not
-    identifiable enters; the standard deviation of a fixed parameter is NaN (not zero).
+    """Per parameter: nominal, identified, change, standard deviation and the half-width of the
+    95 % interval (mm or deg, :meth:`CellFit.half_widths`), with the ``status`` of
+    :attr:`CellFit.identifiability` and the ``combination`` a parameter fixed as not identifiable
+    enters; the standard deviation and half-width of a fixed parameter are NaN (not zero).
 
     Parameters
     ----------
@@ -1022,7 +1082,7 @@ def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
     -------
     pandas.DataFrame
         30 rows: ``name``, ``unit``, ``nominal``, ``identified``, ``change``, ``std``,
-        ``status``, ``combination``.
+        ``half_width_95``, ``status``, ``combination``.
 
     Raises
     ------
@@ -1044,6 +1104,7 @@ def parameter_report(cell_fit: CellFit, start) -> pd.DataFrame:
             "identified": p * conv,
             "change": angle_wrap(p - start) * conv,
             "std": std * conv,
+            "half_width_95": cell_fit.half_widths(0.95) * conv,
             "status": cell_fit.identifiability["status"].to_numpy(),
             "combination": cell_fit.identifiability["combination"].to_numpy(),
         }

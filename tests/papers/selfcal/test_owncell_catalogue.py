@@ -486,7 +486,7 @@ def test_shared_error_covariance_recovers_the_sandwich_of_the_true_variances():
     for _ in range(40):
         noise = rng.normal(0, 0.02, 3 * m) + rng.normal(0, 0.015, (k, 3))[sphere].ravel()
         r = noise - jac @ (info_inv @ jac.T @ noise)
-        estimates.append(measured.shared_error_covariance(jac, r, sphere))
+        estimates.append(measured.shared_error_covariance(jac, r, sphere).covariance)
     ratio = np.diag(np.mean(estimates, axis=0)) / np.diag(truth)
     assert np.all(np.abs(ratio - 1.0) < 0.3)
     # the views of one sphere are not independent: s^2 (J^T J)^-1 is far too small

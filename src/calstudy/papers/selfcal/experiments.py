@@ -14,6 +14,8 @@ rebuild it from ``experiments.json`` and recompute stored trials:
 - :func:`basin_experiment`: :func:`basin_trial`, convergence from starts farther and farther away.
 - :func:`pose_selection_experiment`: :func:`pose_selection_trial`, D-optimal against random
   measuring poses of the same number.
+- :func:`interval_coverage`: how often the intervals and the joint region of the own-cell
+  identification hold the truth, with the noise declared and without.
 
 :func:`simulated_cell` and :func:`write_example_measurements` give the simulated cell as measured
 data (the notebook's default and ``data/selfcal/example_measurements``).
@@ -26,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -33,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.core.config import read_toml, scenario_file
-from calstudy.core.errors import CalibrationError
+from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
 from calstudy.core.schema import with_inputs
 from calstudy.papers.selfcal.routes import (
@@ -50,6 +53,7 @@ from calstudy.papers.selfcal.simulate import (
     draw_station,
     poor_start,
     simulate,
+    tracker_sigma,
     view_geometry,
 )
 from calstudy.selfcal.design import (
@@ -66,7 +70,7 @@ from calstudy.selfcal.identify import (
     identify,
     scaled_jacobian,
 )
-from calstudy.selfcal.measured import MeasuredCell, write_cell
+from calstudy.selfcal.measured import MeasuredCell, identify_measurements, write_cell
 from calstudy.selfcal.model import (
     IS_LENGTH,
     N_PARAMS,
@@ -571,3 +575,82 @@ def write_example_measurements(folder, scenario: Scenario | None = None, seed: i
 def _robot_stem(scenario: Scenario) -> str:
     """Stem of the robot file the paper's scenario names (``robot`` of its TOML)."""
     return str(read_toml(scenario_file("selfcal", "scenario.toml"), "selfcal scenario")["robot"])
+
+
+def probe_rows(scenario: Scenario, st: Station, meas: Measurements, rng) -> Measurements:
+    """The views of ``meas`` read as a tracker reflector at the sensor origin: each pose's own
+    tracker reading of the reflector (repeatability and tracker noise, nothing shared), the
+    sensor-frame point zero."""
+    C = np.zeros_like(meas.C)
+    truth = default_model().points(st.true_params, meas.Q, C)
+    sigma_t = tracker_sigma(scenario, truth)
+    P_ref = (
+        truth
+        + rng.normal(0.0, scenario.repeatability.sigma_mm, truth.shape)
+        + rng.normal(size=truth.shape) * sigma_t[:, None]
+    )
+    own = (scenario.repeatability.sigma_mm**2 + sigma_t**2)[:, None, None] * np.eye(3)
+    shared = (sigma_t**2)[:, None, None] * np.eye(3)
+    return Measurements(meas.Q, C, P_ref, np.arange(len(meas)), C, own, shared)
+
+
+def interval_coverage(
+    scenario: Scenario, n_cells: int, seed: int = 2026, probe: bool = False, level: float = 0.95
+) -> dict:
+    """How often the intervals and the joint region of
+    :func:`calstudy.selfcal.measured.identify_measurements` hold the truth.
+
+    Each cell is drawn as in the calibration experiment with the joint compliance off (the
+    truth in the model class): a new station, its spheres measured from the scenario's views
+    (scanner caps, repeatability, one tracker reading per sphere shared by its views); with
+    ``probe`` the same poses read as a tracker reflector on the flange instead (one tracker
+    reading per pose, 27 parameters identifiable). Each cell is identified with its noise
+    declared (the simulated covariance as the weights) and without (covariance from the
+    residuals), from the nominal parameters, outlier rule on.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The paper's scenario or another; its compliance is switched off here.
+    n_cells : int
+        Cells drawn (cell ``i`` from the generator seeded ``[seed, i]``).
+    seed : int
+        First entry of every cell's seed.
+    probe : bool
+        A one-point probe instead of the spheres.
+    level : float
+        Level of the intervals and the region.
+
+    Returns
+    -------
+    dict
+        ``"declared noise"`` and ``"no noise declared"``, each ``(inside, in_region)``:
+        ``inside`` (n_cells, 30) 1.0 where the truth lies within the parameter's interval, 0.0
+        outside, NaN for a parameter not identified; ``in_region`` (n_cells,) bool.
+    """
+    scenario = with_inputs(scenario, {"compliance.scale": 0.0})
+    out = {"declared noise": ([], []), "no noise declared": ([], [])}
+    for i in range(int(n_cells)):
+        rng = np.random.default_rng([seed, i])
+        st = draw_station(scenario, rng)
+        meas = simulate(scenario, st, st.spheres_base, scenario.protocol.views_per_sphere, rng)
+        if probe:
+            meas = probe_rows(scenario, st, meas, child_rng(rng, "probe"))
+        bare = replace(meas, cov=None, tracker_cov=None, C_true=None, Q_true=None)
+        noise = {
+            "sensor_mm": 0.0,
+            "repeatability_mm": scenario.repeatability.sigma_mm,
+            "tracker_mm": 0.0,
+        }
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", CalibrationWarning)
+            fits = {
+                "declared noise": identify_measurements(meas, st.nominal_params, noise),
+                "no noise declared": identify_measurements(bare, st.nominal_params),
+            }
+        for key, fit in fits.items():
+            d = np.abs(angle_wrap(fit.params - st.true_params))
+            inside = np.where(fit.free, (d <= fit.half_widths(level)).astype(float), np.nan)
+            out[key][0].append(inside)
+            out[key][1].append(fit.in_region(st.true_params, level))
+    return {k: (np.array(inside), np.array(region)) for k, (inside, region) in out.items()}
