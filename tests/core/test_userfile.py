@@ -17,7 +17,7 @@ from calstudy.core import userfile
 from calstudy.core.paths import data_path
 from calstudy.handeye import read_pose_list, read_sphere_measurements, write_sphere_measurements
 from calstudy.papers.hybrid import compensation, simulate
-from calstudy.papers.selfcal import measured
+from calstudy.selfcal import measured
 
 
 def _pose_list(tmp_path):

@@ -190,5 +190,5 @@ def test_a_requirement_that_is_not_a_positive_length_is_refused(requirement):
 
 
 def test_a_missing_folder_is_named():
-    with pytest.raises(CalibrationError, match="no such file"):
+    with pytest.raises(FileNotFoundError, match="no_such_cell"):
         identify_cell(REPO_ROOT / "no_such_cell")
