@@ -165,14 +165,30 @@ def virtual_weights() -> np.ndarray:
 
 
 def distances_to_p7(points8) -> np.ndarray:
-    """Distances P1P7 ... P6P7 and P8P7 (Table 2's rows) of ``(..., 8, 3)`` points."""
+    """Distances P1P7 ... P6P7 and P8P7 (Table 2's rows) of ``(..., 8, 3)`` points (mm).
+
+    Raises
+    ------
+    CalibrationError
+        If the points are not ``(..., 8, 3)``, hold NaN or infinity, or lie so far apart (near
+        1e308 mm) that a distance overflows.
+    """
     p = geo.check_finite("calibrator targets", points8)
     if p.ndim < 2 or p.shape[-2:] != (8, 3):
         raise CalibrationError(
             f"need P1-P8 as (..., 8, 3) points; got {p.shape} (see with_virtual)"
         )
     rows = [0, 1, 2, 3, 4, 5, 7]
-    return np.linalg.norm(p[..., rows, :] - p[..., 6:7, :], axis=-1)
+    d = p[..., rows, :] - p[..., 6:7, :]
+    out = np.linalg.norm(d, axis=-1)
+    if not np.isfinite(out).all():  # squares past 1e308: np.hypot does not square
+        out = np.hypot(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
+        if not np.isfinite(out).all():
+            raise CalibrationError(
+                "calibrator targets: a distance to P7 overflows (largest |coordinate| "
+                f"{np.abs(p).max():.3g} mm)"
+            )
+    return out
 
 
 #: smallest singular value of Eq. 21's ``U``, relative to its largest, for which all six
