@@ -653,7 +653,7 @@ def test_misfit_is_flagged_by_default():
 #                      with_virtual, distances_to_p7, layout_problem, solve_calibrator_layout,
 #                      modify_observed_error(s), motion_axes, check_rotation_axes,
 #                      preliminary_handeye, correct_transformation .......... binocular_calibrator
-#   estimators.stereo_views make_view, triangulate .......................... stereo_triangulation
+#   estimators.stereo_views make_view; StereoRig.triangulate ................ stereo_triangulation
 #   estimators.sfm     pnp_pose ............................................. stereo_triangulation
 #                      image_graph, cluster_images .......................... bundle
 #   estimators.bundle  bundle_adjust, refine_camera_pose .................... bundle
@@ -893,7 +893,7 @@ def test_property_stereo_triangulation(data):
         _check(bino.triangulate, RIG, uv_l, uv_r, 1e9)
         _check(bino.triangulate_sets, RIG, uv_l[None], uv_r[None], 1e9)
         _check(bino.ray_gap, uv_l * 1e-3, uv_r * 1e-3, RIG.rotation, RIG.translation)
-        _check(sv.triangulate, RIG, uv_l, uv_r)
+        _check(RIG.triangulate, uv_l, uv_r)
         _check(sv.make_view, np.arange(len(ul)), uv_l, uv_r)
         _check(sfm.pnp_pose, p, uv_l, RIG.left)
     _check(bino.ray_gap, p, q, RIG.rotation, RIG.translation)  # wrong shapes

@@ -44,6 +44,7 @@ from calstudy.estimators import handeye_sim as hsim
 from calstudy.models import exposure, optics, reach, sensors, targets, urdf
 from calstudy.models.robots import load_robot
 from calstudy.models.sensors import PinholeCamera
+from calstudy.models.stereo import stereo_rig
 
 _HOME = tempfile.mkdtemp(prefix="calstudy-hypothesis-")
 set_hypothesis_home_dir(_HOME)
@@ -961,3 +962,49 @@ def test_urdf_refusals_name_the_file_and_fault(tmp_path):
     with pytest.raises(CalibrationError, match=r"arm.urdf: not a readable URDF"):  # urdfdom's reason goes to stderr
         urdf.robot_from_urdf(tmp_path / "arm.urdf")
 
+
+# ----------------------------------------------------------------------------------------------
+# the one stereo triangulation (models.stereo.StereoRig.triangulate) against OpenCV
+
+DISTORTED = dataclasses.replace(IDEAL, dist=(-0.08, 0.01, 1e-4, -2e-4, 0.0))
+
+
+@PROFILE
+@given(_arrays((8, 3), st.floats(-1.0, 1.0)), _arrays((2, 8, 2), st.floats(-0.5, 0.5)), st.floats(100.0, 400.0), st.floats(600.0, 1200.0), st.sampled_from([IDEAL, DISTORTED]))
+def test_rig_triangulation_is_opencvs(xyz, noise, baseline, convergence, camera):
+    """Triangulated points are OpenCV's: cv2.undistortPoints of each image, then
+    cv2.triangulatePoints with [I | 0] and [R | t], to 1e-9 mm for an ideal rig and 1e-4 mm
+    with distortion (cv2.undistortPoints iterates less than the rig's undistortPointsIter);
+    for an ideal rig also cv2.triangulatePoints on the pixel projection matrices K [R | t],
+    to 1e-6 mm; noise-free points come back to 1e-6 mm; binocular.triangulate gives the
+    same numbers."""
+    rig = stereo_rig(camera, baseline, convergence)
+    p = xyz * [100.0, 100.0, 100.0] + [0.0, 0.0, convergence]
+    ul, ur = rig.project(p)
+    ul, ur = ul + noise[0], ur + noise[1]
+    got = rig.triangulate(ul, ur)
+    assert _finite(got)
+    xl = cv2.undistortPoints(ul.reshape(-1, 1, 2), camera.K, camera.dist_coeffs).reshape(-1, 2)
+    xr = cv2.undistortPoints(ur.reshape(-1, 1, 2), camera.K, camera.dist_coeffs).reshape(-1, 2)
+    h = cv2.triangulatePoints(np.eye(4)[:3], rig.left2right[:3], xl.T.copy(), xr.T.copy())
+    np.testing.assert_allclose(got, (h[:3] / h[3]).T, atol=1e-4 if camera.distorted else 1e-9)
+    if not camera.distorted:
+        h = cv2.triangulatePoints(camera.K @ np.eye(4)[:3], camera.K @ rig.left2right[:3], ul.T.copy(), ur.T.copy())
+        np.testing.assert_allclose(got, (h[:3] / h[3]).T, atol=1e-6)
+    np.testing.assert_allclose(rig.triangulate(*rig.project(p)), p, atol=1e-6)
+    np.testing.assert_array_equal(bino.triangulate(rig, ul, ur, tol_mm=10.0), got)
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda r: r.triangulate([[640.0, math.nan]], [[600.0, 512.0]]), r"uv_left holds a non-finite value \(nan\) at index \(0, 1\)"),
+        (lambda r: r.triangulate([[640.0, 512.0]], [[600.0, 512.0], [1.0, 2.0]]), r"uv_right has shape \(2, 2\); expected \(1, 2\)"),
+        # the right ray along R e_z, the left ray e_z: parallel, a point at infinity
+        (lambda r: r.triangulate_normalised(np.zeros((1, 2)), r.left2right[None, :2, 2] / r.left2right[2, 2]), r"point 0 cannot be triangulated: its two rays are parallel \(homogeneous scale 0\)"),
+    ],
+)
+def test_triangulation_refusals_name_the_input_and_number(call, message):
+    rig = stereo_rig(IDEAL, 300.0, 850.0)
+    with pytest.raises(CalibrationError, match=message):
+        call(rig)

@@ -5,8 +5,8 @@ The geometric half of the `binocular` paper (Sections 2 and 3.2); the imaging ha
 :mod:`calstudy.models.optics` (the circle-of-confusion model) and :mod:`calstudy.estimators.coc`
 (rectification, ellipse centres), the sensor :class:`calstudy.models.stereo.StereoRig`.
 
-- :func:`triangulate`: Eq. 1 by ``cv2.undistortPointsIter`` and ``cv2.triangulatePoints`` with a
-  check that the two rays meet.
+- :func:`triangulate`: Eq. 1 by the rig's triangulation (``cv2.undistortPointsIter`` and
+  ``cv2.triangulatePoints``) with a check that the two rays meet.
 - :func:`solve_calibrator_layout`: a 3D layout of targets P1-P6 and the virtual P7, P8 consistent
   with the standard distances of Table 2.
 - :func:`modify_observed_error`: the distance-constraint adjustment of Eq. 23-25 (least norm).
@@ -22,7 +22,6 @@ from __future__ import annotations
 import itertools
 import math
 
-import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -46,9 +45,10 @@ def triangulate(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.nd
     """Sensor-frame points ``(N, 3)`` from matched image points (Eq. 1), undistorted first.
 
     Both cameras' points are undistorted to normalised coordinates
-    (:meth:`calstudy.models.stereo.StereoRig.normalise`), then ``cv2.triangulatePoints`` (linear,
-    on normalised coordinates) with the rig's ``left2right``. The distance between the two
-    back-projected rays at their closest approach is checked against ``tol_mm``.
+    (:meth:`calstudy.models.stereo.StereoRig.normalise`) and triangulated by the rig
+    (:meth:`~calstudy.models.stereo.StereoRig.triangulate_normalised`, ``cv2.triangulatePoints``
+    with its ``left2right``). The distance between the two back-projected rays at their
+    closest approach is checked against ``tol_mm``.
 
     Parameters
     ----------
@@ -87,12 +87,8 @@ def triangulate_sets(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> 
         raise CalibrationError(f"left {a.shape} and right {b.shape} points must match, N >= 1")
     k, n = a.shape[:2]
     xl, xr = rig.normalise(a.reshape(-1, 2), "left"), rig.normalise(b.reshape(-1, 2), "right")
-    rotation, translation = rig.rotation, rig.translation
-    p1 = np.hstack([np.eye(3), np.zeros((3, 1))])
-    p2 = np.hstack([rotation, translation[:, None]])
-    hom = cv2.triangulatePoints(p1, p2, xl.T.copy(), xr.T.copy())
-    points = (hom[:3] / hom[3]).T.reshape(k, n, 3)
-    gap = ray_gap(xl, xr, rotation, translation).reshape(k, n)
+    gap = ray_gap(xl, xr, rig.rotation, rig.translation).reshape(k, n)
+    points = rig.triangulate_normalised(xl, xr).reshape(k, n, 3)
     missed = np.flatnonzero(gap.max(axis=1) > tol_mm)
     if missed.size:
         worst = int(np.argmax(gap[missed[0]]))
