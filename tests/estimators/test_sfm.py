@@ -20,15 +20,16 @@ CAMERA = PinholeCamera(fx=2000.0, fy=1990.0, cx=640.0, cy=512.0, width=1280, hei
 def test_triangulation_of_an_ideal_rig_is_exact():
     rig = stereo_rig(CAMERA, 200.0, 1000.0)
     p = np.array([[10.0, -20.0, 950.0], [-40.0, 30.0, 1100.0]])
-    np.testing.assert_allclose(stereo_views.triangulate(rig, *rig.project(p)), p, atol=1e-6)
+    np.testing.assert_allclose(rig.triangulate(*rig.project(p)), p, atol=1e-6)
 
 
 def test_a_rig_with_lens_distortion_is_refused():
     distorted = dataclasses.replace(CAMERA, dist=(-0.1, 0.0, 0.0, 0.0))
     rig = stereo_rig(distorted, 200.0, 1000.0)
     uv = np.array([[640.0, 512.0], [700.0, 500.0], [600.0, 540.0], [650.0, 600.0]])
+    view = stereo_views.make_view([0, 1, 2, 3], uv, uv + [-50.0, 0.0])
     with pytest.raises(CalibrationError, match="lens distortion"):
-        stereo_views.triangulate(rig, uv, uv)
+        sfm.reconstruct_cluster(rig, [view], 0, [0])
     with pytest.raises(CalibrationError, match="lens distortion"):
         sfm.pnp_pose(np.random.default_rng(0).normal(0, 50, (4, 3)) + [0, 0, 900], uv, distorted)
 

@@ -232,7 +232,9 @@ def covariance_from_jacobian(
         Residuals at the solution.
     sigma : float, optional
         Known standard deviation of the residuals (1.0 for whitened residuals). If omitted it is
-        estimated as ``sqrt(sum r^2 / (m - n))``.
+        estimated as ``sqrt(sum r^2 / (m - n))``; with no degrees of freedom (``m <= n``) it
+        cannot be, and the covariance is NaN (the one NaN this function returns for finite
+        input: the data say nothing about the noise).
 
     Returns
     -------

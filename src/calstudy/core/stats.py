@@ -128,12 +128,22 @@ def rmse(x, axis: int | None = None) -> float | np.ndarray:
     ------
     CalibrationError
         If ``x`` is empty or holds NaN or infinity.
+
+    Notes
+    -----
+    Values whose squares overflow (beyond about 1e154) are scaled by the largest magnitude
+    first, so every finite input gives a finite RMS; other inputs take the plain formula.
     """
     a = np.asarray(x, dtype=float)
     if a.size == 0:
         raise CalibrationError("rmse of an empty array (0 values)")
     finite_samples("rmse input", a)
-    out = np.sqrt(np.mean(np.square(a), axis=axis))
+    with np.errstate(over="ignore"):
+        out = np.sqrt(np.mean(np.square(a), axis=axis))
+    if not np.isfinite(out).all():  # squares past 1e308: the same in units of the largest value
+        scale = np.max(np.abs(a), axis=axis, keepdims=True)
+        scale = np.where(scale > 0.0, scale, 1.0)
+        out = np.sqrt(np.mean(np.square(a / scale), axis=axis)) * np.squeeze(scale, axis=axis)
     return float(out) if np.ndim(out) == 0 else out
 
 

@@ -5,8 +5,8 @@ The geometric half of the `binocular` paper (Sections 2 and 3.2); the imaging ha
 :mod:`calstudy.models.optics` (the circle-of-confusion model) and :mod:`calstudy.estimators.coc`
 (rectification, ellipse centres), the sensor :class:`calstudy.models.stereo.StereoRig`.
 
-- :func:`triangulate`: Eq. 1 by ``cv2.undistortPointsIter`` and ``cv2.triangulatePoints`` with a
-  check that the two rays meet.
+- :func:`triangulate`: Eq. 1 by the rig's triangulation (``cv2.undistortPointsIter`` and
+  ``cv2.triangulatePoints``) with a check that the two rays meet.
 - :func:`solve_calibrator_layout`: a 3D layout of targets P1-P6 and the virtual P7, P8 consistent
   with the standard distances of Table 2.
 - :func:`modify_observed_error`: the distance-constraint adjustment of Eq. 23-25 (least norm).
@@ -22,7 +22,6 @@ from __future__ import annotations
 import itertools
 import math
 
-import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -46,9 +45,10 @@ def triangulate(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.nd
     """Sensor-frame points ``(N, 3)`` from matched image points (Eq. 1), undistorted first.
 
     Both cameras' points are undistorted to normalised coordinates
-    (:meth:`calstudy.models.stereo.StereoRig.normalise`), then ``cv2.triangulatePoints`` (linear,
-    on normalised coordinates) with the rig's ``left2right``. The distance between the two
-    back-projected rays at their closest approach is checked against ``tol_mm``.
+    (:meth:`calstudy.models.stereo.StereoRig.normalise`) and triangulated by the rig
+    (:meth:`~calstudy.models.stereo.StereoRig.triangulate_normalised`, ``cv2.triangulatePoints``
+    with its ``left2right``). The distance between the two back-projected rays at their
+    closest approach is checked against ``tol_mm``.
 
     Parameters
     ----------
@@ -87,12 +87,8 @@ def triangulate_sets(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> 
         raise CalibrationError(f"left {a.shape} and right {b.shape} points must match, N >= 1")
     k, n = a.shape[:2]
     xl, xr = rig.normalise(a.reshape(-1, 2), "left"), rig.normalise(b.reshape(-1, 2), "right")
-    rotation, translation = rig.rotation, rig.translation
-    p1 = np.hstack([np.eye(3), np.zeros((3, 1))])
-    p2 = np.hstack([rotation, translation[:, None]])
-    hom = cv2.triangulatePoints(p1, p2, xl.T.copy(), xr.T.copy())
-    points = (hom[:3] / hom[3]).T.reshape(k, n, 3)
-    gap = ray_gap(xl, xr, rotation, translation).reshape(k, n)
+    gap = ray_gap(xl, xr, rig.rotation, rig.translation).reshape(k, n)
+    points = rig.triangulate_normalised(xl, xr).reshape(k, n, 3)
     missed = np.flatnonzero(gap.max(axis=1) > tol_mm)
     if missed.size:
         worst = int(np.argmax(gap[missed[0]]))
@@ -165,14 +161,30 @@ def virtual_weights() -> np.ndarray:
 
 
 def distances_to_p7(points8) -> np.ndarray:
-    """Distances P1P7 ... P6P7 and P8P7 (Table 2's rows) of ``(..., 8, 3)`` points."""
+    """Distances P1P7 ... P6P7 and P8P7 (Table 2's rows) of ``(..., 8, 3)`` points (mm).
+
+    Raises
+    ------
+    CalibrationError
+        If the points are not ``(..., 8, 3)``, hold NaN or infinity, or lie so far apart (near
+        1e308 mm) that a distance overflows.
+    """
     p = geo.check_finite("calibrator targets", points8)
     if p.ndim < 2 or p.shape[-2:] != (8, 3):
         raise CalibrationError(
             f"need P1-P8 as (..., 8, 3) points; got {p.shape} (see with_virtual)"
         )
     rows = [0, 1, 2, 3, 4, 5, 7]
-    return np.linalg.norm(p[..., rows, :] - p[..., 6:7, :], axis=-1)
+    d = p[..., rows, :] - p[..., 6:7, :]
+    out = np.linalg.norm(d, axis=-1)
+    if not np.isfinite(out).all():  # squares past 1e308: np.hypot does not square
+        out = np.hypot(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
+        if not np.isfinite(out).all():
+            raise CalibrationError(
+                "calibrator targets: a distance to P7 overflows (largest |coordinate| "
+                f"{np.abs(p).max():.3g} mm)"
+            )
+    return out
 
 
 #: smallest singular value of Eq. 21's ``U``, relative to its largest, for which all six

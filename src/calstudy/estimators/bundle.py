@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.estimators.stereo_views import View, triangulate
+from calstudy.estimators.stereo_views import View, check_ideal
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig
 
@@ -64,7 +64,8 @@ def _observations(rig: StereoRig, views: list[View]):
     marker_idx = np.concatenate([v.ids for v in views]).astype(int)
     uv_l = np.concatenate([v.uv_left for v in views])
     uv_r = np.concatenate([v.uv_right for v in views])
-    return view_idx, marker_idx, uv_l, uv_r, triangulate(rig, uv_l, uv_r)
+    check_ideal(rig.left, rig.right)
+    return view_idx, marker_idx, uv_l, uv_r, rig.triangulate(uv_l, uv_r)
 
 
 def _euclid_sigma(p_cam: np.ndarray, sigma_mm: float, depth_ref_mm: float | None) -> np.ndarray:

@@ -10,7 +10,7 @@ global frame follow from
    ``alpha`` markers with a centre (greedy minimum dominating set), each image joining the centre
    it shares most with;
 3. in each cluster, the markers triangulated in the centre image's frame (Eq. 7,
-   :func:`calstudy.estimators.stereo_views.triangulate`) and the other images located by PnP
+   :meth:`calstudy.models.stereo.StereoRig.triangulate`) and the other images located by PnP
    (checked against a rigid fit of their own triangulated markers);
 4. the incremental splice (Eq. 8): clusters joined to the growing reconstruction by a rigid fit
    on their common markers, the best-connected pair first;
@@ -39,7 +39,7 @@ from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.bundle import BundleResult, bundle_adjust
 from calstudy.estimators.fitting import fit_rigid
-from calstudy.estimators.stereo_views import View, check_ideal, triangulate
+from calstudy.estimators.stereo_views import View, check_ideal
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig
 
@@ -164,7 +164,7 @@ def _initial_pose(rig: StereoRig, obj: np.ndarray, uv_left, uv_right) -> np.ndar
     """
     candidates = [
         pnp_pose(obj, uv_left, rig.left),
-        fit_rigid(obj, triangulate(rig, uv_left, uv_right)),
+        fit_rigid(obj, rig.triangulate(uv_left, uv_right)),
     ]
 
     def cost(w2c):
@@ -177,9 +177,10 @@ def _initial_pose(rig: StereoRig, obj: np.ndarray, uv_left, uv_right) -> np.ndar
 def reconstruct_cluster(rig: StereoRig, views: list[View], centre: int, members) -> Cluster:
     """Markers of the centre image triangulated in its frame; the other members located by PnP
     (or the rigid fit of their triangulated markers, whichever reprojects better)."""
+    check_ideal(rig.left, rig.right)
     c = views[centre]
     cluster = Cluster(centre, {centre: np.eye(4)})
-    for i, p in zip(c.ids, triangulate(rig, c.uv_left, c.uv_right), strict=True):
+    for i, p in zip(c.ids, rig.triangulate(c.uv_left, c.uv_right), strict=True):
         cluster.points[int(i)] = p
     for j in members:
         if j == centre:
@@ -198,7 +199,7 @@ def reconstruct_cluster(rig: StereoRig, views: list[View], centre: int, members)
         v = views[j]
         new = [k for k, i in enumerate(v.ids) if int(i) not in cluster.points]
         if new:
-            local = triangulate(rig, v.uv_left[new], v.uv_right[new])
+            local = rig.triangulate(v.uv_left[new], v.uv_right[new])
             cam2w = geo.invert(cluster.world2cam[j])
             for k, p in zip(new, geo.apply(cam2w, local), strict=True):
                 extra.setdefault(int(v.ids[k]), []).append(p)

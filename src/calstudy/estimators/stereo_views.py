@@ -1,5 +1,5 @@
-"""Coded markers seen by a binocular sensor: the detections of one stereo image pair and their
-triangulation (Eq. 7 of the ``dualarm`` paper).
+"""Coded markers seen by a binocular sensor: the detections of one stereo image pair, which
+the rig triangulates (Eq. 7 of the ``dualarm`` paper, :meth:`StereoRig.triangulate`).
 
 The observations that :mod:`calstudy.estimators.bundle` (the adjustment, Eq. 9-10) and
 :mod:`calstudy.estimators.sfm` (image graph, clusters, splice, the whole reconstruction) share.
@@ -19,7 +19,6 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.models.sensors import PinholeCamera
-from calstudy.models.stereo import StereoRig
 
 
 @dataclass(frozen=True)
@@ -52,10 +51,6 @@ def make_view(ids, uv_left, uv_right) -> View:
     return View(i[order].astype(int), ul[order], ur[order])
 
 
-# ----------------------------------------------------------------------------------------------
-# triangulation (Eq. 7)
-
-
 def check_ideal(*cameras: PinholeCamera) -> None:
     """Raise if a camera has lens distortion, which these steps do not model."""
     for camera in cameras:
@@ -66,35 +61,4 @@ def check_ideal(*cameras: PinholeCamera) -> None:
             )
 
 
-def _projection_matrix(camera: PinholeCamera, world2cam: np.ndarray) -> np.ndarray:
-    check_ideal(camera)
-    return camera.K @ world2cam[:3, :]
-
-
-def triangulate(rig: StereoRig, uv_left, uv_right) -> np.ndarray:
-    """Points ``(N, 3)`` in the left camera frame from matched centres (Eq. 7, linear).
-
-    Each point solves the four linear equations ``(u m_3 - m_1) X = 0``, ``(v m_3 - m_2) X = 0``
-    of both cameras' projection matrices ``M`` in the least-squares sense.
-    """
-    ul = geo.check_shape("uv_left", uv_left, (None, 2))
-    ur = geo.check_shape("uv_right", uv_right, (ul.shape[0], 2))
-    rows = []
-    for m, uv in (
-        (_projection_matrix(rig.left, np.eye(4)), ul),
-        (_projection_matrix(rig.right, rig.left2right), ur),
-    ):
-        rows.append(uv[:, 0:1, None] * m[None, 2:3, :] - m[None, 0:1, :])
-        rows.append(uv[:, 1:2, None] * m[None, 2:3, :] - m[None, 1:2, :])
-    a = np.concatenate(rows, axis=1)  # (N, 4, 4)
-    lhs, rhs = a[:, :, :3], -a[:, :, 3]
-    ata = np.einsum("nki,nkj->nij", lhs, lhs)
-    atb = np.einsum("nki,nk->ni", lhs, rhs)
-    cond = np.linalg.cond(ata) if len(ata) else np.zeros(0)
-    if np.any(cond > 1e14):
-        i = int(np.argmax(cond))
-        raise CalibrationError(f"point {i} cannot be triangulated (condition number {cond[i]:.3g})")
-    return np.linalg.solve(ata, atb[..., None])[..., 0]
-
-
-__all__ = ["View", "check_ideal", "make_view", "triangulate"]
+__all__ = ["View", "check_ideal", "make_view"]

@@ -220,6 +220,8 @@ def check_cell(a, b, x, res, weights, limits: CellLimits, slack: float = 1.0) ->
     """
     cam, rob, fails = range_failures(a, b, limits)
     scale = pose_scale(b)
+    if weights is None:
+        raise CalibrationError("check_cell needs the per-pose weights (an (N,) array); got None")
     keep = np.asarray(weights) > 0
     s_rot, s_trans, ratio = noise_ratio(res[keep], scale, limits)
     if ratio > slack:

@@ -132,7 +132,9 @@ def plan_poses(
     if not 3 <= n_poses <= m:
         raise CalibrationError(f"n_poses must be between 3 and the {m} candidates; got {n_poses}")
     if not (sigma_rot > 0 and sigma_trans > 0):
-        raise CalibrationError("sigma_rot and sigma_trans must be positive")
+        raise CalibrationError(
+            f"sigma_rot = {sigma_rot} and sigma_trans = {sigma_trans}: both must be positive"
+        )
     x = np.asarray(camera2flange, dtype=float)
     z = np.asarray(target2base, dtype=float)
     pj = point_jacobian(x, geo.check_shape("tool point", tool_point_mm, (3,)))

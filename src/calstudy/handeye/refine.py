@@ -59,7 +59,11 @@ def target_in_world(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 def pose_residuals(a, b, x, z) -> np.ndarray:
     """Per-pose residuals ``(N, 6)``: ``[t_B - t_pred (mm, camera frame), log(R_pred^T R_B) (rad)]``
-    of the measured ``B_i`` against the prediction ``inv(X) inv(A_i) Z``."""
+    of the measured ``B_i`` against the prediction ``inv(X) inv(A_i) Z``; a CalibrationError
+    for a pose or transform that is not finite."""
+    for name, value in (("a", a), ("b", b), ("x", x), ("z", z)):
+        if not np.isfinite(value).all():
+            raise CalibrationError(f"pose_residuals: {name} holds a non-finite value (nan or inf)")
     pred = geo.invert(x) @ geo.invert(a) @ z
     rot = geo.so3_log(np.swapaxes(pred[:, :3, :3], 1, 2) @ b[:, :3, :3])
     return np.concatenate([b[:, :3, 3] - pred[:, :3, 3], rot], axis=1)

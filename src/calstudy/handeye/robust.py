@@ -60,8 +60,11 @@ def robust_sigmas(res: np.ndarray, alpha: float = 1e-3) -> tuple[float, float]:
     A median-based start (each part is ``sigma^2 chi2(3)`` for an inlier) marks the poses beyond
     the ``1 - alpha`` quantile; the RMS of the others, corrected for the 12 fitted parameters,
     is the estimate (reweighted least-median: efficient on clean data, robust to outliers).
+    A CalibrationError if ``res`` holds no pose.
     """
     n = res.shape[0]
+    if n == 0:
+        raise CalibrationError("robust_sigmas needs the residuals of at least 1 pose; got 0 poses")
     rr = np.sum(res[:, 3:] ** 2, 1)
     tt = np.sum(res[:, :3] ** 2, 1)
     keep = (n - 2.0) / n  # 12 parameters take 2 of the 6 N degrees of freedom per pose
@@ -124,12 +127,20 @@ robot_error_map`); the camera's noise moves them independently. So the covarianc
 
 def outlier_scores(res, sigma_rot, sigma_trans):
     """Whitened squared residual of each pose ``(N,)``: chi-square with 6 degrees of freedom for
-    an inlier."""
+    an inlier; a CalibrationError unless both sigmas are positive."""
+    if not (sigma_rot > 0 and sigma_trans > 0):
+        raise CalibrationError(
+            f"outlier_scores needs positive noise levels; got sigma_rot = {sigma_rot}, "
+            f"sigma_trans = {sigma_trans}"
+        )
     return np.sum(res[:, :3] ** 2, 1) / sigma_trans**2 + np.sum(res[:, 3:] ** 2, 1) / sigma_rot**2
 
 
 def robust_weights(score: np.ndarray, loss: str, c: float = 2.0) -> np.ndarray:
-    """Iteratively reweighted least-squares weights of the ``"huber"`` or ``"cauchy"`` loss."""
+    """Iteratively reweighted least-squares weights of the ``"huber"`` or ``"cauchy"`` loss (a
+    CalibrationError naming any other)."""
+    if loss not in ("huber", "cauchy"):
+        raise CalibrationError(f"robust loss {loss!r}: use 'huber' or 'cauchy'")
     u = np.sqrt(score / 6.0)
     if loss == "huber":
         return np.where(u <= c, 1.0, c / np.maximum(u, 1e-300))

@@ -341,7 +341,8 @@ class Robot:
         ------
         CalibrationError
             If the error has not fallen below ``tol`` after ``max_iter`` iterations, or the solution
-            is outside the joint limits.
+            is outside the joint limits, or ``flange2base`` lies so far away (beyond about
+            1e154 mm) that the error's square overflows.
         """
         target = check_transform("flange2base", flange2base)
         if target.shape != (4, 4):
@@ -351,6 +352,11 @@ class Robot:
         desired = _se3(target)
         err = self._ik_error(q, desired)
         cost = float(err @ err)
+        if not math.isfinite(cost):  # |error| past 1e154: no step of the search is a number
+            raise CalibrationError(
+                f"flange2base: translation {target[:3, 3].tolist()} mm lies too far from the "
+                "flange at q0 for any robot (the squared IK error overflows past 1e308)"
+            )
         damping, iterations = 1e-6, 0
         eye = np.eye(self.nq)
         while math.sqrt(cost) > tol and iterations < max_iter:

@@ -224,11 +224,19 @@ def render_rois(k, dist, centres, normals, radius_mm: float, origins, shapes) ->
     Returns
     -------
     list of ``m`` float32 arrays ``(rows, cols)``
+
+    Raises
+    ------
+    CalibrationError
+        If the camera matrix, the distortion, a centre, a normal or an origin is not finite, a
+        focal length or the radius is not > 0, a dot's centre is not in front of the camera
+        (z > 0), a normal is zero, a shape is not positive, or the counts differ.
     """
     c = np.asarray(centres, dtype=float).reshape(-1, 3)
     n = np.asarray(normals, dtype=float).reshape(-1, 3)
     shapes = [tuple(int(v) for v in sh) for sh in shapes]
     origins = np.asarray(origins).reshape(-1, 2)
+    _check_dots(k, dist, c, n, radius_mm, origins, shapes)
     boxes = _dot_boxes(k, c, radius_mm, shapes)
     cut = _render_boxes(k, dist, c, n, radius_mm, origins, shapes, boxes)
     out = []
@@ -248,6 +256,35 @@ def render_rois(k, dist, centres, normals, radius_mm: float, origins, shapes) ->
         for i, img in zip(redo, again, strict=True):
             out[i] = img
     return out
+
+
+def _check_dots(k, dist, c: np.ndarray, n: np.ndarray, radius_mm, origins, shapes) -> None:
+    """Refuse inputs of :func:`render_rois` outside their domain (once per call, vectorised)."""
+    k = np.asarray(k, dtype=float)
+    if k.shape != (3, 3) or not np.isfinite(k).all() or not (k[0, 0] > 0 and k[1, 1] > 0):
+        raise CalibrationError(f"camera matrix must be a finite (3, 3) with fx, fy > 0; got {k}")
+    if not np.isfinite(np.asarray(dist, dtype=float)).all():
+        raise CalibrationError(f"distortion coefficients must be finite; got {dist}")
+    if not (math.isfinite(radius_mm) and radius_mm > 0):
+        raise CalibrationError(f"dot radius {radius_mm} mm must be finite and > 0")
+    if not (len(c) == len(n) == len(origins) == len(shapes)):
+        raise CalibrationError(
+            f"{len(c)} centres, {len(n)} normals, {len(origins)} origins and {len(shapes)} "
+            "shapes: one of each per dot"
+        )
+    for name, a in (("dot centres", c), ("dot normals", n), ("ROI origins", origins)):
+        bad = ~np.isfinite(np.asarray(a, dtype=float)).all(axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise CalibrationError(f"{name}: row {i} is not finite ({a[i].tolist()})")
+    if len(c) and not (c[:, 2] > 0).all():
+        i = int(np.argmin(c[:, 2]))
+        raise CalibrationError(f"dot {i} is not in front of the camera: z = {c[i, 2]:.4g} mm")
+    if len(n) and not (np.abs(n).max(axis=1) > 0).all():
+        raise CalibrationError(f"dot normal {int(np.argmin(np.abs(n).max(axis=1)))} is zero")
+    small = [sh for sh in shapes if min(sh) < 1]
+    if small:
+        raise CalibrationError(f"ROI shape {small[0]} must have at least one row and column")
 
 
 def _dot_boxes(k, centres, radius_mm: float, shapes) -> list:

@@ -55,6 +55,7 @@ import weakref
 
 import numpy as np
 
+from calstudy.core.errors import CalibrationError
 from calstudy.models.kinematics import IK_TOL, Robot
 
 #: the margin beyond the rounding and the solver tolerance (mm)
@@ -106,12 +107,43 @@ class ReachBound:
 
     def excess(self, flange2base) -> float:
         """How far (mm) the wrist point of ``flange2base`` lies beyond the arm's reach: > 0 for
-        a pose that no joint angles reach, <= 0 for every pose :meth:`Robot.fk` gives."""
+        a pose that no joint angles reach, <= 0 for every pose :meth:`Robot.fk` gives.
+
+        Parameters
+        ----------
+        flange2base : array_like, shape (4, 4)
+            Flange pose, mm. Not checked for rigidity (callers check their poses once).
+
+        Returns
+        -------
+        float
+            The excess, mm; finite for every finite pose whose wrist point lies within about
+            1e308 mm of the shoulder circle (``-inf`` for an arm of one joint, which reaches
+            everywhere by this bound).
+
+        Raises
+        ------
+        CalibrationError
+            If the pose holds NaN or infinity, or its wrist point is too far away for a float.
+        """
         pose = np.asarray(flange2base, dtype=float)
         d = pose[:3, :3] @ self.wrist + pose[:3, 3] - self.centre
         h = float(d @ self.axis)
-        rho = math.sqrt(max(float(d @ d) - h * h, 0.0))
-        return math.hypot(rho - self.radius, h) - self.reach
+        dd = float(d @ d)
+        if math.isfinite(dd):
+            rho = math.sqrt(max(dd - h * h, 0.0))
+        else:  # past 1e154 mm the squares overflow: the same in units of the largest |d_i|
+            scale = float(np.abs(d).max())
+            u = d / scale
+            hu = float(u @ self.axis)
+            rho = scale * math.sqrt(max(float(u @ u) - hu * hu, 0.0))
+        out = math.hypot(rho - self.radius, h) - self.reach
+        if not out < math.inf:  # NaN or +inf (-inf is a one-joint arm's: never refused)
+            raise CalibrationError(
+                f"flange2base: translation {pose[:3, 3].tolist()} mm has no finite distance to "
+                "the arm (NaN, infinity or beyond 1e308 mm)"
+            )
+        return out
 
     def margin_mm(self, tol: float = IK_TOL) -> float:
         """The excess above which ``Robot.ik(..., tol=tol)`` fails from every start (mm)."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import cv2
 import numpy as np
 
 from calstudy.core import geometry as geo
@@ -111,6 +112,66 @@ class StereoRig:
         """Undistorted normalised coordinates ``(N, 2)`` of image points ``(N, 2)`` of the
         ``side`` (``"left"`` or ``"right"``) camera."""
         return self.camera(side).normalise(uv)
+
+    def triangulate(self, uv_left, uv_right) -> np.ndarray:
+        """Points in the left camera frame from matched image points: both undistorted to
+        normalised coordinates (:meth:`normalise`), then :meth:`triangulate_normalised`.
+
+        Parameters
+        ----------
+        uv_left, uv_right : array_like, shape (N, 2)
+            Matched image points of the left and the right camera, px.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, 3)
+            The points in the left camera frame, mm.
+
+        Raises
+        ------
+        CalibrationError
+            If the arrays are not ``(N, 2)`` of one ``N``, hold NaN or infinity, or a pair of
+            rays is parallel (see :meth:`triangulate_normalised`).
+        """
+        ul = geo.check_shape("uv_left", uv_left, (None, 2))
+        ur = geo.check_shape("uv_right", uv_right, (ul.shape[0], 2))
+        return self.triangulate_normalised(self.normalise(ul, "left"), self.normalise(ur, "right"))
+
+    def triangulate_normalised(self, x_left, x_right) -> np.ndarray:
+        """Points in the left camera frame from matched normalised coordinates, by
+        ``cv2.triangulatePoints`` (the linear, homogeneous solution) with the projection
+        matrices ``[I | 0]`` and ``[R | t]`` of ``left2right``.
+
+        Parameters
+        ----------
+        x_left, x_right : numpy.ndarray, shape (N, 2)
+            Undistorted normalised coordinates (``x / z``, ``y / z``) of both cameras, finite
+            (as :meth:`normalise` returns them).
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, 3)
+            The points in the left camera frame, mm.
+
+        Raises
+        ------
+        CalibrationError
+            If a pair of rays is parallel (a point at infinity: its homogeneous scale is 0) or
+            meets beyond the range of floats.
+        """
+        p1 = np.hstack([np.eye(3), np.zeros((3, 1))])
+        p2 = np.hstack([self.rotation, self.translation[:, None]])
+        hom = cv2.triangulatePoints(p1, p2, x_left.T.copy(), x_right.T.copy())
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            points = (hom[:3] / hom[3]).T
+        bad = ~np.isfinite(points).all(axis=1)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise CalibrationError(
+                f"point {i} cannot be triangulated: its two rays are parallel (homogeneous "
+                f"scale {hom[3, i]:.3g})"
+            )
+        return points
 
     def perturbed(self, sigmas: dict, rng: np.random.Generator) -> StereoRig:
         """A rig whose parameters differ from this one by normal calibration errors.
