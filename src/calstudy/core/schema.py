@@ -36,7 +36,7 @@ import io
 import math
 import re
 import tomllib
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any, TypeVar, get_args
 
@@ -337,6 +337,41 @@ def load_toml(path: str | Path, model: type[M], what: str) -> M:
     return validate(model, read_toml(path, what), path, study=is_study_file(path))
 
 
+def apply_overrides(table: dict, overrides: Mapping[str, object] | None) -> dict:
+    """A copy of the parsed TOML ``table`` with some inputs set by their dotted keys.
+
+    The copy is validated like the file (by the caller), so a value outside its ledger range
+    is refused there as in the file itself.
+
+    Parameters
+    ----------
+    table : dict
+        A parsed scenario file (not changed).
+    overrides : mapping of str to object, or None
+        Dotted key (``"detection.sigma_px"``) to its new value; None or empty for none.
+
+    Returns
+    -------
+    dict
+        A new table.
+
+    Raises
+    ------
+    CalibrationError
+        If a dotted key names no input of ``table`` (the message names the key).
+    """
+    out = copy.deepcopy(table)
+    for key, value in (overrides or {}).items():
+        *path, name = str(key).split(".")
+        node = out
+        for part in path:
+            node = node.get(part) if isinstance(node, dict) else None
+        if not isinstance(node, dict) or name not in node or isinstance(node[name], dict):
+            raise CalibrationError(f"override {key!r}: the scenario has no input of that name")
+        node[name] = copy.deepcopy(value)
+    return out
+
+
 # ----------------------------------------------------------------------------------------------
 # CSV files
 
@@ -458,6 +493,7 @@ def validate_rows(
 
 
 __all__ = [
+    "apply_overrides",
     "Degrees",
     "Documented",
     "Finite",

@@ -41,10 +41,12 @@ from calstudy.io.claims_cells import (
     typeset,
 )
 from calstudy.io.results import atomic_write, read_claims
+from calstudy.io.robustness_grid import grid_figure, read_maps
 
 __all__ = [
     "COLUMNS",
     "FIGURE_NAME",
+    "GRID_NAME",
     "HEADLINE_NAME",
     "REGISTER_COPY",
     "RESULTS_COPY",
@@ -87,6 +89,8 @@ NOTEBOOK_DIR = REPO_ROOT / "notebooks"
 
 #: Files written beside the page: the figure and copies of the two tables it is made from.
 FIGURE_NAME = "claims-verdicts.png"
+#: the robustness grid (:mod:`calstudy.io.robustness_grid`)
+GRID_NAME = "claims-robustness.png"
 REGISTER_COPY = "claims-register.csv"
 RESULTS_COPY = "claims-results.csv"
 
@@ -761,6 +765,23 @@ def render_claims_page(
             "published figure, the bound, or 1 for no effect) with its 95 % interval; "
             "marker and colour give the verdict, the shaded band is what the rule accepts for "
             "the median (a bound asks the 95th percentile to meet it too).",
+            "```",
+            "",
+        ]
+    maps = read_maps(res_path.parent)
+    if len(maps):
+        grid, grid_alt = grid_figure(maps, book_dir / GRID_NAME, VERDICT_COLOURS)
+        lines += [
+            f"```{{figure}} {grid.name}",
+            ":name: fig-claims-robustness",
+            f":alt: {grid_alt}",
+            ":width: 100%",
+            "",
+            "Robustness of the verdicts: each claim with a map against the inputs it was "
+            "screened on (assumed inputs over their plausible range, calibrated ones over their "
+            "calibration's uncertainty); a cell shows the verdicts the claim takes over that "
+            "input's range, in stripes when it takes more than one. Blank: the claim's "
+            "computation does not read the input.",
             "```",
             "",
         ]

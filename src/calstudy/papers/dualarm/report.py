@@ -61,13 +61,35 @@ def calibrated_value(pilot: pd.DataFrame, x: str, y: str, target: float) -> floa
             f"target {target:g} of {y} outside the swept range {ys[0]:.4g}-{ys[-1]:.4g}; widen {x}"
         )
     value = float(np.interp(target, ys, xs))
+    return round_to_uncertainty(value, _uncertainty(xs, ys, sems.to_numpy(float), target))
+
+
+def _uncertainty(xs: np.ndarray, ys: np.ndarray, sems: np.ndarray, target: float) -> float:
+    """The standard uncertainty of a value read off a rising curve at ``target``."""
     i = min(int(np.searchsorted(ys, target, side="right")), len(ys) - 1)
     i = max(i, 1)
     slope = (ys[i] - ys[i - 1]) / (xs[i] - xs[i - 1])
-    sem = np.nanmax(sems.to_numpy(float)[i - 1 : i + 1])
+    sem = np.nanmax(sems[i - 1 : i + 1])
     if not np.isfinite(sem) or sem <= 0:  # one trial per point: no spread to round to
         sem = abs(ys[i] - ys[i - 1])
-    return round_to_uncertainty(value, float(sem / slope))
+    return float(sem / slope)
+
+
+def calibration_uncertainty(pilot: pd.DataFrame, x: str, y: str, target: float) -> float:
+    """The standard uncertainty of :func:`calibrated_value` (the larger standard error of the
+    mean of the two bracketing points over the slope between them), in the unit of ``x``: what
+    a robustness map carries into the calibrated input's range.
+
+    Raises
+    ------
+    ValueError
+        As :func:`calibrated_value`.
+    """
+    calibrated_value(pilot, x, y, target)  # the same checks
+    groups = pilot.groupby(x)[y]
+    means = groups.mean().sort_index()
+    sems = groups.sem().reindex(means.index).to_numpy(float)
+    return _uncertainty(means.index.to_numpy(float), means.to_numpy(float), sems, target)
 
 
 def calibration_table(pilot: pd.DataFrame, x: str, y: str, target: float) -> pd.DataFrame:
@@ -275,20 +297,50 @@ def claim_samples(trials: pd.DataFrame) -> dict[str, np.ndarray]:
     """Per-trial figures of the three claims and their controls, in trial order:
     ``icp_before/after/oracle`` (mean over the 4 arm-sphere pairs of the mean over views), and the
     mean Euclidean sphere-centre error of Tables 1-2 per method (``coded``, ``plate``, ``none``
-    (no calibration), ``true`` (true calibration))."""
-    per = icp_per_trial(part(trials, "icp")).groupby("trial")
-    icp = per[["before_mm", "after_mm", "oracle_mm"]].mean().sort_index()
-    g = part(trials, "global").groupby(["method", "trial"])["euclid_mm"].mean().unstack(0)
-    g = g.sort_index()
-    return {
-        "icp_before": icp["before_mm"].to_numpy(),
-        "icp_after": icp["after_mm"].to_numpy(),
-        "icp_oracle": icp["oracle_mm"].to_numpy(),
-        "coded": g["coded markers"].to_numpy(),
-        "plate": g["circular plate"].to_numpy(),
-        "none": g["no calibration"].to_numpy(),
-        "true": g["true calibration"].to_numpy(),
-    }
+    (no calibration), ``true`` (true calibration)). Trials without the ICP part, or without the
+    Tables 1-2 part, give only the figures of the other."""
+    out = {}
+    if (trials["part"] == "icp").any():
+        per = icp_per_trial(part(trials, "icp")).groupby("trial")
+        icp = per[["before_mm", "after_mm", "oracle_mm"]].mean().sort_index()
+        out.update(
+            icp_before=icp["before_mm"].to_numpy(),
+            icp_after=icp["after_mm"].to_numpy(),
+            icp_oracle=icp["oracle_mm"].to_numpy(),
+        )
+    if (trials["part"] == "global").any():
+        g = part(trials, "global").groupby(["method", "trial"])["euclid_mm"].mean().unstack(0)
+        g = g.sort_index()
+        out.update(
+            coded=g["coded markers"].to_numpy(),
+            plate=g["circular plate"].to_numpy(),
+            none=g["no calibration"].to_numpy(),
+            true=g["true calibration"].to_numpy(),
+        )
+    return out
+
+
+#: the claims of the notebook and the figures of :func:`claim_samples` each is judged on
+CLAIM_FIGURES = {
+    "dualarm.icp": ("icp_after", "icp_before", "icp_oracle"),
+    "dualarm.global": ("coded", "none", "true"),
+    "dualarm.vs_circular": ("coded", "plate", "true"),
+}
+
+
+def claim_statistics(trials: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Each claim's figure per trial, as its verdict judges it: the after / before ICP ratio
+    (``dualarm.icp``), the coded markers' mean sphere-centre error in mm (``dualarm.global``)
+    and the coded / plate ratio (``dualarm.vs_circular``); only the claims whose figures the
+    trials hold."""
+    x = claim_samples(trials)
+    stats = {}
+    if "icp_after" in x:
+        stats["dualarm.icp"] = x["icp_after"] / x["icp_before"]
+    if "coded" in x:
+        stats["dualarm.global"] = x["coded"]
+        stats["dualarm.vs_circular"] = x["coded"] / x["plate"]
+    return stats
 
 
 def published_figures(published: Published) -> dict[str, float]:
@@ -306,32 +358,29 @@ def published_figures(published: Published) -> dict[str, float]:
     }
 
 
-def dualarm_verdicts(trials: pd.DataFrame, published: Published) -> dict:
+def dualarm_verdicts(trials: pd.DataFrame, published: Published, ids=None) -> dict:
     """The three claims by the v2 rule with their null and oracle controls, on the same trials:
-    claim id -> (claim verdict after the oracle gate, null control, oracle control)."""
+    claim id -> (claim verdict after the oracle gate, null control, oracle control). ``ids``:
+    only these claims (default: those whose figures the trials hold, :data:`CLAIM_FIGURES`)."""
     x = claim_samples(trials)
     f = published_figures(published)
+    if ids is None:
+        ids = [cid for cid, need in CLAIM_FIGURES.items() if set(need) <= set(x)]
     ratio = dict(kind="ratio", direction="lower")
-    icp = judge_controls(
-        x["icp_after"],
-        x["icp_before"],
-        x["icp_oracle"],
-        published=f["icp_ratio"],
-        baseline=x["icp_before"],
-        **ratio,
-    )
     value = dict(kind="value", direction="lower", null=f["global_reference"])
-    glob = judge_controls(x["coded"], x["none"], x["true"], published=f["global"], **value)
-    vs = judge_controls(
-        x["coded"], x["plate"], x["true"], published=f["vs_ratio"], baseline=x["plate"], **ratio
-    )
+    rules = {
+        "dualarm.icp": dict(published=f["icp_ratio"], baseline=x.get("icp_before"), **ratio),
+        "dualarm.global": dict(published=f["global"], **value),
+        "dualarm.vs_circular": dict(published=f["vs_ratio"], baseline=x.get("plate"), **ratio),
+    }
     mech = {
         "dualarm.icp": "pose errors between the views of a multi-view scan (drift)",
         "dualarm.global": "calibration error of the hand-eye and base-to-base transforms",
         "dualarm.vs_circular": "calibration error of the two routes",
     }
     out = {}
-    for cid, (claim, null, oracle) in zip(mech, (icp, glob, vs), strict=True):
+    for cid in ids:
+        claim, null, oracle = judge_controls(*(x[k] for k in CLAIM_FIGURES[cid]), **rules[cid])
         out[cid] = (oracle_gate(claim, oracle, mech[cid]), null, oracle)
     return out
 

@@ -15,6 +15,7 @@ Millimetres and radians (the files hold degrees where a key says so).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +23,14 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.config import require, scenario_file
-from calstudy.core.schema import check_toml
+from calstudy.core.schema import (
+    apply_overrides,
+    check_toml,
+    is_study_file,
+    read_toml,
+    validate,
+    without_provenance,
+)
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig, stereo_rig
 from calstudy.papers.dualarm.schema import PublishedFile, ScenarioFile
@@ -227,8 +235,18 @@ _SCALARS = {
 }
 
 
-def load_scenario(path: str | Path | None = None) -> Scenario:
+def load_scenario(
+    path: str | Path | None = None, overrides: Mapping[str, object] | None = None
+) -> Scenario:
     """Read the station from ``data/dualarm/scenario.toml`` (or ``path``).
+
+    Parameters
+    ----------
+    path : path-like, optional
+        A scenario file of one's own (same keys).
+    overrides : mapping of str to object, optional
+        Inputs set by their dotted keys (``{"detection.sigma_px": 0.05}``) before the file is
+        validated, so that a value outside the input's ledger range is refused.
 
     Raises
     ------
@@ -238,10 +256,15 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
         If it is not valid TOML or breaks :class:`~calstudy.papers.dualarm.schema.ScenarioFile`:
         a missing or unknown key, a value out of range (``loss_rate = 1.5``, ``points_per_scan
         = -500``), markers without a group; the message names the file, the key, the value and
-        the allowed range.
+        the allowed range. An override naming no input is refused with its key.
     """
     src = scenario_file(PAPER, "scenario.toml", path)
-    d = check_toml(src, ScenarioFile, "dualarm scenario")
+    if overrides:
+        table = apply_overrides(read_toml(src, "dualarm scenario"), overrides)
+        validate(ScenarioFile, table, src, study=is_study_file(src))
+        d = without_provenance(table)
+    else:
+        d = check_toml(src, ScenarioFile, "dualarm scenario")
     scalars = {}
     for field, (key, degrees) in _SCALARS.items():
         value = require(d, key, src)
