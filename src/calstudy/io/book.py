@@ -32,6 +32,7 @@ from calstudy.core.labels import claim_label
 from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
 from calstudy.core.verdicts import BAND_PP, FACTOR
 from calstudy.io.claims_cells import (
+    VERDICT_COLOURS,
     Published,
     bound_value,
     is_ratio,
@@ -94,14 +95,7 @@ GRID_NAME = "claims-robustness.png"
 REGISTER_COPY = "claims-register.csv"
 RESULTS_COPY = "claims-results.csv"
 
-#: Badge and figure colour of each verdict (the CSS classes in book/_static/calstudy.css).
-VERDICT_COLOURS = {
-    "reproduced": "#1a7f37",
-    "direction only": "#b35900",
-    "not reproduced": "#c62828",
-    "not testable": "#57606a",
-    PENDING: "#8c959f",
-}
+
 
 _RULE = """\
 Each verdict is computed by the notebook from its Monte Carlo trials (rule v2 of the claims

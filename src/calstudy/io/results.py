@@ -620,6 +620,8 @@ def _with_robustness(df: pd.DataFrame, root: Path) -> pd.DataFrame:
     frames = [pd.read_csv(p, dtype=str, keep_default_na=False) for p in found]
     cols = ["id", *ROBUSTNESS_COLUMNS]
     maps = pd.concat(frames, ignore_index=True)[cols] if frames else pd.DataFrame(columns=cols)
+    if df.empty:
+        return df.assign(**{c: pd.Series(dtype=object) for c in ROBUSTNESS_COLUMNS})
     out = df.merge(maps, on="id", how="left")
     out["robustness"] = out["robustness"].fillna("not mapped")
     return out.fillna({"depends_on": "", "thresholds": ""})
