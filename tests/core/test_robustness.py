@@ -28,6 +28,8 @@ def toy_trial(scn: dict, rng: np.random.Generator) -> dict:
     CALLS["n"] += 1
     if CALLS["stop_at"] is not None and CALLS["n"] >= CALLS["stop_at"]:
         raise KeyboardInterrupt  # an interrupted run
+    if scn.get("fails_above") is not None and scn["x"] > scn["fails_above"]:
+        raise CalibrationError(f"x = {scn['x']} cannot run")
     noise = rng.normal(size=2)
     return {"flip": scn["x"] + 0.01 * noise[0], "flat": 1.0 + 0.01 * noise[1]}
 
@@ -145,3 +147,20 @@ def test_ledger_inputs_take_assumed_scalars_and_vector_components():
     count = next(i for i in inputs if i.label == "sensor.points_per_scan")
     assert count.integer and count.setting(250.4) == {"sensor.points_per_scan": 250}
     assert any(s.startswith("global_test.placement_offsets_mm") for s in skipped)
+
+
+def test_points_where_the_chain_fails_are_named_and_not_taken_as_verdicts():
+    def failing(group, setting, n_trials):
+        scenario = {"x": 0.3, "y": 0.5, "fails_above": 0.9, **setting}
+        return Experiment("toy", toy_trial, scenario, n_trials)
+
+    spec = MapSpec(SPEC.claims, INPUTS, failing, _statistics, _judge)
+    engine = {"n_jobs": 1, "progress": False}
+    table, _ = robustness_map(spec, 3, sweep_size=9, engine=engine)
+    failed = table[table["error"] != ""]
+    assert set(failed["input"]) == {"x"} and failed["value"].min() > 0.9
+    assert set(failed["verdict"]) == {"chain fails"}
+    summary = claim_summary(table, INPUTS).set_index("id")
+    assert summary.at["toy.flat", "verdicts"] == "reproduced"
+    assert "the simulated chain cannot run at x 1" in summary.at["toy.flat", "sentence"]
+    assert summary.at["toy.flip", "robustness"] == "conditional"

@@ -48,6 +48,8 @@ from calstudy.core.verdicts import median_interval
 
 #: stages of a map row, in the order they run
 STAGES = ("base", "screen", "sweep", "grid")
+#: the verdict of a point where a trial cannot run (the chain raises)
+FAILS = "chain fails"
 #: trials per screened end and per judged point the rule asks for (claims register, rules 1, 13)
 MIN_SCREEN, MIN_SWEEP = 10, 30
 #: columns of the map (``robustness.csv``)
@@ -303,7 +305,7 @@ def _row(claim, stage, where, n, verdict=None, shift=None, matters=None, error="
         median=getattr(v, "median", np.nan),
         ci_low=getattr(v, "ci_low", np.nan),
         ci_high=getattr(v, "ci_high", np.nan),
-        verdict=getattr(v, "verdict", "chain fails"),
+        verdict=getattr(v, "verdict", FAILS),
     )
     s = shift if shift is not None else (np.nan, np.nan, np.nan)
     row.update(shift=s[0], shift_low=s[1], shift_high=s[2])
@@ -386,7 +388,8 @@ def robustness_map(
                 for c in (c for c in claims if spec.claims[c] == group):
                     if error:
                         rows.append(_row(c, "screen", where, n_screen, error=error, matters=True))
-                        shifts[c, item.label] = np.inf
+                        # swept (where does it fail?), ranked last for the grid
+                        shifts.setdefault((c, item.label), -1.0)
                         continue
                     s = _shift(stats[c], base[group][0][c])
                     base_v = base_screen[group][c].verdict
@@ -493,15 +496,21 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
         screen = t[t["stage"] == "screen"]
         matter = list(dict.fromkeys(screen.loc[screen["matters"] == "yes", "input"]))
         screened = screen["input"].nunique()
-        parts, sentences = [], []
+        parts, sentences, moved, failing = [], [], [], []
         for label in matter:
             item = by_label[label]
-            changes = thresholds(t, claim, label)
-            fails = t[(t["input"] == label) & (t["error"] != "")]["value"].tolist()
-            text = "; ".join(changes) if changes else "the verdict holds over its range"
+            own = t[(t["input"] == label) & t["stage"].isin(["screen", "sweep"])]
+            changes = [c for c in thresholds(t, claim, label) if FAILS not in c]
+            fails = sorted(set(own.loc[own["error"] != "", "value"]))
             if fails:
-                text += f"; the chain fails at {', '.join(_number(v) for v in fails)}"
-            parts.append(f"{label}: {text}")
+                failing.append(f"{label} {', '.join(_number(v) for v in fails)}")
+            text = "; ".join(changes) or "the verdict holds over its range"
+            parts.append(
+                f"{label}: {text}" + (f"; {FAILS} at {_number(fails[0])}" if fails else "")
+            )
+            if not changes:
+                moved.append(label)
+                continue
             where = f"; {item.paper_note}" if item.paper_note else ""
             if item.paper is not None:
                 where = f"; the paper's numbers put it at {_number(item.paper)}" + (
@@ -516,10 +525,12 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
             f"{claim} is {base_v} at the scenario's values and "
             f"{'robust' if robust else 'conditional'} over the {screened} inputs screened"
         )
-        if sentences:
-            body = "; it depends on " + "; ".join(sentences)
-        else:
-            body = ": no input moves it"
+        body = "; its verdict depends on " + "; ".join(sentences) if sentences else ""
+        if moved:
+            body += f"; its figure moves with {', '.join(moved)}, its verdict does not"
+        if failing:
+            body += f"; the simulated chain cannot run at {'; '.join(failing)}"
+        body = body or ": no input moves it"
         tail = f" ({len(skipped)} ranged inputs not screened)" if len(skipped) else ""
         n_screen, n_judged = screen["n"].min(), t.loc[t["stage"] != "screen", "n"].min()
         if n_screen < MIN_SCREEN or n_judged < MIN_SWEEP:
