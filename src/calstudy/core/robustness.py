@@ -475,8 +475,10 @@ def thresholds(table: pd.DataFrame, claim: str, label: str) -> list[str]:
 
 
 def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> pd.DataFrame:
-    """Per claim of a map: robust or conditional, the verdicts taken, the inputs it depends on,
-    the thresholds and one sentence for the chapter (columns :data:`SUMMARY_COLUMNS`).
+    """Per claim of a map: robust or conditional, the verdicts taken, the inputs its verdict
+    depends on (a swept verdict changes along them), the thresholds of every input that
+    matters (and where the chain cannot run) and one sentence for the chapter (columns
+    :data:`SUMMARY_COLUMNS`).
 
     Parameters
     ----------
@@ -496,7 +498,7 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
         screen = t[t["stage"] == "screen"]
         matter = list(dict.fromkeys(screen.loc[screen["matters"] == "yes", "input"]))
         screened = screen["input"].nunique()
-        parts, sentences, moved, failing = [], [], [], []
+        parts, sentences, moved, failing, depends = [], [], [], [], []
         for label in matter:
             item = by_label[label]
             own = t[(t["input"] == label) & t["stage"].isin(["screen", "sweep"])]
@@ -511,6 +513,7 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
             if not changes:
                 moved.append(label)
                 continue
+            depends.append(label)
             where = f"; {item.paper_note}" if item.paper_note else ""
             if item.paper is not None:
                 where = f"; the paper's numbers put it at {_number(item.paper)}" + (
@@ -542,7 +545,7 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
                 "id": claim,
                 "robustness": "robust" if robust else "conditional",
                 "verdicts": "; ".join(taken),
-                "depends_on": "; ".join(matter),
+                "depends_on": "; ".join(depends),
                 "thresholds": " | ".join(parts),
                 "sentence": head + body + tail + ".",
             }

@@ -5,9 +5,9 @@ verdicts the claim takes over that input's range.
 by :func:`calstudy.core.robustness.robustness_map`); :func:`grid_figure` draws them: one row per
 claim with a map, one column per input that matters to at least one claim (screened and found
 to change a verdict or move a statistic), and a last column for all other screened inputs. A
-cell is split into one stripe per verdict taken at the input's points (screened ends, sweep,
-grid), in the verdict colours of the book; an input the claim's computation does not read is
-left blank.
+cell is split into one stripe per verdict taken over the input's range (the base and the sweep), in
+the verdict colours of the book; an input the claim's computation does not read is left
+blank.
 """
 
 from __future__ import annotations
@@ -48,8 +48,9 @@ def read_maps(results_root: str | Path | None = None) -> pd.DataFrame:
 
 def cell_verdicts(maps: pd.DataFrame) -> tuple[dict, list[str], list[str]]:
     """The verdicts each claim takes per input: ``({(claim, input): [verdicts]}, claims,
-    inputs that matter (columns, in first-seen order))``; the base verdict is taken at every
-    input, and the inputs that matter to no claim are pooled under :data:`OTHERS`."""
+    inputs that matter (columns, in first-seen order))``: the base verdict and those of the
+    input's sweep (points judged by the rule), the inputs that matter to no claim pooled under
+    :data:`OTHERS`."""
     claims = list(dict.fromkeys(maps["claim"]))
     screen = maps[maps["stage"] == "screen"]
     matter = list(dict.fromkeys(screen.loc[screen["matters"] == "yes", "input"]))
@@ -57,7 +58,9 @@ def cell_verdicts(maps: pd.DataFrame) -> tuple[dict, list[str], list[str]]:
     for claim, t in maps.groupby("claim", sort=False):
         base = t.loc[t["stage"] == "base", "verdict"].tolist()
         for label in t.loc[t["stage"] == "screen", "input"].unique():
-            at = t[((t["input"] == label) | (t["input2"] == label)) & (t["error"] == "")]
+            # judged points of the input alone (its sweep); a screened end is judged on fewer
+            # trials and only tells whether the input is swept
+            at = t[(t["input"] == label) & (t["stage"] == "sweep") & (t["error"] == "")]
             key = (claim, label if label in matter else OTHERS)
             cells[key] = list(dict.fromkeys([*cells.get(key, base), *at["verdict"]]))
     return cells, claims, [*matter, OTHERS]
@@ -86,9 +89,13 @@ def grid_figure(maps: pd.DataFrame, path: str | Path, colours: dict) -> tuple[Pa
     from calstudy.io.results import write_figure
 
     cells, claims, inputs = cell_verdicts(maps)
-    width, height = max(2.6 + 0.36 * len(inputs), 6.5), 1.9 + 0.32 * len(claims)
+    longest = max(len(label) for label in inputs)
+    bottom = 0.4 + 0.055 * longest  # room for the rotated input names, in
+    width, height = max(2.6 + 0.36 * len(inputs), 6.5), bottom + 0.6 + 0.32 * len(claims)
     fig = Figure(figsize=(width, height))
-    ax = fig.add_axes((2.2 / width, 1.3 / height, 1 - 2.4 / width, 0.32 * len(claims) / height))
+    ax = fig.add_axes(
+        (2.2 / width, bottom / height, 1 - 2.4 / width, 0.32 * len(claims) / height)
+    )
     seen = []
     for i, claim in enumerate(claims):
         for j, label in enumerate(inputs):
