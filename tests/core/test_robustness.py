@@ -164,3 +164,9 @@ def test_points_where_the_chain_fails_are_named_and_not_taken_as_verdicts():
     assert summary.at["toy.flat", "verdicts"] == "reproduced"
     assert "the simulated chain cannot run at x 1" in summary.at["toy.flat", "sentence"]
     assert summary.at["toy.flip", "robustness"] == "conditional"
+
+
+def test_a_sweep_keeps_the_screened_ends_exactly_and_once():
+    values = Input("p", 0.72, 0.605677, 0.834323).sweep_values(5)
+    assert values == [0.605677, 0.6628, 0.72, 0.7772, 0.834323]
+    assert Input("n", 1000, 250, 4000, integer=True).sweep_values(5) == [250, 500, 1000, 2000, 4000]

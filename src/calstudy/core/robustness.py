@@ -147,8 +147,9 @@ class Input:
             grid = np.geomspace(self.low, self.high, size)
         else:
             grid = np.linspace(self.low, self.high, size)
-        values = {self.value(float(f"{x:.4g}")) for x in grid} | {self.value(self.base)}
-        values |= {self.value(self.low), self.value(self.high)}
+        # the ends exactly (they are the screened points), the inside to 4 digits
+        values = {self.value(float(f"{x:.4g}")) for x in grid[1:-1]}
+        values |= {self.value(x) for x in (self.low, self.base, self.high)}
         return sorted(values)
 
 
@@ -507,9 +508,9 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
             if fails:
                 failing.append(f"{label} {', '.join(_number(v) for v in fails)}")
             text = "; ".join(changes) or "the verdict holds over its range"
-            parts.append(
-                f"{label}: {text}" + (f"; {FAILS} at {_number(fails[0])}" if fails else "")
-            )
+            paper = f"; paper {_number(item.paper)}" if item.paper is not None else ""
+            fail = f"; {FAILS} at {_number(fails[0])}" if fails else ""
+            parts.append(f"{label}: {text}{paper}{fail}")
             if not changes:
                 moved.append(label)
                 continue
