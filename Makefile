@@ -126,7 +126,7 @@ results/claims.csv: $(EXECUTED) src/calstudy/io/results.py | $(STAMP)
 	$(BIN)/python -c "from calstudy.io.results import aggregate_claims; aggregate_claims()"
 
 book/claims.md: results/claims.csv data/claims.csv src/calstudy/io/book.py \
-		src/calstudy/io/claims_cells.py | $(STAMP)
+		src/calstudy/io/claims_cells.py src/calstudy/io/robustness_grid.py | $(STAMP)
 	$(BIN)/python -m calstudy.io.book claims $@
 
 book/ledger.md: $(DATA) src/calstudy/io/ledger.py src/calstudy/core/ledger.py | $(STAMP)
@@ -177,5 +177,5 @@ bench: $(STAMP) ## time the speed budgets (prints; writes nothing)
 
 clean: ## remove the built book and executed notebooks (results/ and .venv stay)
 	rm -rf book/_build book/notebooks book/claims.md book/claims-verdicts.png \
-		book/claims-register.csv book/claims-results.csv book/claims-headline.md book/ledger.md \
+		book/claims-robustness.png book/claims-register.csv book/claims-results.csv book/claims-headline.md book/ledger.md \
 		book/verdicts-*.md book/key-*.png

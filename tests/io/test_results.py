@@ -385,9 +385,29 @@ def test_aggregate_claims(tmp_path):
 
 
 def test_aggregate_claims_empty(tmp_path):
+    from calstudy.io.results import ROBUSTNESS_COLUMNS
+
     df = aggregate_claims(tmp_path)
     assert df.empty
-    assert (tmp_path / "claims.csv").read_text() == ",".join(CLAIM_COLUMNS) + "\n"
+    header = ",".join([*CLAIM_COLUMNS, *ROBUSTNESS_COLUMNS]) + "\n"
+    assert (tmp_path / "claims.csv").read_text() == header
+
+
+def test_aggregate_claims_adds_the_robustness_of_mapped_claims(tmp_path):
+    from calstudy.io.results import ROBUSTNESS_SUMMARY
+
+    write_claims(tmp_path / "03_binocular", [row("binocular.field"), row("binocular.coc")])
+    summary = pd.DataFrame(
+        [{"id": "binocular.coc", "robustness": "conditional", "verdicts": "a; b",
+          "depends_on": "optics.f_number", "thresholds": "a -> b between 4 and 5.6",
+          "sentence": "..."}]
+    )
+    summary.to_csv(tmp_path / "03_binocular" / ROBUSTNESS_SUMMARY, index=False)
+    df = aggregate_claims(tmp_path).set_index("id")
+    assert df.at["binocular.coc", "robustness"] == "conditional"
+    assert df.at["binocular.coc", "thresholds"] == "a -> b between 4 and 5.6"
+    assert df.at["binocular.field", "robustness"] == "not mapped"
+    assert df.at["binocular.field", "depends_on"] == ""
 
 
 

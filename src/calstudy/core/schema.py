@@ -575,10 +575,6 @@ class Pinhole(Schema):
         return self
 
 
-# ----------------------------------------------------------------------------------------------
-# CSV files
-
-
 def validate_rows(
     model: type[M], header: Sequence[str], rows: Sequence[tuple[int, Sequence[str]]], path
 ) -> list[M]:
@@ -604,6 +600,7 @@ def validate_rows(
 
 
 __all__ = [
+    "apply_overrides",
     "Degrees",
     "Documented",
     "Finite",

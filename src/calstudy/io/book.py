@@ -32,6 +32,7 @@ from calstudy.core.labels import claim_label
 from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
 from calstudy.core.verdicts import BAND_PP, FACTOR
 from calstudy.io.claims_cells import (
+    VERDICT_COLOURS,
     Published,
     bound_value,
     is_ratio,
@@ -41,10 +42,12 @@ from calstudy.io.claims_cells import (
     typeset,
 )
 from calstudy.io.results import atomic_write, read_claims
+from calstudy.io.robustness_grid import grid_figure, read_maps
 
 __all__ = [
     "COLUMNS",
     "FIGURE_NAME",
+    "GRID_NAME",
     "HEADLINE_NAME",
     "REGISTER_COPY",
     "RESULTS_COPY",
@@ -87,17 +90,12 @@ NOTEBOOK_DIR = REPO_ROOT / "notebooks"
 
 #: Files written beside the page: the figure and copies of the two tables it is made from.
 FIGURE_NAME = "claims-verdicts.png"
+#: the robustness grid (:mod:`calstudy.io.robustness_grid`)
+GRID_NAME = "claims-robustness.png"
 REGISTER_COPY = "claims-register.csv"
 RESULTS_COPY = "claims-results.csv"
 
-#: Badge and figure colour of each verdict (the CSS classes in book/_static/calstudy.css).
-VERDICT_COLOURS = {
-    "reproduced": "#1a7f37",
-    "direction only": "#b35900",
-    "not reproduced": "#c62828",
-    "not testable": "#57606a",
-    PENDING: "#8c959f",
-}
+
 
 _RULE = """\
 Each verdict is computed by the notebook from its Monte Carlo trials (rule v2 of the claims
@@ -761,6 +759,23 @@ def render_claims_page(
             "published figure, the bound, or 1 for no effect) with its 95 % interval; "
             "marker and colour give the verdict, the shaded band is what the rule accepts for "
             "the median (a bound asks the 95th percentile to meet it too).",
+            "```",
+            "",
+        ]
+    maps = read_maps(res_path.parent)
+    if len(maps):
+        grid, grid_alt = grid_figure(maps, book_dir / GRID_NAME, VERDICT_COLOURS)
+        lines += [
+            f"```{{figure}} {grid.name}",
+            ":name: fig-claims-robustness",
+            f":alt: {grid_alt}",
+            ":width: 100%",
+            "",
+            "Robustness of the verdicts: each claim with a map against the inputs it was "
+            "screened on (assumed inputs over their plausible range, calibrated ones over their "
+            "calibration's uncertainty); a cell shows the verdicts the claim takes over that "
+            "input's range, in stripes when it takes more than one. Blank: the claim's "
+            "computation does not read the input.",
             "```",
             "",
         ]

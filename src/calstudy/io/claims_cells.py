@@ -21,6 +21,15 @@ import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 
+#: Badge and figure colour of each verdict, and of a claim still pending (the CSS classes in
+#: book/_static/calstudy.css).
+VERDICT_COLOURS = {
+    "reproduced": "#1a7f37",
+    "direction only": "#b35900",
+    "not reproduced": "#c62828",
+    "not testable": "#57606a",
+    "pending": "#8c959f",
+}
 _NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?")
 _LEADING_NUMBER = re.compile(r"^\s*([-+]?\d+(?:\.\d+)?)(?:\s*-\s*(\d+(?:\.\d+)?))?(.*)$")
 _UNICODE = (

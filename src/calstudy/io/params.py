@@ -148,6 +148,11 @@ class Notebook05(NotebookParameters):
     sweep_poses: Annotated[list[Annotated[int, Field(ge=3, le=MAX_COUNT)]], Field(min_length=1)]
     n_budget_trials: Count
     scenario_toml: str
+    n_screen_trials: Replications
+    n_robust_trials: Replications
+    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
+    robustness_inputs: list[str]
+    robustness_caps: dict[str, PositiveFinite]
 
 
 class Notebook06(NotebookParameters):

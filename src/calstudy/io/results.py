@@ -605,6 +605,28 @@ def read_claims(path: str | Path) -> pd.DataFrame:
     )
 
 
+#: Columns ``results/claims.csv`` adds from the notebooks' robustness summaries
+#: (``<notebook>/robustness_claims.csv``): robust or conditional, the inputs the verdict
+#: depends on, and where it changes; ``not mapped`` for a claim without a map.
+ROBUSTNESS_COLUMNS = ("robustness", "depends_on", "thresholds")
+ROBUSTNESS_SUMMARY = "robustness_claims.csv"
+
+
+def _with_robustness(df: pd.DataFrame, root: Path) -> pd.DataFrame:
+    """``df`` with the :data:`ROBUSTNESS_COLUMNS` of every claim that has a map."""
+    found = sorted(
+        p for p in root.glob(f"*/{ROBUSTNESS_SUMMARY}") if not p.parent.name.startswith(".")
+    )
+    frames = [pd.read_csv(p, dtype=str, keep_default_na=False) for p in found]
+    cols = ["id", *ROBUSTNESS_COLUMNS]
+    maps = pd.concat(frames, ignore_index=True)[cols] if frames else pd.DataFrame(columns=cols)
+    if df.empty:
+        return df.assign(**{c: pd.Series(dtype=object) for c in ROBUSTNESS_COLUMNS})
+    out = df.merge(maps, on="id", how="left")
+    out["robustness"] = out["robustness"].fillna("not mapped")
+    return out.fillna({"depends_on": "", "thresholds": ""})
+
+
 def aggregate_claims(results_root: str | Path | None = None) -> pd.DataFrame:
     """Collect every ``<root>/*/claims.csv`` into ``<root>/claims.csv``, sorted by id.
 
@@ -619,7 +641,7 @@ def aggregate_claims(results_root: str | Path | None = None) -> pd.DataFrame:
     Returns
     -------
     pandas.DataFrame
-        The aggregated table (columns :data:`CLAIM_COLUMNS`).
+        The aggregated table (columns :data:`CLAIM_COLUMNS`, then :data:`ROBUSTNESS_COLUMNS`).
 
     Raises
     ------
@@ -640,6 +662,7 @@ def aggregate_claims(results_root: str | Path | None = None) -> pd.DataFrame:
         first = dup.iloc[0]
         where = ", ".join(df.loc[df["id"] == first, "notebook"])
         raise CalibrationError(f"claim id {first!r} is reported by more than one notebook: {where}")
+    df = _with_robustness(df, root)
     df = df.sort_values("id", kind="stable").reset_index(drop=True)
     write_table(df, root / "claims.csv")
     return df

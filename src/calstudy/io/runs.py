@@ -60,7 +60,7 @@ FACTORIES = frozenset(
         ),
         *(
             f"calstudy.papers.dualarm.experiments:{name}_experiment"
-            for name in ("budget", "drift", "plate", "station", "survey")
+            for name in ("budget", "drift", "plate", "robustness", "station", "survey")
         ),
         *(
             f"calstudy.papers.hybrid.experiments:{name}_experiment"

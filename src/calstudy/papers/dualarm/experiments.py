@@ -424,8 +424,8 @@ def _transform_error(quantity: str, estimate, truth) -> dict:
     }
 
 
-def _scenario(scenario_toml: str, drift_scale: float = 1.0) -> Scenario:
-    return load_scenario(scenario_toml or None).with_drift_scale(drift_scale)
+def _scenario(scenario_toml: str, drift_scale: float = 1.0, overrides=None) -> Scenario:
+    return load_scenario(scenario_toml or None, overrides).with_drift_scale(drift_scale)
 
 
 #: the error sources of the coded-marker chain, each switched on alone in the error budget
@@ -502,6 +502,52 @@ def station_experiment(
         _scenario(scenario_toml, drift_scale),
         n_trials,
         ({"plate_sigma_px": float(plate_sigma_px)},),
+    )
+
+
+#: the parts of a robustness trial: the multi-view scans and ICP (``dualarm.icp``), and the
+#: coded-marker and plate routes with the Tables 1-2 test (``dualarm.global``,
+#: ``dualarm.vs_circular``)
+ROBUSTNESS_PARTS = ("icp", "global")
+
+
+def robustness_trial(
+    scn: Scenario, rng: np.random.Generator, plate_sigma_px: float, section: str
+) -> list:
+    """One trial of a robustness map: the rows of one part of :data:`ROBUSTNESS_PARTS` with the
+    controls of its claims, as in :func:`station_trial`. Each component draws from a child
+    stream named after it (:func:`calstudy.core.montecarlo.child_rng`), so the hand-eyes, the
+    scans and the survey of a trial are the same draws whichever part runs and whatever input
+    a point of the map changes."""
+    if section not in ROBUSTNESS_PARTS:
+        raise CalibrationError(f"section {section!r} is not one of {ROBUSTNESS_PARTS}")
+    if section == "icp":
+        cam2flange = hand_eyes(scn, child_rng(rng, "chain"))
+        return icp_rows(scn, cam2flange, child_rng(rng, "multi-view scans"))
+    cam2flange, _, ours = coded_marker_chain(scn, child_rng(rng, "chain"))
+    circ = plate_base_to_base(scn, cam2flange, child_rng(rng, "plate"), plate_sigma_px)
+    b2b1 = {"coded markers": ours, "circular plate": circ, "no calibration": np.eye(4)}
+    return global_rows(scn, cam2flange, b2b1, child_rng(rng, "global scans"))
+
+
+def robustness_experiment(
+    scenario_toml: str = "",
+    n_trials: int = 10,
+    drift_scale: float = 1.0,
+    plate_sigma_px: float = 0.1,
+    section: str = "icp",
+    overrides: dict | None = None,
+) -> Experiment:
+    """One point of a robustness map: :func:`robustness_trial` of ``section`` on the scenario
+    with ``overrides`` (dotted keys of ``scenario.toml``, set before it is validated). The
+    name is the same at every point, so every point runs the same trials (paired seeds); the
+    scenario, and so the trial cache's key, holds the overrides."""
+    return Experiment(
+        "robustness",
+        robustness_trial,
+        _scenario(scenario_toml, drift_scale, overrides),
+        n_trials,
+        ({"plate_sigma_px": float(plate_sigma_px), "section": section},),
     )
 
 

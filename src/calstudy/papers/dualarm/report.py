@@ -61,13 +61,35 @@ def calibrated_value(pilot: pd.DataFrame, x: str, y: str, target: float) -> floa
             f"target {target:g} of {y} outside the swept range {ys[0]:.4g}-{ys[-1]:.4g}; widen {x}"
         )
     value = float(np.interp(target, ys, xs))
+    return round_to_uncertainty(value, _uncertainty(xs, ys, sems.to_numpy(float), target))
+
+
+def _uncertainty(xs: np.ndarray, ys: np.ndarray, sems: np.ndarray, target: float) -> float:
+    """The standard uncertainty of a value read off a rising curve at ``target``."""
     i = min(int(np.searchsorted(ys, target, side="right")), len(ys) - 1)
     i = max(i, 1)
     slope = (ys[i] - ys[i - 1]) / (xs[i] - xs[i - 1])
-    sem = np.nanmax(sems.to_numpy(float)[i - 1 : i + 1])
+    sem = np.nanmax(sems[i - 1 : i + 1])
     if not np.isfinite(sem) or sem <= 0:  # one trial per point: no spread to round to
         sem = abs(ys[i] - ys[i - 1])
-    return round_to_uncertainty(value, float(sem / slope))
+    return float(sem / slope)
+
+
+def calibration_uncertainty(pilot: pd.DataFrame, x: str, y: str, target: float) -> float:
+    """The standard uncertainty of :func:`calibrated_value` (the larger standard error of the
+    mean of the two bracketing points over the slope between them), in the unit of ``x``: what
+    a robustness map carries into the calibrated input's range.
+
+    Raises
+    ------
+    ValueError
+        As :func:`calibrated_value`.
+    """
+    calibrated_value(pilot, x, y, target)  # the same checks
+    groups = pilot.groupby(x)[y]
+    means = groups.mean().sort_index()
+    sems = groups.sem().reindex(means.index).to_numpy(float)
+    return _uncertainty(means.index.to_numpy(float), means.to_numpy(float), sems, target)
 
 
 def calibration_table(pilot: pd.DataFrame, x: str, y: str, target: float) -> pd.DataFrame:
@@ -275,20 +297,42 @@ def claim_samples(trials: pd.DataFrame) -> dict[str, np.ndarray]:
     """Per-trial figures of the three claims and their controls, in trial order:
     ``icp_before/after/oracle`` (mean over the 4 arm-sphere pairs of the mean over views), and the
     mean Euclidean sphere-centre error of Tables 1-2 per method (``coded``, ``plate``, ``none``
-    (no calibration), ``true`` (true calibration))."""
-    per = icp_per_trial(part(trials, "icp")).groupby("trial")
-    icp = per[["before_mm", "after_mm", "oracle_mm"]].mean().sort_index()
-    g = part(trials, "global").groupby(["method", "trial"])["euclid_mm"].mean().unstack(0)
-    g = g.sort_index()
-    return {
-        "icp_before": icp["before_mm"].to_numpy(),
-        "icp_after": icp["after_mm"].to_numpy(),
-        "icp_oracle": icp["oracle_mm"].to_numpy(),
-        "coded": g["coded markers"].to_numpy(),
-        "plate": g["circular plate"].to_numpy(),
-        "none": g["no calibration"].to_numpy(),
-        "true": g["true calibration"].to_numpy(),
-    }
+    (no calibration), ``true`` (true calibration)). Trials without the ICP part, or without the
+    Tables 1-2 part, give only the figures of the other."""
+    out = {}
+    if (trials["part"] == "icp").any():
+        per = icp_per_trial(part(trials, "icp")).groupby("trial")
+        icp = per[["before_mm", "after_mm", "oracle_mm"]].mean().sort_index()
+        out.update(
+            icp_before=icp["before_mm"].to_numpy(),
+            icp_after=icp["after_mm"].to_numpy(),
+            icp_oracle=icp["oracle_mm"].to_numpy(),
+        )
+    if (trials["part"] == "global").any():
+        g = part(trials, "global").groupby(["method", "trial"])["euclid_mm"].mean().unstack(0)
+        g = g.sort_index()
+        out.update(
+            coded=g["coded markers"].to_numpy(),
+            plate=g["circular plate"].to_numpy(),
+            none=g["no calibration"].to_numpy(),
+            true=g["true calibration"].to_numpy(),
+        )
+    return out
+
+
+def claim_statistics(trials: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Each claim's figure per trial, as its verdict judges it: the after / before ICP ratio
+    (``dualarm.icp``), the coded markers' mean sphere-centre error in mm (``dualarm.global``)
+    and the coded / plate ratio (``dualarm.vs_circular``); only the claims whose figures the
+    trials hold."""
+    x = claim_samples(trials)
+    stats = {}
+    if "icp_after" in x:
+        stats["dualarm.icp"] = x["icp_after"] / x["icp_before"]
+    if "coded" in x:
+        stats["dualarm.global"] = x["coded"]
+        stats["dualarm.vs_circular"] = x["coded"] / x["plate"]
+    return stats
 
 
 def published_figures(published: PublishedFile) -> dict[str, float]:
@@ -342,13 +386,21 @@ def claim_figures(published: PublishedFile) -> dict[str, dict[str, float]]:
     }
 
 
-def dualarm_verdicts(trials: pd.DataFrame, published: PublishedFile) -> dict:
-    """The three claims by the v2 rule with their null and oracle controls, on the same trials:
+def dualarm_verdicts(trials: pd.DataFrame, published: PublishedFile, ids=None) -> dict:
+    """The claims by the v2 rule with their null and oracle controls, on the same trials:
     claim id -> :class:`calstudy.claims.Judged` (verdict after the oracle gate, null control,
-    oracle control)."""
+    oracle control). ``ids``: only these claims (default: those whose columns of
+    :data:`CLAIMS` the trials hold)."""
     x = claim_samples(trials)
     figures = claim_figures(published)
-    return {cid: judge_claim(cid, x, CLAIMS[cid], **figures[cid]) for cid in CLAIMS}
+    if ids is None:
+        ids = [
+            cid
+            for cid, columns in CLAIMS.items()
+            if {c for c in (columns.figure, columns.baseline, columns.null, columns.oracle) if c}
+            <= set(x)
+        ]
+    return {cid: judge_claim(cid, x, CLAIMS[cid], **figures[cid]) for cid in ids}
 
 
 def dualarm_claims(trials: pd.DataFrame, published: PublishedFile, notebook: str):

@@ -1,0 +1,130 @@
+"""The robustness grid of the claims page: claims by inputs, each cell coloured by the
+verdicts the claim takes over that input's range.
+
+:func:`read_maps` collects the notebooks' maps (``results/<notebook>/robustness.csv``, written
+by :func:`calstudy.core.robustness.robustness_map`); :func:`grid_figure` draws them: one row per
+claim with a map, one column per input that matters to at least one claim (screened and found
+to change a verdict or move a statistic), and a last column for all other screened inputs. A
+cell is split into one stripe per verdict taken over the input's range (the base and the sweep), in
+the verdict colours of the book; an input the claim's computation does not read is left
+blank.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from calstudy.core.paths import RESULTS_DIR
+
+#: the map of one notebook, beside its other results
+MAP_NAME = "robustness.csv"
+#: the column of the inputs that matter to no claim of a row
+OTHERS = "other inputs"
+
+
+def read_maps(results_root: str | Path | None = None) -> pd.DataFrame:
+    """Every ``<root>/*/robustness.csv`` in one table, with the column ``notebook``.
+
+    Parameters
+    ----------
+    results_root : path-like, optional
+        Folder of the notebooks' result folders; default ``results/``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The maps (empty, without columns, if none exists).
+    """
+    root = RESULTS_DIR if results_root in (None, "") else Path(results_root)
+    found = sorted(p for p in root.glob(f"*/{MAP_NAME}") if not p.parent.name.startswith("."))
+    frames = []
+    for path in found:
+        table = pd.read_csv(path, keep_default_na=False, na_values={"value": [""]})
+        frames.append(table.assign(notebook=path.parent.name))
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def cell_verdicts(maps: pd.DataFrame) -> tuple[dict, list[str], list[str]]:
+    """The verdicts each claim takes per input: ``({(claim, input): [verdicts]}, claims,
+    inputs that matter (columns, in first-seen order))``: the base verdict and those of the
+    input's sweep (points judged by the rule), the inputs that matter to no claim pooled under
+    :data:`OTHERS`."""
+    claims = list(dict.fromkeys(maps["claim"]))
+    screen = maps[maps["stage"] == "screen"]
+    matter = list(dict.fromkeys(screen.loc[screen["matters"] == "yes", "input"]))
+    cells: dict = {}
+    for claim, t in maps.groupby("claim", sort=False):
+        base = t.loc[t["stage"] == "base", "verdict"].tolist()
+        for label in t.loc[t["stage"] == "screen", "input"].unique():
+            # judged points of the input alone (its sweep); a screened end is judged on fewer
+            # trials and only tells whether the input is swept
+            at = t[(t["input"] == label) & (t["stage"] == "sweep") & (t["error"] == "")]
+            key = (claim, label if label in matter else OTHERS)
+            cells[key] = list(dict.fromkeys([*cells.get(key, base), *at["verdict"]]))
+    return cells, claims, [*matter, OTHERS]
+
+
+def grid_figure(maps: pd.DataFrame, path: str | Path, colours: dict) -> tuple[Path, str]:
+    """Draw the grid (module docstring) and write it as a PNG.
+
+    Parameters
+    ----------
+    maps : pandas.DataFrame
+        :func:`read_maps` (at least one map).
+    path : path-like
+        The PNG to write.
+    colours : dict of str to str
+        Colour of each verdict.
+
+    Returns
+    -------
+    (pathlib.Path, str)
+        The PNG and a one-sentence description (alt text).
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch, Rectangle
+
+    from calstudy.io.results import write_figure
+
+    cells, claims, inputs = cell_verdicts(maps)
+    longest = max(len(label) for label in inputs)
+    bottom = 0.4 + 0.055 * longest  # room for the rotated input names, in
+    width, height = max(2.6 + 0.36 * len(inputs), 6.5), bottom + 0.6 + 0.32 * len(claims)
+    fig = Figure(figsize=(width, height))
+    ax = fig.add_axes(
+        (2.2 / width, bottom / height, 1 - 2.4 / width, 0.32 * len(claims) / height)
+    )
+    seen = []
+    for i, claim in enumerate(claims):
+        for j, label in enumerate(inputs):
+            verdicts = cells.get((claim, label), [])
+            for k, v in enumerate(verdicts):
+                step = 1.0 / len(verdicts)
+                box = Rectangle((j, i + k * step), 1, step, color=colours.get(v, "k"), lw=0)
+                ax.add_patch(box)
+                seen += [v] if v not in seen else []
+            ax.add_patch(Rectangle((j, i), 1, 1, fill=False, ec="white", lw=1.5))
+    ax.set_xlim(0, len(inputs))
+    ax.set_ylim(len(claims), 0)
+    ax.set_xticks([j + 0.5 for j in range(len(inputs))], inputs, rotation=60, ha="right",
+                  fontsize=9)
+    ax.set_yticks([i + 0.5 for i in range(len(claims))], claims, fontsize=9)
+    ax.tick_params(length=0)
+    for side in ax.spines.values():
+        side.set_visible(False)
+    handles = [Patch(color=colours.get(v, "k"), label=v) for v in seen]
+    fig.legend(handles=handles, loc="upper left", ncol=min(len(handles), 4), fontsize=9,
+               frameon=False, bbox_to_anchor=(0.01, 0.99))
+    path = Path(path)
+    write_figure(fig, path)
+    conditional = sum(
+        any(len(cells.get((c, lab), [])) > 1 for lab in inputs) for c in claims
+    )
+    alt = (
+        f"A grid of {len(claims)} claims by {len(inputs) - 1} inputs that matter and the other "
+        f"inputs: a cell in one colour keeps one verdict over the input's range, a cell in "
+        f"stripes takes several; {conditional} of the {len(claims)} claims have such a cell."
+    )
+    return path, alt

@@ -1,0 +1,232 @@
+"""The robustness map of the three ``dualarm`` claims (:mod:`calstudy.core.robustness`).
+
+Every ``assumed`` input of ``data/dualarm/scenario.toml`` with a range is screened for the
+claims whose computation reads it, and the two calibrated inputs (the drift scale and the
+plate's circle noise) over their calibration's uncertainty. A point of the map is a
+:func:`~calstudy.papers.dualarm.experiments.robustness_experiment` with the input set by its
+dotted key (``overrides``, validated against the ledger) or, for a calibrated input, by the
+factory's keyword; the claims are judged by :func:`judge_claims`, the one place that turns
+trial rows into verdicts here.
+
+Where the paper's own numbers put an input (:func:`paper_values`): the marker-centre noise and
+the triangulated markers' accuracy follow from the sensors' stated accuracy (0.029 mm, sec.
+4.1) through the triangulation formula the scenario uses, ``sigma_z = Z^2 sigma_d / (f B)``
+with ``sigma_d = sqrt(2) sigma_px``; the points a scan has follow from the stated cameras
+(1280 x 1024 px) over the visible cap of each sphere at the working distance.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.robustness import Input, MapSpec, ledger_inputs
+from calstudy.papers.dualarm import experiments, report
+from calstudy.papers.dualarm.scenario import load_scenario
+from calstudy.papers.dualarm.schema import PublishedFile, Scenario
+
+#: claim -> the part of the robustness trial that computes it
+CLAIM_PARTS = {"dualarm.icp": "icp", "dualarm.global": "global", "dualarm.vs_circular": "global"}
+#: inputs (dotted keys, or a prefix ending in ".") each part does not read: not screened for
+#: its claims (a test checks that changing them leaves the part's rows as they are)
+NOT_READ = {
+    "icp": (
+        "survey.",
+        "circular_plate.",
+        "global_test.placement_offsets_mm",
+        "detection.marker_radius_mm",
+        "detection.marker_sigma_mm",
+        "detection.loss_rate",
+        "detection.max_view_angle_deg",
+        "plate_sigma_px",
+    ),
+    "global": ("icp.", "drift_scale"),
+}
+#: the sensors' accuracy the paper states (sec. 4.1), mm
+SENSOR_ACCURACY_MM = 0.029
+#: calibrated inputs are screened over their value +- this many standard uncertainties
+CALIBRATION_SIGMAS = 2.0
+
+
+def _reads(part: str, key: str) -> bool:
+    return not any(key == s or (s.endswith(".") and key.startswith(s)) for s in NOT_READ[part])
+
+
+def paper_values(scn: Scenario) -> dict[str, tuple[float, str]]:
+    """Where the paper's stated instruments put some inputs: dotted key -> (value, how).
+
+    Parameters
+    ----------
+    scn : Scenario
+        The station (its focal length, baseline, working distance, spheres and cap angle).
+
+    Returns
+    -------
+    dict of str to (float, str)
+        ``detection.sigma_px`` (px), ``detection.marker_sigma_mm`` and
+        ``sensor.point_sigma_mm`` (mm), ``sensor.points_per_scan`` (sphere B; sphere A in the
+        text).
+    """
+    f, z = float(scn.rig.left.K[0, 0]), scn.sensor.working_distance_mm
+    baseline = float(np.linalg.norm(scn.rig.right2left[:3, 3]))
+    sigma_px = SENSOR_ACCURACY_MM * f * baseline / (np.sqrt(2.0) * z**2)
+    cap = {
+        s: np.pi * (r * np.sin(scn.sensor.max_incidence) * f / z) ** 2
+        for s, r in scn.spheres.radius.items()
+    }
+    accuracy = f"the sensors' stated accuracy {SENSOR_ACCURACY_MM} mm (sec. 4.1)"
+    return {
+        "detection.sigma_px": (
+            float(sigma_px),
+            f"{accuracy} as the depth error Z^2 sqrt(2) sigma_px / (f B) at Z = {z:g} mm",
+        ),
+        "detection.marker_sigma_mm": (SENSOR_ACCURACY_MM, accuracy),
+        "sensor.point_sigma_mm": (SENSOR_ACCURACY_MM, accuracy),
+        "sensor.points_per_scan": (
+            float(cap["B"]),
+            f"pixels over the visible cap of sphere B at {z:g} mm ({cap['A']:.0f} for sphere A)",
+        ),
+    }
+
+
+def map_inputs(
+    scenario_toml: str,
+    scn: Scenario,
+    calibrated: Mapping[str, tuple[float, float]],
+    caps: Mapping[str, float] | None = None,
+) -> tuple[list[Input], list[str]]:
+    """The inputs of the map: the ledger's assumed inputs with a range, the claims each is read
+    by, where the paper puts it, and the calibrated inputs over their uncertainty.
+
+    Parameters
+    ----------
+    scenario_toml : str
+        The scenario file ("" for the study's).
+    scn : Scenario
+        The station loaded from it.
+    calibrated : mapping of str to (float, float)
+        Keyword of a calibrated input of the experiment (``drift_scale``, ``plate_sigma_px``)
+        -> (value, standard uncertainty).
+    caps : mapping of str to float, optional
+        Dotted key -> the highest value screened when the top of its range costs too much to
+        run (the summary says so).
+
+    Returns
+    -------
+    (list of Input, list of str)
+        The inputs and the ranged inputs not screened (with the reason).
+    """
+    found, skipped = ledger_inputs(load_scenario(scenario_toml or None))
+    for key, (value, u) in calibrated.items():
+        low = max(value - CALIBRATION_SIGMAS * u, value / 2)
+        note = f"calibrated; value +- {CALIBRATION_SIGMAS:g} standard uncertainties ({u:.2g})"
+        found.append(
+            Input(
+                key,
+                value,
+                low,
+                value + CALIBRATION_SIGMAS * u,
+                "calibrated",
+                paper=value,
+                paper_note=note,
+            )
+        )
+    paper = paper_values(scn)
+    out = []
+    for item in found:
+        claims = tuple(c for c, part in CLAIM_PARTS.items() if _reads(part, item.key))
+        if not claims:
+            skipped.append(f"{item.label}: read by no claim's computation")
+            continue
+        changes: dict = {"claims": claims}
+        if item.key in paper:
+            changes.update(paper=paper[item.key][0], paper_note=paper[item.key][1])
+        if caps and item.key in caps and caps[item.key] < item.high:
+            changes.update(
+                high=float(caps[item.key]),
+                paper_note=(
+                    changes.get("paper_note", "") + f"; screened up to {caps[item.key]:g} "
+                    f"of its range's {item.high:g} (cost)"
+                ).lstrip("; "),
+            )
+        out.append(dataclasses.replace(item, **changes))
+    return out, skipped
+
+
+def judge_claims(trials: pd.DataFrame, published: PublishedFile) -> dict:
+    """Each claim's verdict from the trial rows, as the notebook judges it: claim id ->
+    :class:`~calstudy.core.verdicts.Verdict` (after the oracle gate)."""
+    return {cid: v[0] for cid, v in report.dualarm_verdicts(trials, published).items()}
+
+
+def map_spec(
+    scenario_toml: str,
+    published: PublishedFile,
+    drift: tuple[float, float],
+    plate: tuple[float, float],
+    caps: Mapping[str, float] | None = None,
+    only: Sequence[str] = (),
+) -> MapSpec:
+    """The :class:`~calstudy.core.robustness.MapSpec` of the three claims.
+
+    Parameters
+    ----------
+    scenario_toml : str
+        The scenario file ("" for the study's).
+    published : PublishedFile
+        The paper's numbers (for the verdicts).
+    drift, plate : (float, float)
+        The calibrated drift scale and plate circle noise (px), each with its standard
+        uncertainty.
+    caps : mapping of str to float, optional
+        As for :func:`map_inputs`.
+    only : sequence of str, optional
+        Screen only these inputs (dotted keys or keywords, a vector's components all); empty:
+        every input of :func:`map_inputs`.
+
+    Raises
+    ------
+    CalibrationError
+        If ``only`` names an input the map does not screen.
+    """
+    base = {"drift_scale": drift[0], "plate_sigma_px": plate[0]}
+    scn = load_scenario(scenario_toml or None)
+    inputs, skipped = map_inputs(
+        scenario_toml, scn, {"drift_scale": drift, "plate_sigma_px": plate}, caps
+    )
+    unknown = sorted(set(only) - {item.key for item in inputs})
+    if unknown:
+        raise CalibrationError(
+            f"robustness inputs {unknown} are not screened inputs of the dualarm scenario"
+        )
+    if only:
+        inputs = [item for item in inputs if item.key in only]
+
+    def experiment(part: str, setting: Mapping, n_trials: int):
+        keywords = {**base, **{k: v for k, v in setting.items() if "." not in k}}
+        overrides = {k: v for k, v in setting.items() if "." in k} or None
+        return experiments.robustness_experiment(
+            scenario_toml, n_trials, section=part, overrides=overrides, **keywords
+        )
+
+    def statistics(part: str, rows: pd.DataFrame):
+        return report.claim_statistics(rows)
+
+    def judge(part: str, rows: pd.DataFrame):
+        return judge_claims(rows, published)
+
+    return MapSpec(CLAIM_PARTS, tuple(inputs), experiment, statistics, judge, tuple(skipped))
+
+
+def point_setting(spec: MapSpec, labels: Sequence[str], values: Sequence[float]) -> dict:
+    """The setting of a map row: its inputs (labels) at its values, for rebuilding a point."""
+    by_label = {item.label: item for item in spec.inputs}
+    setting: dict = {}
+    for label, value in zip(labels, values, strict=True):
+        if label:
+            setting.update(by_label[label].setting(value))
+    return setting

@@ -1,0 +1,168 @@
+"""Verdict robustness maps (calstudy.core.robustness) on toy claims with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.montecarlo import Experiment
+from calstudy.core.robustness import (
+    Input,
+    MapSpec,
+    claim_summary,
+    ledger_inputs,
+    robustness_map,
+)
+from calstudy.core.verdicts import judge
+
+#: the toy claim "flip" is reproduced while x lies below this
+THRESHOLD = 0.5
+CALLS = {"n": 0, "stop_at": None}
+
+
+def toy_trial(scn: dict, rng: np.random.Generator) -> dict:
+    """``flip``: x plus small noise (judged below THRESHOLD); ``flat``: 1 plus noise, whatever
+    x and y."""
+    CALLS["n"] += 1
+    if CALLS["stop_at"] is not None and CALLS["n"] >= CALLS["stop_at"]:
+        raise KeyboardInterrupt  # an interrupted run
+    if scn.get("fails_above") is not None and scn["x"] > scn["fails_above"]:
+        raise CalibrationError(f"x = {scn['x']} cannot run")
+    noise = rng.normal(size=2)
+    return {"flip": scn["x"] + 0.01 * noise[0], "flat": 1.0 + 0.01 * noise[1]}
+
+
+def _experiment(group: str, setting: dict, n_trials: int) -> Experiment:
+    scenario = {"x": 0.3, "y": 0.5, **setting}
+    return Experiment("toy", toy_trial, scenario, n_trials)
+
+
+def _statistics(group: str, rows: pd.DataFrame) -> dict:
+    return {"toy.flip": rows["flip"].to_numpy(), "toy.flat": rows["flat"].to_numpy()}
+
+
+def _judge(group: str, rows: pd.DataFrame) -> dict:
+    value = dict(kind="value", direction="lower", min_trials=10)
+    return {
+        "toy.flip": judge(rows["flip"], null=THRESHOLD, **value),
+        "toy.flat": judge(rows["flat"], null=2.0, **value),
+    }
+
+
+INPUTS = (Input("x", 0.3, 0.0, 1.0), Input("y", 0.5, 0.0, 1.0))
+SPEC = MapSpec({"toy.flip": "g", "toy.flat": "g"}, INPUTS, _experiment, _statistics, _judge)
+
+
+@pytest.fixture(autouse=True)
+def _reset_calls():
+    CALLS.update(n=0, stop_at=None)
+
+
+def _map(tmp_path=None, **kw):
+    engine = {"n_jobs": 1, "progress": False}
+    if tmp_path is not None:
+        engine["cache_dir"] = tmp_path
+    args = dict(n_screen=10, n_sweep=30, sweep_size=9, min_shift=0.05, engine=engine)
+    return robustness_map(SPEC, 3, **{**args, **kw})
+
+
+def test_a_flip_is_conditional_with_its_threshold_within_a_grid_step():
+    table, _ = _map()
+    summary = claim_summary(table, INPUTS).set_index("id")
+    assert summary.at["toy.flip", "robustness"] == "conditional"
+    assert summary.at["toy.flip", "depends_on"] == "x"
+    sweep = table[(table["claim"] == "toy.flip") & (table["stage"] == "sweep")]
+    values = np.sort(sweep["value"].to_numpy())
+    step = float(np.max(np.diff(values)))
+    below = sweep.loc[sweep["verdict"] == "reproduced", "value"].max()
+    above = sweep.loc[sweep["verdict"] != "reproduced", "value"].min()
+    assert below < THRESHOLD <= above
+    assert above - below <= step + 1e-12
+    assert "reproduced -> not reproduced between" in summary.at["toy.flip", "thresholds"]
+
+
+def test_a_flat_claim_is_robust_and_an_unused_input_does_not_matter():
+    table, _ = _map()
+    summary = claim_summary(table, INPUTS).set_index("id")
+    assert summary.at["toy.flat", "robustness"] == "robust"
+    assert summary.at["toy.flat", "depends_on"] == ""
+    screen = table[(table["stage"] == "screen") & (table["input"] == "y")]
+    assert set(screen["matters"]) == {"no"}
+    assert not (table["stage"] == "sweep").loc[table["input"] == "y"].any()
+
+
+def test_the_same_trials_run_at_every_point():
+    _, trials = _map()
+    flip = trials[trials["claim"] == "toy.flip"].copy()
+    x = flip["value"].where(flip["input"] == "x", 0.3)
+    flip["noise"] = flip["statistic"] - x
+    per_trial = flip[flip["trial"] < 10].groupby("trial")["noise"]
+    assert float(per_trial.agg(np.ptp).max()) < 1e-12  # the same draw at every value of x
+    assert float(per_trial.mean().std()) > 1e-3  # and different draws in different trials
+
+
+def test_an_interrupted_map_goes_on_where_it_stopped(tmp_path):
+    full, _ = _map(tmp_path / "whole")
+    total = CALLS["n"]
+    CALLS.update(n=0, stop_at=total // 2)
+    with pytest.raises(KeyboardInterrupt):
+        _map(tmp_path / "cut")
+    done = CALLS["n"] - 1  # the call that raised did not finish
+    CALLS.update(n=0, stop_at=None)
+    resumed, _ = _map(tmp_path / "cut")
+    assert CALLS["n"] == total - done
+    pd.testing.assert_frame_equal(resumed, full)
+
+
+def test_too_few_trials_are_refused_and_fewer_than_the_rule_are_noted():
+    with pytest.raises(CalibrationError, match="n_screen 5 and n_sweep 30"):
+        robustness_map(SPEC, 3, n_screen=5)
+    table, _ = _map(n_screen=6, n_sweep=8)
+    sentence = claim_summary(table, INPUTS).set_index("id").at["toy.flat", "sentence"]
+    assert "N = 6 per screened end, 8 per judged point: below the rule" in sentence
+    table, _ = _map()
+    assert "below the rule" not in claim_summary(table, INPUTS).at[0, "sentence"]
+
+
+def test_an_input_outside_its_range_is_refused():
+    with pytest.raises(CalibrationError, match="input x: base 2.0"):
+        Input("x", 2.0, 0.0, 1.0)
+
+
+def test_ledger_inputs_take_assumed_scalars_and_vector_components():
+    from calstudy.papers.dualarm.scenario import load_scenario
+
+    inputs, skipped = ledger_inputs(load_scenario())
+    labels = [i.label for i in inputs]
+    assert "detection.sigma_px" in labels and "sensor.points_per_scan" in labels
+    assert "layout.world2base1_mm[0]" in labels
+    assert "layout.world2base1_rotvec[0]" not in labels  # a range of one value: fixed
+    assert "global_test.n_groups" not in labels  # paper
+    count = next(i for i in inputs if i.label == "sensor.points_per_scan")
+    assert count.integer and count.setting(250.4) == {"sensor.points_per_scan": 250}
+    assert any(s.startswith("global_test.placement_offsets_mm") for s in skipped)
+
+
+def test_points_where_the_chain_fails_are_named_and_not_taken_as_verdicts():
+    def failing(group, setting, n_trials):
+        scenario = {"x": 0.3, "y": 0.5, "fails_above": 0.9, **setting}
+        return Experiment("toy", toy_trial, scenario, n_trials)
+
+    spec = MapSpec(SPEC.claims, INPUTS, failing, _statistics, _judge)
+    engine = {"n_jobs": 1, "progress": False}
+    table, _ = robustness_map(spec, 3, sweep_size=9, engine=engine)
+    failed = table[table["error"] != ""]
+    assert set(failed["input"]) == {"x"} and failed["value"].min() > 0.9
+    assert set(failed["verdict"]) == {"chain fails"}
+    summary = claim_summary(table, INPUTS).set_index("id")
+    assert summary.at["toy.flat", "verdicts"] == "reproduced"
+    assert "the simulated chain cannot run at x 1" in summary.at["toy.flat", "sentence"]
+    assert summary.at["toy.flip", "robustness"] == "conditional"
+
+
+def test_a_sweep_keeps_the_screened_ends_exactly_and_once():
+    values = Input("p", 0.72, 0.605677, 0.834323).sweep_values(5)
+    assert values == [0.605677, 0.6628, 0.72, 0.7772, 0.834323]
+    assert Input("n", 1000, 250, 4000, integer=True).sweep_values(5) == [250, 500, 1000, 2000, 4000]
