@@ -370,3 +370,21 @@ def test_book_extension_drops_the_icon_script():
     light = ext.lighten(page)
     assert "scripts/fontawesome.js" not in light and '<script src="_static/x.js">' in light
     assert light.endswith("<body>fontawesome.js</body>")  # only the head's script line goes
+
+
+def test_verdict_cell_carries_the_robustness_of_the_verdict():
+    """Under each verdict: robust, conditional (its inputs and thresholds in the title) or not
+    mapped; nothing while the claim is pending."""
+    from calstudy.io.book import _verdict_cell
+
+    base = {"verdict": "reproduced", "depends_on": "", "thresholds": ""}
+    robust = _verdict_cell({}, pd.Series({**base, "robustness": "robust"}), {})
+    assert 'class="rob rob-robust"' in robust and ">robust<" in robust
+    cond = _verdict_cell({}, pd.Series({**base, "robustness": "conditional",
+                                        "depends_on": "marker-centre noise",
+                                        "thresholds": "reproduced below 0.05 px"}), {})
+    assert "rob-conditional" in cond
+    assert 'title="the verdict depends on marker-centre noise: reproduced below 0.05 px"' in cond
+    unmapped = _verdict_cell({}, pd.Series({**base, "robustness": "not mapped"}), {})
+    assert "rob-not-mapped" in unmapped and "no robustness map yet" in unmapped
+    assert "rob" not in _verdict_cell({}, None, {})

@@ -381,7 +381,25 @@ def _claim_cell(claim, row, context) -> str:
 
 
 def _verdict_cell(claim, row, context) -> str:
-    return _badge(PENDING if row is None else typeset(row["verdict"]))
+    return _badge(PENDING if row is None else typeset(row["verdict"])) + _robustness_tag(row)
+
+
+def _robustness_tag(row: pd.Series | None) -> str:
+    """A small tag under the verdict: *robust* or *conditional* over the inputs the map screened
+    (the inputs and thresholds in its title), or *not mapped* while the claim has no map."""
+    state = typeset(row.get("robustness", "")) if row is not None else ""
+    if not state:
+        return ""
+    depends = typeset(row.get("depends_on", ""))
+    thresholds = typeset(row.get("thresholds", ""))
+    tip = {
+        "robust": "the same verdict over the plausible range of every input screened",
+        "conditional": f"the verdict depends on {depends}" + (f": {thresholds}" if thresholds
+                                                              else ""),
+    }.get(state, "no robustness map yet for this claim")
+    css = state.replace(" ", "-")
+    return (f' <span class="rob rob-{html.escape(css)}" title="{html.escape(tip, quote=True)}">'
+            f"{html.escape(state)}</span>")
 
 
 def _notebook_cell(claim, row, context) -> str:
