@@ -367,36 +367,8 @@ def read_toml(path: str | Path, what: str) -> dict:
 _PARSED: dict[tuple[str, int, int], dict] = {}
 
 
-def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
-    """The TOML table of ``path`` (the ``what``, for messages) after validating it against
-    ``model``: for loaders that go on reading the dict (the numbers stay the bytes of the file).
-    The ``provenance`` entries of the assumption ledger (:mod:`calstudy.core.ledger`) are
-    dropped from it: they describe the inputs and are none themselves."""
-    table = read_toml(path, what)  # a copy of the parsed file, kept by its file_key
-    key = (*file_key(Path(path)), model)
-    if key not in _VALIDATED:
-        validate(model, table, path, study=is_study_file(path))
-        if len(_VALIDATED) >= 64:
-            _VALIDATED.clear()
-        _VALIDATED.add(key)
-    return without_provenance(table)
-
-
-def without_provenance(table: Any) -> Any:
-    """``table`` with the ``provenance`` entry of every (nested) table removed."""
-    if isinstance(table, dict):
-        return {k: without_provenance(v) for k, v in table.items() if k != PROVENANCE}
-    return table
-
-
 #: the key of a table's ledger entries (:mod:`calstudy.core.ledger`)
 PROVENANCE = "provenance"
-
-
-#: (resolved path, modification time, size, model) of the files that passed :func:`check_toml`:
-#: every Monte Carlo trial draws its station from the same files, and validating them costs
-#: more than the rest of the loading (an edited file has a new key, so it is checked again)
-_VALIDATED: set = set()
 
 
 def apply_overrides(table: dict, overrides: Mapping[str, object] | None) -> dict:
@@ -623,7 +595,6 @@ __all__ = [
     "Vec2",
     "Vec3",
     "apply_overrides",
-    "check_toml",
     "file_key",
     "format_errors",
     "is_study_file",
@@ -634,5 +605,4 @@ __all__ = [
     "validate",
     "validate_rows",
     "with_inputs",
-    "without_provenance",
 ]

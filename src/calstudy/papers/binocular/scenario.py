@@ -21,8 +21,8 @@ import numpy as np
 from pydantic import ConfigDict
 
 from calstudy.core import geometry as geo
-from calstudy.core.config import scenario_file
 from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import scenario_file
 from calstudy.core.schema import (
     Schema,
     apply_overrides,

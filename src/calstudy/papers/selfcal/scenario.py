@@ -23,9 +23,9 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field, model_validator
 
-from calstudy.core.config import scenario_file
 from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
+from calstudy.core.paths import scenario_file
 from calstudy.core.schema import (
     Degrees,
     Documented,
