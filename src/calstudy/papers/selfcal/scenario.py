@@ -61,15 +61,10 @@ NOISE_BOUNDS = {
 MAX_SPHERES, MAX_VIEWS, MAX_PLACEMENTS, MAX_POINTS = 50, 100, 1000, 100_000
 
 
-def _noise(bound: str):
-    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
-    return noise_level(NOISE_BOUNDS[bound])
-
-
 class Repeatability(Inputs):
     """The ``[repeatability]`` table of data/selfcal/scenario.toml."""
 
-    sigma_mm: _noise("repeatability_mm")
+    sigma_mm: noise_level(NOISE_BOUNDS, "repeatability_mm")
 
 
 class Base(Inputs):
@@ -146,15 +141,15 @@ class Scanner(Inputs):
     cap_half_angle_deg: HalfAngle
     #: a sphere fit (centre and radius) needs at least 4 points
     points_per_cap: Annotated[int, Field(ge=4, le=MAX_POINTS)]
-    sigma_point_mm: _noise("point_mm")
+    sigma_point_mm: noise_level(NOISE_BOUNDS, "point_mm")
     max_fit_condition: Annotated[float, Field(ge=1, allow_inf_nan=False)]
 
 
 class Tracker(Inputs):
     """The ``[tracker]`` table of data/selfcal/scenario.toml."""
 
-    u0_mm: _noise("tracker_mm")
-    u1_mm_per_m: _noise("tracker_mm_per_m")
+    u0_mm: noise_level(NOISE_BOUNDS, "tracker_mm")
+    u1_mm_per_m: noise_level(NOISE_BOUNDS, "tracker_mm_per_m")
     coverage: PositiveFinite
 
 
