@@ -66,8 +66,6 @@ def triangulate(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.nd
         If the arrays differ in shape or are not finite, ``tol_mm`` is not > 0, or a pair of
         rays misses by more than ``tol_mm`` (a wrong match or a wrong calibration).
     """
-    if not (math.isfinite(tol_mm) and tol_mm > 0):
-        raise CalibrationError(f"ray tolerance tol_mm = {tol_mm} must be a finite number > 0")
     a = geo.check_finite("left image points", uv_left).reshape(-1, 2)
     b = geo.check_finite("right image points", uv_right).reshape(-1, 2)
     if a.shape != b.shape or a.shape[0] == 0:
