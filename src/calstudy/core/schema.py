@@ -175,6 +175,18 @@ Vec2 = Annotated[list[Finite], Field(min_length=2, max_length=2)]
 #: here: a scenario file declares degrees in its key names)
 Degrees = Annotated[float, Field(ge=-360, le=360, allow_inf_nan=False)]
 
+
+
+def _low_high(pair: Sequence[float]) -> Sequence[float]:
+    if pair[0] > pair[1]:
+        raise ValueError(f"{list(pair)} is not [low, high]")
+    return pair
+
+
+#: marks a pair of numbers as a range written ``[low, high]`` (the first not above the second):
+#: ``Annotated[list[Finite], Field(min_length=2, max_length=2), LowHigh]``
+LowHigh = AfterValidator(_low_high)
+
 _DOC_KEY = re.compile(r"^(source|assumption|note|reason)s?$|_(source|assumption|note|reason)s?$")
 
 
@@ -580,6 +592,7 @@ __all__ = [
     "Documented",
     "Finite",
     "Fraction",
+    "LowHigh",
     "MAX_PIXELS",
     "NonNegativeFinite",
     "NonNegativeInt",

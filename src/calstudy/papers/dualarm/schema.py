@@ -34,6 +34,7 @@ from calstudy.core.schema import (
     Documented,
     Finite,
     Fraction,
+    LowHigh,
     NonNegativeFinite,
     Pixels,
     PositiveFinite,
@@ -336,20 +337,13 @@ class CircularPlate(Inputs):
     tilt_deg: Tilt
     jitter_deg: Tilt
     outlier_rate: Fraction
-    outlier_px: Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
+    outlier_px: Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2), LowHigh]
     #: where the plate lies: (x, y) mm from the point between the marker groups, on the table
     offset_mm: Annotated[list[Finite], Field(min_length=2, max_length=2)]
     ransac_threshold_px: PositiveFinite
 
     tilt = Radians("tilt_deg")
     jitter = Radians("jitter_deg")
-
-    @model_validator(mode="after")
-    def _range(self) -> CircularPlate:
-        lo, hi = self.outlier_px
-        if lo > hi:
-            raise ValueError(f"outlier_px = {self.outlier_px} is not [low, high]")
-        return self
 
 
 class Icp(Inputs):

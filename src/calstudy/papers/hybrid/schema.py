@@ -30,6 +30,7 @@ from calstudy.core.schema import (
     Degrees,
     Documented,
     Finite,
+    LowHigh,
     NonNegativeFinite,
     Pinhole,
     PositiveFinite,
@@ -424,14 +425,9 @@ def _ascending(values: tuple) -> tuple:
 class Systematic(Documented):
     """The ``[systematic]`` table of data/hybrid/published.toml."""
 
-    range_mm: Annotated[tuple[NonNegativeFinite, ...], Field(min_length=2, max_length=2), Row]
-
-    @field_validator("range_mm")
-    @classmethod
-    def _range(cls, value: tuple) -> tuple:
-        if value[0] > value[1]:
-            raise ValueError(f"{list(value)} is not [low, high]")
-        return value
+    range_mm: Annotated[
+        tuple[NonNegativeFinite, ...], Field(min_length=2, max_length=2), Row, LowHigh
+    ]
 
 
 class Table1(Documented):
