@@ -23,6 +23,13 @@ from calstudy.core.schema import (
     Vec3,
 )
 
+
+def zyx_pose(xyz_mm, zyx_deg) -> np.ndarray:
+    """A pose as a file writes it: position ``xyz_mm`` (3,) mm and ZYX Euler angles ``zyx_deg``
+    (3,) degrees (:func:`calstudy.core.geometry.euler_zyx_to_matrix`), as a (4, 4) transform."""
+    return make_transform(euler_zyx_to_matrix(*zyx_deg), xyz_mm)
+
+
 #: a robot: the stem of a library table or a file name
 RobotName = Annotated[str, Field(min_length=1)]
 
@@ -36,7 +43,7 @@ class Pose(Schema):
     @property
     def transform(self) -> np.ndarray:
         """The pose as a 4 x 4 rigid transform (mm), ZYX Euler angles in degrees."""
-        return make_transform(euler_zyx_to_matrix(*self.zyx_deg), np.asarray(self.xyz_mm, float))
+        return zyx_pose(self.xyz_mm, self.zyx_deg)
 
 
 class SensorPose(Pose):
@@ -73,4 +80,4 @@ class CellFile(Documented):
     noise: Noise | None = None
 
 
-__all__ = ["CellFile", "RobotName"]
+__all__ = ["CellFile", "RobotName", "zyx_pose"]

@@ -23,7 +23,6 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field, model_validator
 
-from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
 from calstudy.core.paths import scenario_file
 from calstudy.core.schema import (
@@ -38,7 +37,7 @@ from calstudy.core.schema import (
 from calstudy.models.kinematics import Robot
 from calstudy.models.reach import reach_bound
 from calstudy.models.robots import load_robot
-from calstudy.selfcal.cellfile import RobotName
+from calstudy.selfcal.cellfile import RobotName, zyx_pose
 
 #: a half-angle of a cone, degrees
 HalfAngle = Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
@@ -78,7 +77,7 @@ class Base(Inputs):
     @cached_property
     def rough(self) -> np.ndarray:
         """``part2base`` (4, 4) of the layout drawing, mm."""
-        return _pose(self.rough_xyz_mm, self.rough_zyx_deg)
+        return zyx_pose(self.rough_xyz_mm, self.rough_zyx_deg)
 
 
 class SensorMount(Inputs):
@@ -92,7 +91,7 @@ class SensorMount(Inputs):
     @cached_property
     def design(self) -> np.ndarray:
         """``sensor2flange`` (4, 4) of the bracket drawing, mm."""
-        return _pose(self.design_xyz_mm, self.design_zyx_deg)
+        return zyx_pose(self.design_xyz_mm, self.design_zyx_deg)
 
 
 class PoorStart(Inputs):
@@ -249,10 +248,6 @@ class Scenario(Ledgered, Inputs):
                 "beyond its reach, for every view at the scanner's standoff: no sphere placed "
                 "there can be measured"
             )
-
-
-def _pose(xyz, zyx_deg) -> np.ndarray:
-    return make_transform(euler_zyx_to_matrix(*zyx_deg), np.asarray(xyz, float))
 
 
 def load_scenario(
