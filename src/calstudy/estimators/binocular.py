@@ -29,7 +29,6 @@ from scipy.optimize import least_squares
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.axxb import OPENCV_METHODS, opencv_handeye
-from calstudy.estimators.fitting import fit_rigid
 from calstudy.models.stereo import StereoRig
 
 #: Indices (0-based) of the physical targets averaged into the virtual P7 and P8 (Section 3.2).
@@ -415,11 +414,6 @@ def motion_axes(flange2base) -> tuple[np.ndarray, np.ndarray]:
     rv = geo.matrix_to_rotvec(rel)
     angle = np.linalg.norm(rv, axis=1)
     return rv / np.maximum(angle, 1e-300)[:, None], angle
-
-
-def calibrator_pose(layout_points, measured_points) -> np.ndarray:
-    """``calibrator2sensor`` by Kabsch (``fitting.fit_rigid``), layout to measured points."""
-    return fit_rigid(layout_points, measured_points)
 
 
 def preliminary_handeye(flange2base, calibrator2sensor, method: str = "Park") -> np.ndarray:
