@@ -647,7 +647,6 @@ def test_misfit_is_flagged_by_default():
 #   estimators.workpiece rps_frame_so3, rps_frame_penalty, rps_frame_batch .. rps_frames
 #                      check_datums, rps_equations, orthogonality ........... workpiece_equations
 #   estimators.binocular triangulate, triangulate_sets, ray_gap ............. stereo_triangulation
-#                      calibrator_pose ...................................... stereo_triangulation
 #                      with_virtual, distances_to_p7, layout_problem, solve_calibrator_layout,
 #                      modify_observed_error(s), motion_axes,
 #                      preliminary_handeye, correct_transformation .......... binocular_calibrator
@@ -894,7 +893,6 @@ def test_property_stereo_triangulation(data):
         _check(sv.make_view, np.arange(len(ul)), uv_l, uv_r)
         _check(sfm.pnp_pose, p, uv_l, RIG.left)
     _check(bino.ray_gap, p, q, RIG.rotation, RIG.translation)  # wrong shapes
-    _check(bino.calibrator_pose, p, q)
 
 
 @PROFILE

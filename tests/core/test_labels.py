@@ -17,6 +17,9 @@ from calstudy.core.labels import CLAIM_LABELS, label, plain
         ("rot_err_updated_mrad", "rot err updated (mrad)"),
         ("translation_range_mm", "range of the pure translations (mm)"),
         ("err", "err"),
+        ("rot_err_deg", "rot err (deg)"),
+        ("sigma_um", "sigma (µm)"),
+        ("trials", "trials"),
         ("hybrid.handeye", "hand-eye calibration"),
     ],
 )

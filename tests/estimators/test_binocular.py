@@ -8,9 +8,9 @@ import pytest
 from support import binocular_rig
 
 from calstudy.core import geometry as geo
-from calstudy.core.config import read_toml
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
+from calstudy.core.schema import read_toml
 from calstudy.estimators import binocular as bino
 
 

@@ -15,7 +15,6 @@ from calstudy.io.display import (
     format_claims,
     format_table,
     format_value,
-    header,
     show_claims,
     show_table,
     table_html,
@@ -41,13 +40,6 @@ def test_format_value():
     assert format_value("<NA>") == MISSING
     # generated text is typeset: a source column reading "+-2 mm" shows as ±2 mm
     assert format_value("assumption: +-2 mm, 15 um, a -> b") == "assumption: ±2 mm, 15 µm, a → b"
-
-
-def test_header_reads_units():
-    assert header("rot_err_deg") == "rot err (deg)"
-    assert header("error", "mm") == "error (mm)"
-    assert header("sigma_um") == "sigma (µm)"
-    assert header("trials") == "trials"
 
 
 def test_narrow_table_is_formatted_with_units_and_reasons():

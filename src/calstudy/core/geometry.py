@@ -262,12 +262,6 @@ def log6(transform) -> np.ndarray:
     return np.asarray(_pin().log6(_pin().SE3(t[:3, :3], t[:3, 3])).vector)
 
 
-def to_se3(transform):
-    """A 4 x 4 array as a ``pinocchio.SE3``."""
-    t = np.asarray(transform, dtype=float)
-    return _pin().SE3(t[:3, :3].copy(), t[:3, 3].copy())
-
-
 def euler_zyx_to_matrix(a, b, c) -> np.ndarray:
     """Rotation ``Rz(a) Ry(b) Rx(c)`` from angles in degrees (the KUKA A, B, C convention).
 

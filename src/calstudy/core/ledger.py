@@ -40,7 +40,7 @@ Before the ledger, the file's :meth:`Ledgered.plausibility` checks that the scen
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from typing import Annotated, Any, ClassVar, Literal, get_args
 
 import numpy as np
@@ -79,10 +79,10 @@ class _Off:
 OFF = _Off()
 
 
-def noise_level(bound: float):
-    """The type of a noise level: finite, >= 0 and <= ``bound`` (its physical bound), and 0
-    accepted outside its ledger range (:data:`OFF`)."""
-    return Annotated[float, Field(ge=0, le=bound, allow_inf_nan=False), OFF]
+def noise_level(bounds: Mapping[str, float], name: str):
+    """The type of a noise level: finite, >= 0 and <= ``bounds[name]`` (its physical bound, from
+    a schema's table of bounds), and 0 accepted outside its ledger range (:data:`OFF`)."""
+    return Annotated[float, Field(ge=0, le=bounds[name], allow_inf_nan=False), OFF]
 
 
 Bound = Annotated[float, Field(allow_inf_nan=False)]

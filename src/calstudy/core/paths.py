@@ -29,6 +29,11 @@ def data_path(*parts: str) -> Path:
     return path
 
 
+def scenario_file(paper: str, name: str, path: str | Path | None = None) -> Path:
+    """``path`` if given, else ``data/<paper>/<name>`` (which must exist)."""
+    return data_path(paper, name) if path in (None, "") else Path(path)
+
+
 def results_path(stem: str, root: str | Path | None = None) -> Path:
     """Folder ``results/<stem>/`` (or ``<root>/<stem>/``), created if missing."""
     base = RESULTS_DIR if root in (None, "") else Path(root)

@@ -175,6 +175,18 @@ Vec2 = Annotated[list[Finite], Field(min_length=2, max_length=2)]
 #: here: a scenario file declares degrees in its key names)
 Degrees = Annotated[float, Field(ge=-360, le=360, allow_inf_nan=False)]
 
+
+
+def _low_high(pair: Sequence[float]) -> Sequence[float]:
+    if pair[0] > pair[1]:
+        raise ValueError(f"{list(pair)} is not [low, high]")
+    return pair
+
+
+#: marks a pair of numbers as a range written ``[low, high]`` (the first not above the second):
+#: ``Annotated[list[Finite], Field(min_length=2, max_length=2), LowHigh]``
+LowHigh = AfterValidator(_low_high)
+
 _DOC_KEY = re.compile(r"^(source|assumption|note|reason)s?$|_(source|assumption|note|reason)s?$")
 
 
@@ -367,36 +379,8 @@ def read_toml(path: str | Path, what: str) -> dict:
 _PARSED: dict[tuple[str, int, int], dict] = {}
 
 
-def check_toml(path: str | Path, model: type[BaseModel], what: str) -> dict:
-    """The TOML table of ``path`` (the ``what``, for messages) after validating it against
-    ``model``: for loaders that go on reading the dict (the numbers stay the bytes of the file).
-    The ``provenance`` entries of the assumption ledger (:mod:`calstudy.core.ledger`) are
-    dropped from it: they describe the inputs and are none themselves."""
-    table = read_toml(path, what)  # a copy of the parsed file, kept by its file_key
-    key = (*file_key(Path(path)), model)
-    if key not in _VALIDATED:
-        validate(model, table, path, study=is_study_file(path))
-        if len(_VALIDATED) >= 64:
-            _VALIDATED.clear()
-        _VALIDATED.add(key)
-    return without_provenance(table)
-
-
-def without_provenance(table: Any) -> Any:
-    """``table`` with the ``provenance`` entry of every (nested) table removed."""
-    if isinstance(table, dict):
-        return {k: without_provenance(v) for k, v in table.items() if k != PROVENANCE}
-    return table
-
-
 #: the key of a table's ledger entries (:mod:`calstudy.core.ledger`)
 PROVENANCE = "provenance"
-
-
-#: (resolved path, modification time, size, model) of the files that passed :func:`check_toml`:
-#: every Monte Carlo trial draws its station from the same files, and validating them costs
-#: more than the rest of the loading (an edited file has a new key, so it is checked again)
-_VALIDATED: set = set()
 
 
 def apply_overrides(table: dict, overrides: Mapping[str, object] | None) -> dict:
@@ -605,6 +589,7 @@ __all__ = [
     "Documented",
     "Finite",
     "Fraction",
+    "LowHigh",
     "MAX_PIXELS",
     "NonNegativeFinite",
     "NonNegativeInt",
@@ -620,7 +605,6 @@ __all__ = [
     "Vec2",
     "Vec3",
     "apply_overrides",
-    "check_toml",
     "file_key",
     "format_errors",
     "is_study_file",
@@ -631,5 +615,4 @@ __all__ = [
     "validate",
     "validate_rows",
     "with_inputs",
-    "without_provenance",
 ]

@@ -28,7 +28,6 @@ from scipy.optimize import least_squares
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.axxb import OPENCV_METHODS, opencv_handeye
-from calstudy.estimators.fitting import fit_rigid
 from calstudy.models.stereo import StereoRig
 
 #: Indices (0-based) of the physical targets averaged into the virtual P7 and P8 (Section 3.2).
@@ -66,8 +65,6 @@ def triangulate(rig: StereoRig, uv_left, uv_right, tol_mm: float = 0.5) -> np.nd
         If the arrays differ in shape or are not finite, ``tol_mm`` is not > 0, or a pair of
         rays misses by more than ``tol_mm`` (a wrong match or a wrong calibration).
     """
-    if not (math.isfinite(tol_mm) and tol_mm > 0):
-        raise CalibrationError(f"ray tolerance tol_mm = {tol_mm} must be a finite number > 0")
     a = geo.check_finite("left image points", uv_left).reshape(-1, 2)
     b = geo.check_finite("right image points", uv_right).reshape(-1, 2)
     if a.shape != b.shape or a.shape[0] == 0:
@@ -429,11 +426,6 @@ def motion_axes(flange2base) -> tuple[np.ndarray, np.ndarray]:
     rv = geo.matrix_to_rotvec(rel)
     angle = np.linalg.norm(rv, axis=1)
     return rv / np.maximum(angle, 1e-300)[:, None], angle
-
-
-def calibrator_pose(layout_points, measured_points) -> np.ndarray:
-    """``calibrator2sensor`` by Kabsch (``fitting.fit_rigid``), layout to measured points."""
-    return fit_rigid(layout_points, measured_points)
 
 
 def preliminary_handeye(flange2base, calibrator2sensor, method: str = "Park") -> np.ndarray:

@@ -21,9 +21,6 @@ from calstudy.core.userfile import (
     read_csv_table,
 )
 
-#: largest orientation spread (rad) accepted among moves that should be pure translations
-
-
 SPHERE_CSV_COLUMNS = ("id", "group", "x", "y", "z", "a", "b", "c", "sx", "sy", "sz")
 SPHERE_CSV_GROUPS = ("translation", "rotation")
 

@@ -33,13 +33,6 @@ MISSING = "—"
 
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
-def header(name: object, unit: str | None = None) -> str:
-    """Column header in words with its unit (:func:`calstudy.core.labels.label`):
-    ``("err_mm", None)`` -> ``"err (mm)"``, ``("err", "mm")`` -> ``"err (mm)"``,
-    ``"within_0p3_pct"`` -> ``"within 0.3 mm (%)"``."""
-    return label(name, unit)
-
-
 def format_value(value: object, digits: int = 4) -> str:
     """One cell as text: floats to ``digits`` significant digits (no ``1e-16`` noise shown as
     more than it is; powers of ten as ``1.2×10⁻⁵``), integers as integers, booleans as yes/no,
@@ -136,25 +129,25 @@ def format_table(
         )
         if n:
             reason = missing.get(col, "no value")
-            notes.append(f"{MISSING} in {header(col, units.get(col))}: {reason} ({n} cell(s))")
+            notes.append(f"{MISSING} in {label(col, units.get(col))}: {reason} ({n} cell(s))")
 
     def column_digits(col) -> int:
         return digits.get(col, 4) if isinstance(digits, Mapping) else int(digits)
 
     text = pd.DataFrame(
         {
-            header(col, units.get(col)): [format_value(v, column_digits(col)) for v in data[col]]
+            label(col, units.get(col)): [format_value(v, column_digits(col)) for v in data[col]]
             for col in data.columns
         }
     )
-    key_headers = [header(k, units.get(k)) for k in keys]
+    key_headers = [label(k, units.get(k)) for k in keys]
     if text.shape[1] <= max_columns:
         return [text], notes
     if key_headers and len(text) + 1 <= max_columns:  # rows become columns, headed by the key
-        label = key_headers[0]
-        flipped = text.set_index(label).T
+        key = key_headers[0]
+        flipped = text.set_index(key).T
         flipped.columns = [str(c) for c in flipped.columns]
-        flipped.insert(0, label, flipped.index)
+        flipped.insert(0, key, flipped.index)
         return [flipped.reset_index(drop=True)], notes
     rest = [c for c in text.columns if c not in key_headers]
     width = max(1, max_columns - len(key_headers))

@@ -372,20 +372,14 @@ def _render_boxes(k, dist, c, n, radius_mm: float, origins, shapes, boxes) -> li
     return [part.reshape(shape) for part, shape in zip(parts, shapes_b, strict=True)]
 
 
-def _undistorted_grid(k, dist, origin, shape, step: int = 8) -> np.ndarray:
-    """Normalised undistorted coordinates ``(rows * cols, 2)`` of the ROI's pixel centres.
+def _undistorted_pixels(k, dist, origins, shapes, step: int = 8, boxes=None):
+    """Normalised undistorted coordinates of the pixel centres of ``m`` ROIs (``shapes``:
+    ``(rows, cols)`` each): ``x`` and ``y``, float32, the ROIs' pixels one after the other (row
+    by row).
 
     The distortion is undone exactly (``cv2.undistortPointsIter``) on a grid every ``step`` px
     and interpolated bilinearly in between: the distortion field is smooth enough that this
-    changes the result by less than 1e-3 px for Table 1's lenses, at a tenth of the cost.
-    """
-    x, y = _undistorted_pixels(k, dist, np.reshape(origin, (1, 2)), [tuple(shape)], step)
-    return np.stack([x, y], axis=-1).astype(np.float64)
-
-
-def _undistorted_pixels(k, dist, origins, shapes, step: int = 8, boxes=None):
-    """:func:`_undistorted_grid` of ``m`` ROIs (``shapes``: ``(rows, cols)`` each): ``x`` and
-    ``y``, float32, the ROIs' pixels one after the other (row by row). One
+    changes the result by less than 1e-3 px for Table 1's lenses, at a tenth of the cost. One
     ``cv2.undistortPointsIter`` call for all grid nodes (each point is undistorted on its own).
     ``boxes``: per ROI, ``(r0, r1, c0, c1)``, the pixels to return (those of the whole ROI's
     interpolation, cut).

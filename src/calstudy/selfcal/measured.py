@@ -48,10 +48,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from calstudy.core.config import require
 from calstudy.core.errors import CalibrationError, CalibrationWarning
-from calstudy.core.geometry import euler_zyx_to_matrix, make_transform, matrix_to_euler_zyx
-from calstudy.core.schema import check_toml
+from calstudy.core.geometry import matrix_to_euler_zyx
+from calstudy.core.schema import load_model
 from calstudy.core.userfile import (
     ANGLE_UNITS,
     LENGTH_UNITS,
@@ -254,22 +253,14 @@ def read_measurements(path, sphere_ids) -> pd.DataFrame:
     return out
 
 
-def _pose_from(table: dict, key: str, source) -> np.ndarray:
-    xyz = np.asarray(require(table, f"{key}.xyz_mm", source), float)
-    zyx = np.asarray(require(table, f"{key}.zyx_deg", source), float)
-    if xyz.shape != (3,) or zyx.shape != (3,) or not np.all(np.isfinite([*xyz, *zyx])):
-        raise CalibrationError(f"{source}: [{key}] xyz_mm and zyx_deg need 3 finite numbers each")
-    return make_transform(euler_zyx_to_matrix(*zyx), xyz)
-
-
-def _robot_from(table: dict, folder: Path, source) -> Robot:
-    name = str(require(table, "robot", source))
+def _robot_from(cell: CellFile, folder: Path, source) -> Robot:
+    name = cell.robot
     if name.endswith(".urdf"):
         path = (folder / name).resolve()
         if not path.is_file():
             raise CalibrationError(f"{source}: robot file {path} does not exist")
-        return robot_from_urdf(path, flange=table.get("flange"))
-    if table.get("flange") is not None:
+        return robot_from_urdf(path, flange=cell.flange)
+    if cell.flange is not None:
         raise CalibrationError(f"{source}: flange names a URDF frame; the robot is not a URDF")
     if name.endswith(".toml"):
         path = (folder / name).resolve()
@@ -277,19 +268,6 @@ def _robot_from(table: dict, folder: Path, source) -> Robot:
             raise CalibrationError(f"{source}: robot file {path} does not exist")
         return load_robot(path)  # the cell's own table, read in place
     return load_robot(name)
-
-
-def _noise(table: dict, source) -> dict | None:
-    noise = table.get("noise")
-    if noise is None:
-        return None
-    out = {}
-    for key in ("sensor_mm", "repeatability_mm", "tracker_mm"):
-        value = float(require(table, f"noise.{key}", source))
-        if not math.isfinite(value) or value < 0:
-            raise CalibrationError(f"{source}: [noise] {key} = {value} must be >= 0 and finite")
-        out[key] = value
-    return out
 
 
 def _measurements(rows: pd.DataFrame, noise: dict | None, readings: np.ndarray) -> Measurements:
@@ -413,12 +391,12 @@ def read_cell(folder) -> MeasuredCell:
     """
     folder = Path(folder)
     cell_path = folder / CELL_FILE
-    table = check_toml(cell_path, CellFile, "cell description")
-    robot = _robot_from(table, folder, cell_path)
-    part2base = _pose_from(table, "base", cell_path)
-    sensor2flange = _pose_from(table, "sensor", cell_path)
+    cell = load_model(cell_path, CellFile, "cell description")
+    robot = _robot_from(cell, folder, cell_path)
+    part2base = cell.base.transform
+    sensor2flange = cell.sensor.transform
     start = parameters_from_robot(robot, part2base, sensor2flange)
-    noise = _noise(table, cell_path)
+    noise = None if cell.noise is None else cell.noise.model_dump()
     sphere_ids, readings = read_spheres(folder / SPHERES_FILE)
     rows = read_measurements(folder / MEASUREMENTS_FILE, sphere_ids)
     sets = {s: rows[rows["set"] == s] for s in SETS}
@@ -436,14 +414,8 @@ def read_cell(folder) -> MeasuredCell:
         str(folder),
         part2base,
         sensor2flange,
-        _sensor_geometry(table),
+        cell.sensor.geometry,
     )
-
-
-def _sensor_geometry(table: dict) -> dict | None:
-    keys = ("standoff_mm", "field_mm", "depth_mm")
-    found = {k: float(table["sensor"][k]) for k in keys if table["sensor"].get(k) is not None}
-    return found or None
 
 
 # ----------------------------------------------------------------------------------------------

@@ -35,7 +35,7 @@ CASES = [
     ("offsets and groups differ", "placement_offsets_mm = [-120.0, 0.0, 120.0]",
      "placement_offsets_mm = [-120.0, 0.0]", r"2 placement_offsets_mm for n_groups = 3"),
     ("outlier range reversed", "outlier_px = [5.0, 20.0]", "outlier_px = [20.0, 5.0]",
-     r"outlier_px = \[20\.0, 5\.0\] is not \[low, high\]"),
+     r"circular_plate\.outlier_px = \[20\.0, 5\.0\]: \[20\.0, 5\.0\] is not \[low, high\]"),
     ("outlier rate above 1", "outlier_rate = 0.05", "outlier_rate = 5",
      r"circular_plate\.outlier_rate = 5: must be >= 0 and <= 1"),
     ("rotation vector of 2", "cam2flange_1_rotvec = [0.133, 0.139, -1.568]",

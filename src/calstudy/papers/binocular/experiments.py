@@ -30,6 +30,7 @@ from calstudy.core.montecarlo import Experiment, child_rng, one_opencv_thread, s
 from calstudy.core.stats import rmse
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import detect_centre
+from calstudy.estimators.fitting import fit_rigid
 from calstudy.papers.binocular.scenario import Scenario, load_scenario, paper_table
 from calstudy.papers.binocular.simulate import (
     Imaging,
@@ -164,7 +165,7 @@ def transformation_figures(scenario, state, flange, vflange, p7_standard: float)
     points alone: they are fitted once per ``state`` and kept in it."""
     if "poses" not in state:
         state["poses"] = np.array(
-            [bino.calibrator_pose(scenario.layout[:6], r[:6]) for r in state["raw8"]]
+            [fit_rigid(scenario.layout[:6], r[:6]) for r in state["raw8"]]
         )
     poses = state["poses"]
     pre = bino.preliminary_handeye(flange, poses)
@@ -297,7 +298,7 @@ def field_trial(setup: Setup, rng) -> dict:
     raw, rect = cal.points(model, tol)
     rect8 = bino.with_virtual(rect)
     state = {"raw8": bino.with_virtual(raw), "rect8": rect8, "mod8": _modify(world, rect8)}
-    poses = np.array([bino.calibrator_pose(scenario.layout[:6], r[:6]) for r in state["raw8"]])
+    poses = np.array([fit_rigid(scenario.layout[:6], r[:6]) for r in state["raw8"]])
     pre = bino.preliminary_handeye(cal.flange2base, poses)
     upd, _ = bino.correct_transformation(cal.flange2base, pre, state["rect8"], state["mod8"])
     regions = [
@@ -476,7 +477,7 @@ def handeye_chain(scenario, world: World, cal: Views, sharp: Views, model, tol: 
     shifts, depths = np.concatenate(shifts), np.concatenate(depths)
     true_poses = [geo.invert(s) @ scenario.calibrator2base for s in cal.sensor2base]
     poses = {
-        label: np.array([bino.calibrator_pose(scenario.layout[:6], p) for p in pts])
+        label: np.array([fit_rigid(scenario.layout[:6], p) for p in pts])
         for label, pts in (("preliminary", raw), ("sharp", sharp_raw))
     }
     pose_err = [

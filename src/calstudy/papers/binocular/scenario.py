@@ -14,19 +14,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from functools import cached_property, lru_cache
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 from pydantic import ConfigDict
 
 from calstudy.core import geometry as geo
-from calstudy.core.config import scenario_file
 from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import scenario_file
 from calstudy.core.schema import (
     Schema,
     apply_overrides,
-    file_key,
     is_study_file,
     load_model,
     read_toml,
@@ -282,14 +281,7 @@ def paper_table(name: str) -> SensorFile | CalibratorFile | StationFile:
     if name not in SCHEMAS:
         raise CalibrationError(f"no binocular table {name!r}; the tables are {', '.join(TABLES)}")
     path = scenario_file(PAPER, f"{name}.toml")
-    return _paper_file(name, path, file_key(path))
-
-
-@lru_cache(maxsize=len(TABLES))
-def _paper_file(name: str, path: Path, key: tuple) -> SensorFile | CalibratorFile | StationFile:
-    """The validated file (``key``: :func:`calstudy.core.schema.file_key`; a trial reads the
-    paper's names again and again, and an edited file has a new key)."""
-    return load_model(path, SCHEMAS[name], f"binocular {name} table")
+    return load_model(path, SCHEMAS[name], f"binocular {name} table")  # kept by its file key
 
 
 def published(name: str, key: str):

@@ -85,11 +85,6 @@ NOISE_BOUNDS = {
 }
 
 
-def _noise(bound: str):
-    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
-    return noise_level(NOISE_BOUNDS[bound])
-
-
 def _metres(values, what: str) -> None:
     """ValueError if the lengths ``values`` (mm) all lie below :data:`METRES_SUSPECT_MM`."""
     size = float(np.max(np.abs(np.asarray(values, dtype=float))))
@@ -228,18 +223,18 @@ class Exposure(Inputs):
 class Noise(Inputs):
     """The ``[noise]`` table of data/binocular/sensor.toml."""
 
-    read_noise_dn: _noise("read_noise_dn")
+    read_noise_dn: noise_level(NOISE_BOUNDS, "read_noise_dn")
     electrons_per_dn: PositiveFinite
 
 
 class CalibrationUncertainty(Inputs):
     """The ``[calibration_uncertainty]`` table of data/binocular/sensor.toml."""
 
-    focal_px: _noise("calibration_px")
-    principal_point_px: _noise("calibration_px")
-    k1: _noise("k1")
-    extrinsic_rotation_rad: _noise("extrinsic_rad")
-    extrinsic_translation_mm: _noise("extrinsic_mm")
+    focal_px: noise_level(NOISE_BOUNDS, "calibration_px")
+    principal_point_px: noise_level(NOISE_BOUNDS, "calibration_px")
+    k1: noise_level(NOISE_BOUNDS, "k1")
+    extrinsic_rotation_rad: noise_level(NOISE_BOUNDS, "extrinsic_rad")
+    extrinsic_translation_mm: noise_level(NOISE_BOUNDS, "extrinsic_mm")
 
 
 class Detection(Inputs):
@@ -328,14 +323,14 @@ class Standard(Inputs):
 class Cmm(Inputs):
     """The ``[cmm]`` table of data/binocular/calibrator.toml: sigma = a + b L."""
 
-    sigma_um: _noise("reference_um")
-    sigma_um_per_m: _noise("reference_um")
+    sigma_um: noise_level(NOISE_BOUNDS, "reference_um")
+    sigma_um_per_m: noise_level(NOISE_BOUNDS, "reference_um")
 
 
 class Sbr(Inputs):
     """The ``[sbr]`` table of data/binocular/calibrator.toml."""
 
-    dot_centring_um: _noise("dot_centring_um")
+    dot_centring_um: noise_level(NOISE_BOUNDS, "dot_centring_um")
     dot_diameter_mm: PositiveFinite
 
 
@@ -419,14 +414,14 @@ class RobotTable(Inputs):
     """The ``[robot]`` table of data/binocular/station.toml."""
 
     model: Name
-    repeatability_mm: _noise("repeatability_mm")
+    repeatability_mm: noise_level(NOISE_BOUNDS, "repeatability_mm")
 
 
 class Tracker(Inputs):
     """The ``[laser_tracker]`` table of data/binocular/station.toml: sigma = a + b L."""
 
-    sigma_um: _noise("reference_um")
-    sigma_um_per_m: _noise("reference_um")
+    sigma_um: noise_level(NOISE_BOUNDS, "reference_um")
+    sigma_um_per_m: noise_level(NOISE_BOUNDS, "reference_um")
 
 
 Five = Annotated[list[PositiveFinite], Field(min_length=5, max_length=5)]

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-from calstudy.core.config import scenario_file
+from calstudy.core.paths import scenario_file
 from calstudy.core.schema import load_model
 from calstudy.papers.dualarm.schema import PublishedFile, Scenario
 

@@ -34,6 +34,7 @@ from calstudy.core.schema import (
     Documented,
     Finite,
     Fraction,
+    LowHigh,
     NonNegativeFinite,
     Pixels,
     PositiveFinite,
@@ -81,11 +82,6 @@ NOISE_BOUNDS = {
 }
 
 
-def _noise(bound: str):
-    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
-    return noise_level(NOISE_BOUNDS[bound])
-
-
 #: a rotation vector (rad), at most half a turn beyond pi
 RotVec = Annotated[
     list[Annotated[float, Field(ge=-7, le=7, allow_inf_nan=False)]],
@@ -131,7 +127,7 @@ class Stereo(Inputs):
 class Sensor(Inputs):
     """The ``[sensor]`` table of data/dualarm/scenario.toml."""
 
-    point_sigma_mm: _noise("point_mm")
+    point_sigma_mm: noise_level(NOISE_BOUNDS, "point_mm")
     #: a sphere fit needs at least 4 points
     points_per_scan: Annotated[int, Field(ge=4, le=MAX_POINTS)]
     max_incidence_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
@@ -143,10 +139,10 @@ class Sensor(Inputs):
 class Detection(Inputs):
     """The ``[detection]`` table of data/dualarm/scenario.toml."""
 
-    sigma_px: _noise("px")
+    sigma_px: noise_level(NOISE_BOUNDS, "px")
     #: radius of a coded marker's centre circle (its perspective bias grows with radius^2)
     marker_radius_mm: Annotated[float, Field(ge=0, le=50, allow_inf_nan=False)]
-    marker_sigma_mm: _noise("marker_mm")
+    marker_sigma_mm: noise_level(NOISE_BOUNDS, "marker_mm")
     #: the probability that a visible marker is lost in an image
     loss_rate: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
     max_view_angle_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
@@ -224,10 +220,10 @@ class Layout(Inputs):
 class Robot(Inputs):
     """The ``[robot]`` table of data/dualarm/scenario.toml."""
 
-    repeat_sigma_mm: _noise("repeat_mm")
-    repeat_sigma_deg: _noise("repeat_deg")
-    drift_step_sigma_mm: _noise("drift_mm")
-    drift_step_sigma_deg: _noise("drift_deg")
+    repeat_sigma_mm: noise_level(NOISE_BOUNDS, "repeat_mm")
+    repeat_sigma_deg: noise_level(NOISE_BOUNDS, "repeat_deg")
+    drift_step_sigma_mm: noise_level(NOISE_BOUNDS, "drift_mm")
+    drift_step_sigma_deg: noise_level(NOISE_BOUNDS, "drift_deg")
 
     repeat_sigma_rad = Radians("repeat_sigma_deg")
     #: the drift steps (mm, rad) of a sweep point, the file's scaled (:meth:`scaled_drift`)
@@ -341,20 +337,13 @@ class CircularPlate(Inputs):
     tilt_deg: Tilt
     jitter_deg: Tilt
     outlier_rate: Fraction
-    outlier_px: Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2)]
+    outlier_px: Annotated[list[NonNegativeFinite], Field(min_length=2, max_length=2), LowHigh]
     #: where the plate lies: (x, y) mm from the point between the marker groups, on the table
     offset_mm: Annotated[list[Finite], Field(min_length=2, max_length=2)]
     ransac_threshold_px: PositiveFinite
 
     tilt = Radians("tilt_deg")
     jitter = Radians("jitter_deg")
-
-    @model_validator(mode="after")
-    def _range(self) -> CircularPlate:
-        lo, hi = self.outlier_px
-        if lo > hi:
-            raise ValueError(f"outlier_px = {self.outlier_px} is not [low, high]")
-        return self
 
 
 class Icp(Inputs):

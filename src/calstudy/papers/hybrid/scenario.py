@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calstudy.core.config import scenario_file
 from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import scenario_file
 from calstudy.core.schema import Schema, load_model
 from calstudy.estimators.workpiece import RPS_EQUATIONS
 from calstudy.papers.hybrid.schema import ProductionFile, PublishedFile, StationFile

@@ -30,6 +30,7 @@ from calstudy.core.schema import (
     Degrees,
     Documented,
     Finite,
+    LowHigh,
     NonNegativeFinite,
     Pinhole,
     PositiveFinite,
@@ -72,11 +73,6 @@ NOISE_BOUNDS = {
 }
 
 
-def _noise(bound: str):
-    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
-    return noise_level(NOISE_BOUNDS[bound])
-
-
 def _frozen(array: np.ndarray) -> np.ndarray:
     """``array`` made read-only: a derived array of a (shared, frozen) scenario."""
     array.flags.writeable = False
@@ -105,7 +101,7 @@ class HandEye(Inputs):
 
 class Robot(Inputs):
     """The ``[robot]`` table of data/hybrid/station.toml."""
-    repeatability_mm: _noise("repeatability_mm")
+    repeatability_mm: noise_level(NOISE_BOUNDS, "repeatability_mm")
 
 
 class Sensor(Inputs):
@@ -114,7 +110,7 @@ class Sensor(Inputs):
     #: the stripe must fall on the sphere: |y| = fraction * R with 0 <= fraction < 1
     stripe_offset_fraction: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
     #: the flexible sensor's stripe (calstudy.models.sensors.LineLaserSensor)
-    sigma_point_mm: _noise("sensor_mm")
+    sigma_point_mm: noise_level(NOISE_BOUNDS, "sensor_mm")
     #: a circle fit needs at least 3 points
     n_points: Annotated[int, Field(ge=3, le=MAX_FEATURES * 100)]
     arc_half_angle_deg: Annotated[float, Field(gt=0, lt=90, allow_inf_nan=False)]
@@ -150,7 +146,7 @@ class Moves(Inputs):
 
 class Cameras(Pinhole, Inputs):
     """The ``[cameras]`` table of data/hybrid/station.toml: the sensors' pinhole camera."""
-    pixel_sigma: _noise("pixel")
+    pixel_sigma: noise_level(NOISE_BOUNDS, "pixel")
     #: the values of the hole-centre noise swept by notebook 01
     pixel_sigmas: Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
@@ -164,8 +160,8 @@ class Cameras(Pinhole, Inputs):
 
 class Target(Inputs):
     """The ``[target]`` table of data/hybrid/station.toml."""
-    cmm_sigma_mm: _noise("cmm_mm")
-    cmm_sigma_deg: _noise("cmm_deg")
+    cmm_sigma_mm: noise_level(NOISE_BOUNDS, "cmm_mm")
+    cmm_sigma_deg: noise_level(NOISE_BOUNDS, "cmm_deg")
 
 
 class Stationary(Inputs):
@@ -176,8 +172,8 @@ class Stationary(Inputs):
         Field(max_length=MAX_SENSORS),
     ]
     #: mounting tolerance of a sensor on the fixture (3 sigma per axis), mm and deg
-    mounting_tolerance_mm: _noise("mounting_mm")
-    mounting_tolerance_deg: _noise("mounting_deg")
+    mounting_tolerance_mm: noise_level(NOISE_BOUNDS, "mounting_mm")
+    mounting_tolerance_deg: noise_level(NOISE_BOUNDS, "mounting_deg")
 
     @cached_property
     def design(self) -> np.ndarray:
@@ -207,9 +203,9 @@ class Workpiece(Inputs):
     datum_A_slot_mm: Vec3
     datum_B_hole_mm: Vec3
     datum_C_plane_mm: Vec3
-    placement_sigma_mm: _noise("tolerance_mm")
-    placement_sigma_deg: _noise("placement_deg")
-    datum_sigma_mm: _noise("sensor_mm")
+    placement_sigma_mm: noise_level(NOISE_BOUNDS, "tolerance_mm")
+    placement_sigma_deg: noise_level(NOISE_BOUNDS, "placement_deg")
+    datum_sigma_mm: noise_level(NOISE_BOUNDS, "sensor_mm")
     free_direction_mm: NonNegativeFinite
 
     @cached_property
@@ -301,22 +297,22 @@ class Protocol(Inputs):
 
 class Variation(Inputs):
     """The ``[variation]`` table of data/hybrid/production.toml."""
-    part_sigma_mm: _noise("tolerance_mm")
+    part_sigma_mm: noise_level(NOISE_BOUNDS, "tolerance_mm")
 
 
 class FeatureNoise(Inputs):
     """The ``[sensors]`` table of data/hybrid/production.toml."""
-    feature_sigma_mm: _noise("sensor_mm")
+    feature_sigma_mm: noise_level(NOISE_BOUNDS, "sensor_mm")
 
 
 class CmmNoise(Inputs):
     """The ``[cmm]`` table of data/hybrid/production.toml."""
-    sigma_mm: _noise("cmm_mm")
+    sigma_mm: noise_level(NOISE_BOUNDS, "cmm_mm")
 
 
 class Drift(Inputs):
     """The ``[drift]`` table of data/hybrid/production.toml."""
-    sigma_mm: _noise("tolerance_mm")
+    sigma_mm: noise_level(NOISE_BOUNDS, "tolerance_mm")
 
 
 Sweep = Annotated[list[NonNegativeFinite], Field(min_length=1)]
@@ -429,14 +425,9 @@ def _ascending(values: tuple) -> tuple:
 class Systematic(Documented):
     """The ``[systematic]`` table of data/hybrid/published.toml."""
 
-    range_mm: Annotated[tuple[NonNegativeFinite, ...], Field(min_length=2, max_length=2), Row]
-
-    @field_validator("range_mm")
-    @classmethod
-    def _range(cls, value: tuple) -> tuple:
-        if value[0] > value[1]:
-            raise ValueError(f"{list(value)} is not [low, high]")
-        return value
+    range_mm: Annotated[
+        tuple[NonNegativeFinite, ...], Field(min_length=2, max_length=2), Row, LowHigh
+    ]
 
 
 class Table1(Documented):

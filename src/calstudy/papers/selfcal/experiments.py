@@ -35,10 +35,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calstudy.core.config import read_toml, scenario_file
 from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
-from calstudy.core.schema import with_inputs
+from calstudy.core.paths import scenario_file
+from calstudy.core.schema import read_toml, with_inputs
 from calstudy.papers.selfcal.routes import (
     hand_eye,
     three_step,

@@ -10,7 +10,6 @@ cell.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import textwrap
 
@@ -350,11 +349,6 @@ def claim_rows(verdicts: dict, scenario: Scenario, notebook: str) -> list[ClaimR
 def controls_rows(verdicts: dict) -> list[dict]:
     """The rows of ``controls.csv`` (claims with controls only)."""
     return [row for cid, judged in verdicts.items() for row in control_rows(cid, judged)]
-
-
-def claims_frame(rows: list[ClaimRow]) -> pd.DataFrame:
-    """The claim rows as a table, for display."""
-    return pd.DataFrame([dataclasses.asdict(r) for r in rows])
 
 
 # ----------------------------------------------------------------------------------------------

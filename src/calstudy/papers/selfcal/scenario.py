@@ -23,9 +23,8 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field, model_validator
 
-from calstudy.core.config import scenario_file
-from calstudy.core.geometry import euler_zyx_to_matrix, make_transform
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
+from calstudy.core.paths import scenario_file
 from calstudy.core.schema import (
     Degrees,
     Documented,
@@ -38,7 +37,7 @@ from calstudy.core.schema import (
 from calstudy.models.kinematics import Robot
 from calstudy.models.reach import reach_bound
 from calstudy.models.robots import load_robot
-from calstudy.selfcal.cellfile import RobotName
+from calstudy.selfcal.cellfile import RobotName, zyx_pose
 
 #: a half-angle of a cone, degrees
 HalfAngle = Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
@@ -61,15 +60,10 @@ NOISE_BOUNDS = {
 MAX_SPHERES, MAX_VIEWS, MAX_PLACEMENTS, MAX_POINTS = 50, 100, 1000, 100_000
 
 
-def _noise(bound: str):
-    """A noise level bounded by ``NOISE_BOUNDS[bound]`` (``core.ledger.noise_level``)."""
-    return noise_level(NOISE_BOUNDS[bound])
-
-
 class Repeatability(Inputs):
     """The ``[repeatability]`` table of data/selfcal/scenario.toml."""
 
-    sigma_mm: _noise("repeatability_mm")
+    sigma_mm: noise_level(NOISE_BOUNDS, "repeatability_mm")
 
 
 class Base(Inputs):
@@ -83,7 +77,7 @@ class Base(Inputs):
     @cached_property
     def rough(self) -> np.ndarray:
         """``part2base`` (4, 4) of the layout drawing, mm."""
-        return _pose(self.rough_xyz_mm, self.rough_zyx_deg)
+        return zyx_pose(self.rough_xyz_mm, self.rough_zyx_deg)
 
 
 class SensorMount(Inputs):
@@ -97,7 +91,7 @@ class SensorMount(Inputs):
     @cached_property
     def design(self) -> np.ndarray:
         """``sensor2flange`` (4, 4) of the bracket drawing, mm."""
-        return _pose(self.design_xyz_mm, self.design_zyx_deg)
+        return zyx_pose(self.design_xyz_mm, self.design_zyx_deg)
 
 
 class PoorStart(Inputs):
@@ -146,15 +140,15 @@ class Scanner(Inputs):
     cap_half_angle_deg: HalfAngle
     #: a sphere fit (centre and radius) needs at least 4 points
     points_per_cap: Annotated[int, Field(ge=4, le=MAX_POINTS)]
-    sigma_point_mm: _noise("point_mm")
+    sigma_point_mm: noise_level(NOISE_BOUNDS, "point_mm")
     max_fit_condition: Annotated[float, Field(ge=1, allow_inf_nan=False)]
 
 
 class Tracker(Inputs):
     """The ``[tracker]`` table of data/selfcal/scenario.toml."""
 
-    u0_mm: _noise("tracker_mm")
-    u1_mm_per_m: _noise("tracker_mm_per_m")
+    u0_mm: noise_level(NOISE_BOUNDS, "tracker_mm")
+    u1_mm_per_m: noise_level(NOISE_BOUNDS, "tracker_mm_per_m")
     coverage: PositiveFinite
 
 
@@ -254,10 +248,6 @@ class Scenario(Ledgered, Inputs):
                 "beyond its reach, for every view at the scanner's standoff: no sphere placed "
                 "there can be measured"
             )
-
-
-def _pose(xyz, zyx_deg) -> np.ndarray:
-    return make_transform(euler_zyx_to_matrix(*zyx_deg), np.asarray(xyz, float))
 
 
 def load_scenario(
