@@ -12,6 +12,7 @@ import pytest
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators import binocular as bino
+from calstudy.estimators.fitting import fit_rigid
 from calstudy.papers.binocular import simulate as sim
 from calstudy.papers.binocular.scenario import load_scenario
 
@@ -43,7 +44,7 @@ def test_noise_free_pipeline_returns_the_standard_distances(scenario):
 
 def test_noise_free_handeye_to_1e9(scenario):
     flange, points = exact_views(scenario)
-    poses = np.array([bino.calibrator_pose(scenario.layout[:6], p) for p in points])
+    poses = np.array([fit_rigid(scenario.layout[:6], p) for p in points])
     pre = bino.preliminary_handeye(flange, poses)
     assert geo.rotation_error(pre, scenario.sensor2flange) < 1e-9
     assert geo.translation_error(pre, scenario.sensor2flange) < 1e-9
