@@ -54,6 +54,10 @@ def test_tables(calib):
         report_sweeps.sweep_verdicts(calib, compliance, "compliance_scale", own, sc),
         "compliance_verdicts",
     )
+    arm, arm_own = _trials("arm_weight_sweep"), sc.compliance.arm_weight_fraction
+    key = "arm_weight_fraction"
+    _compare(report_sweeps.sweep_table(calib, arm, key, arm_own), "arm_weight_sweep")
+    _compare(report_sweeps.sweep_verdicts(calib, arm, key, arm_own, sc), "arm_weight_verdicts")
     noise = _trials("noise_sweep")
     _compare(report_sweeps.sweep_table(calib, noise, "noise_scale", 1.0), "noise_sweep")
     _compare(report_sweeps.sweep_verdicts(calib, noise, "noise_scale", 1.0, sc), "noise_verdicts")
@@ -82,10 +86,26 @@ def test_compliance_sweep_judges_all_five_claims_at_every_scale(calib):
     assert (comparisons["null_control"] == "not reproduced").all()
 
 
+def _conditions(calib, sc):
+    """The conditions stated beside the verdicts, from the committed sweep trials."""
+    basin = report.basin_table(_trials("basin"), sc.published.convergence_iterations)
+    compliance = report_sweeps.sweep_verdicts(
+        calib, _trials("compliance_sweep"), "compliance_scale", sc.compliance.scale, sc
+    )
+    arm = report_sweeps.sweep_verdicts(
+        calib,
+        _trials("arm_weight_sweep"),
+        "arm_weight_fraction",
+        sc.compliance.arm_weight_fraction,
+        sc,
+    )
+    return report_sweeps.claim_conditions(sc, basin, compliance, arm)
+
+
 def test_claims_and_controls(calib):
     sc = load_scenario()
     verdicts = report.selfcal_verdicts(calib, sc)
-    rows = report.claim_rows(verdicts, sc, STEM)
+    rows = report.claim_rows(verdicts, sc, STEM, _conditions(calib, sc))
     claims = claims_table(rows)
     _compare(claims, "claims")
     controls = pd.DataFrame(report.controls_rows(verdicts), columns=list(CONTROL_COLUMNS))

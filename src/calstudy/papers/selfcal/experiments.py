@@ -9,7 +9,7 @@ rebuild it from ``experiments.json`` and recompute stored trials:
   very poor start) and by every multi-step route, and validates each on 10 new placements,
   beside the two controls (nothing identified; the true parameters).
 - :func:`compliance_sweep_experiment`: the same trial at several sizes of the unmodelled joint
-  compliance.
+  compliance; :func:`arm_weight_sweep_experiment`: with the arm's own weight on the joints.
 - :func:`noise_sweep_experiment`: the same trial with all noise scaled.
 - :func:`basin_experiment`: :func:`basin_trial`, convergence from starts farther and farther away.
 - :func:`pose_selection_experiment`: :func:`pose_selection_trial`, D-optimal against random
@@ -295,6 +295,7 @@ def calibration_trial(
     rng: np.random.Generator,
     compliance_scale: float | None = None,
     noise_scale: float = 1.0,
+    arm_weight_fraction: float | None = None,
 ) -> list[dict]:
     """One simulated calibration, identified every way and validated; one row per method.
 
@@ -324,6 +325,8 @@ def calibration_trial(
             "tracker.u1_mm_per_m": scenario.tracker.u1_mm_per_m * noise_scale,
         }
         scenario = with_inputs(scenario, changes)
+    if arm_weight_fraction is not None:
+        scenario = with_inputs(scenario, {"compliance.arm_weight_fraction": arm_weight_fraction})
     scale = scenario.compliance.scale if compliance_scale is None else compliance_scale
     st, meas, val = _cell(scenario, rng, scale)
     good = identify(meas, st.nominal_params, max_evaluations=MAX_EVALUATIONS)
@@ -386,6 +389,16 @@ def compliance_sweep_experiment(scenario_toml: str = "", n_trials: int = 30) -> 
     scales = [s for s in sc.compliance.sweep_scales if s != sc.compliance.scale]
     points = [{"compliance_scale": float(s)} for s in scales]
     return _experiment("compliance_sweep", calibration_trial, scenario_toml, n_trials, points)
+
+
+def arm_weight_sweep_experiment(scenario_toml: str = "", n_trials: int = 30) -> Experiment:
+    """:func:`calibration_trial` with the share of the arm's own weight on the joints at each
+    value of the scenario's ``arm_weight_sweep`` other than its own (that point is
+    :func:`calibration_experiment`), the payload's compliance at the scenario's scale."""
+    sc = _scenario(scenario_toml)
+    own = sc.compliance.arm_weight_fraction
+    points = [{"arm_weight_fraction": float(f)} for f in sc.compliance.arm_weight_sweep if f != own]
+    return _experiment("arm_weight_sweep", calibration_trial, scenario_toml, n_trials, points)
 
 
 def noise_sweep_experiment(

@@ -6,7 +6,8 @@ five claims per sweep value), :func:`sweep_verdicts` (the five verdicts by the v
 their controls, at every sweep value), :func:`sweep_sentences` (what the sweep does to each
 verdict, as text for the chapter), :func:`verdict_grid` (the verdicts as a compact table),
 :func:`sweep_figure`; and in words for the chapter: :func:`condition_sentence` (up to which
-value of a sweep a verdict holds), :func:`basin_sentence` and :func:`basin_condition` (the basin
+value of a sweep a verdict holds) and :func:`claim_conditions` (the conditions stated beside the
+verdicts), :func:`basin_sentence` and :func:`basin_condition` (the basin
 of convergence, and up to which start error the published count holds),
 :func:`route_sentence`, :func:`best_route_sentence` and :func:`refit_sentence` (the route
 comparison, and what a refit of the two-step result on all equations does),
@@ -325,6 +326,46 @@ def basin_condition(table: pd.DataFrame, bound: float, scenario: Scenario, share
     else:
         text += ", the farthest swept"
     return text + tail
+
+
+#: the claims whose verdicts the compliance and arm-weight sweeps condition
+SWEPT_CLAIMS = (
+    "selfcal.identification",
+    "selfcal.robot_params",
+    "selfcal.residual",
+    "selfcal.one_step",
+)
+
+
+def claim_conditions(
+    scenario: Scenario,
+    basin: pd.DataFrame,
+    compliance_verdicts: pd.DataFrame,
+    arm_verdicts: pd.DataFrame,
+) -> dict[str, str]:
+    """The condition stated beside each verdict in ``claims.csv``: for the convergence claim the
+    start error up to which it holds (:func:`basin_condition` of the basin table), for the
+    others the size of the unmodelled joint compliance and the share of the arm's own weight up
+    to which they hold (:func:`condition_sentence` of the two sweeps' verdicts)."""
+    out = {
+        "selfcal.convergence": basin_condition(
+            basin, scenario.published.convergence_iterations, scenario
+        )
+    }
+    c = scenario.compliance
+    for cid in SWEPT_CLAIMS:
+        payload = condition_sentence(
+            compliance_verdicts, "compliance_scale", cid, c.scale, "compliance scale"
+        )
+        arm = condition_sentence(
+            arm_verdicts,
+            "arm_weight_fraction",
+            cid,
+            c.arm_weight_fraction,
+            "share of the arm's weight",
+        )
+        out[cid] = f"unmodelled joint compliance: {payload}; arm's own weight: {arm}"
+    return out
 
 
 def refit_sentence(calib: pd.DataFrame) -> str:
