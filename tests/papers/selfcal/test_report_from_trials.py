@@ -117,3 +117,17 @@ def test_every_null_control_fails(calib):
     for cid, (_, null, _) in verdicts.items():
         if null is not None:
             assert null.verdict == "not reproduced", cid
+
+
+def test_arm_weight_sweep_covers_its_range(calib):
+    """Every share of the arm's weight in the scenario's sweep has >= 30 trials and a verdict
+    for each claim; the share's range in the ledger is covered end to end."""
+    sc = load_scenario()
+    key = "arm_weight_fraction"
+    table = report_sweeps.sweep_verdicts(
+        calib, _trials("arm_weight_sweep"), key, sc.compliance.arm_weight_fraction, sc
+    )
+    assert sorted(set(table[key])) == sorted(sc.compliance.arm_weight_sweep)
+    assert min(table[key]) == 0.0 and max(table[key]) == 1.0
+    assert (table.groupby(key)["claim"].nunique() == 5).all()
+    assert (table["n"] >= 30).all()
