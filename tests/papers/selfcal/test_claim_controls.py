@@ -27,7 +27,12 @@ from calstudy.papers.selfcal.experiments import (
     robot_tolerance,
 )
 from calstudy.papers.selfcal.routes import refit
-from calstudy.papers.selfcal.simulate import draw_placements, simulate
+from calstudy.papers.selfcal.simulate import (
+    draw_placements,
+    joint_deflection,
+    link_gravity_torques,
+    simulate,
+)
 from calstudy.selfcal.model import (
     BASE,
     IS_LENGTH,
@@ -260,3 +265,43 @@ def test_conditions_are_stated_beside_the_verdict(scenario, calib):
     assert by["selfcal.residual"].note.endswith("; holds up to compliance scale 2")
     assert by["selfcal.residual"].note.startswith(verdicts["selfcal.residual"].claim.note)
     assert by["selfcal.one_step"].note == verdicts["selfcal.one_step"].claim.note
+
+
+# ----------------------------------------------------------------------------------------------
+# the arm's own weight
+
+
+def _potential(robot, q, masses):
+    """Potential energy (J) of point masses at the links' midpoints, heights along base z."""
+    frames = [robot.base]
+    for link, angle in zip(robot.links, q, strict=True):
+        frames.append(frames[-1] @ link.transform(angle))
+    z = np.array([f[2, 3] for f in frames])
+    return float(np.sum(np.asarray(masses) * 9.81 * 0.5 * (z[:-1] + z[1:]))) / 1000.0
+
+
+def test_link_gravity_torques_are_minus_the_gradient_of_the_potential(scenario):
+    robot = scenario.nominal_robot
+    masses = scenario.compliance.link_masses_kg
+    q = np.array([0.4, 0.3, -0.2, 0.5, -0.8, 0.3])
+    torque = link_gravity_torques(robot, q, masses)
+    h = 1e-6
+    gradient = [
+        (_potential(robot, q + h * e, masses) - _potential(robot, q - h * e, masses)) / (2 * h)
+        for e in np.eye(6)
+    ]
+    np.testing.assert_allclose(torque, -np.array(gradient), atol=1e-4)
+    assert abs(torque[0]) < 1e-9 and abs(torque[1]) > 100.0  # vertical axis 1; loaded axis 2
+
+
+def test_arm_weight_share_switches_the_deflection(scenario):
+    robot = scenario.nominal_robot
+    q = np.array([[0.2, 0.3, -0.1, 0.0, -0.8, 0.0]])
+    payload_only = joint_deflection(scenario, robot, q, 1.0)
+    half = with_inputs(scenario, {"compliance.arm_weight_fraction": 0.5})
+    full = with_inputs(scenario, {"compliance.arm_weight_fraction": 1.0})
+    extra_half = joint_deflection(half, robot, q, 1.0) - payload_only
+    extra_full = joint_deflection(full, robot, q, 1.0) - payload_only
+    assert scenario.compliance.arm_weight_fraction == 0.0
+    assert np.abs(extra_full[0, 1]) > 2 * np.abs(payload_only[0, 1])
+    np.testing.assert_allclose(extra_full, 2 * extra_half, rtol=1e-12)
