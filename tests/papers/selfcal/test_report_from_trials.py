@@ -54,6 +54,10 @@ def test_tables(calib):
         report_sweeps.sweep_verdicts(calib, compliance, "compliance_scale", own, sc),
         "compliance_verdicts",
     )
+    arm, arm_own = _trials("arm_weight_sweep"), sc.compliance.arm_weight_fraction
+    key = "arm_weight_fraction"
+    _compare(report_sweeps.sweep_table(calib, arm, key, arm_own), "arm_weight_sweep")
+    _compare(report_sweeps.sweep_verdicts(calib, arm, key, arm_own, sc), "arm_weight_verdicts")
     noise = _trials("noise_sweep")
     _compare(report_sweeps.sweep_table(calib, noise, "noise_scale", 1.0), "noise_sweep")
     _compare(report_sweeps.sweep_verdicts(calib, noise, "noise_scale", 1.0, sc), "noise_verdicts")
@@ -82,10 +86,26 @@ def test_compliance_sweep_judges_all_five_claims_at_every_scale(calib):
     assert (comparisons["null_control"] == "not reproduced").all()
 
 
+def _conditions(calib, sc):
+    """The conditions stated beside the verdicts, from the committed sweep trials."""
+    basin = report.basin_table(_trials("basin"), sc.published.convergence_iterations)
+    compliance = report_sweeps.sweep_verdicts(
+        calib, _trials("compliance_sweep"), "compliance_scale", sc.compliance.scale, sc
+    )
+    arm = report_sweeps.sweep_verdicts(
+        calib,
+        _trials("arm_weight_sweep"),
+        "arm_weight_fraction",
+        sc.compliance.arm_weight_fraction,
+        sc,
+    )
+    return report_sweeps.claim_conditions(sc, basin, compliance, arm)
+
+
 def test_claims_and_controls(calib):
     sc = load_scenario()
     verdicts = report.selfcal_verdicts(calib, sc)
-    rows = report.claim_rows(verdicts, sc, STEM)
+    rows = report.claim_rows(verdicts, sc, STEM, _conditions(calib, sc))
     claims = claims_table(rows)
     _compare(claims, "claims")
     controls = pd.DataFrame(report.controls_rows(verdicts), columns=list(CONTROL_COLUMNS))
@@ -97,3 +117,17 @@ def test_every_null_control_fails(calib):
     for cid, (_, null, _) in verdicts.items():
         if null is not None:
             assert null.verdict == "not reproduced", cid
+
+
+def test_arm_weight_sweep_covers_its_range(calib):
+    """Every share of the arm's weight in the scenario's sweep has >= 30 trials and a verdict
+    for each claim; the share's range in the ledger is covered end to end."""
+    sc = load_scenario()
+    key = "arm_weight_fraction"
+    table = report_sweeps.sweep_verdicts(
+        calib, _trials("arm_weight_sweep"), key, sc.compliance.arm_weight_fraction, sc
+    )
+    assert sorted(set(table[key])) == sorted(sc.compliance.arm_weight_sweep)
+    assert min(table[key]) == 0.0 and max(table[key]) == 1.0
+    assert (table.groupby(key)["claim"].nunique() == 5).all()
+    assert (table["n"] >= 30).all()

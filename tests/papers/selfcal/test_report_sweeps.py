@@ -8,7 +8,16 @@ import pandas as pd
 import pytest
 
 from calstudy.papers.selfcal import report_owncell, report_sweeps
-from calstudy.papers.selfcal.experiments import METHODS, NULL, ONE_STEP, ONE_STEP_ML, ORACLE, ROUTES
+from calstudy.papers.selfcal.experiments import (
+    METHODS,
+    NULL,
+    NULL_ROBOT_NOISE,
+    NULL_ROBOT_NOMINAL,
+    ONE_STEP,
+    ONE_STEP_ML,
+    ORACLE,
+    ROUTES,
+)
 from calstudy.papers.selfcal.report import selfcal_verdicts
 
 #: mean validation error of the synthetic trials (mm): one-step and oracle beat the routes
@@ -23,7 +32,7 @@ def _rows(scenario, rng, n, val_max_mm, iterations, key=None, value=None):
     rows = []
     for trial in range(n):
         for method in METHODS:
-            good = method != NULL
+            good = method not in (NULL, NULL_ROBOT_NOMINAL, NULL_ROBOT_NOISE)
             row = {
                 "trial": trial,
                 "method": method,
@@ -35,6 +44,9 @@ def _rows(scenario, rng, n, val_max_mm, iterations, key=None, value=None):
                 else 50.0,
                 "model_rms_mm": 0.05 * (1 + 0.1 * rng.random()) if good else 40.0,
                 "robot_param_error": (0.02 if method == ORACLE else 0.1) if good else 1.0,
+                "robot_tol_error": (0.02 if method == ORACLE else 0.1)
+                if good
+                else (1.4 if method == NULL_ROBOT_NOISE else 1.0),
             }
             if method == ONE_STEP:
                 row |= {

@@ -5,9 +5,15 @@ compliance under the payload, or all noise scaled): :func:`sweep_table` (the fig
 five claims per sweep value), :func:`sweep_verdicts` (the five verdicts by the v2 rule, with
 their controls, at every sweep value), :func:`sweep_sentences` (what the sweep does to each
 verdict, as text for the chapter), :func:`verdict_grid` (the verdicts as a compact table),
-:func:`sweep_figure`; and in words for the chapter: :func:`basin_sentence` (the basin of
-convergence), :func:`route_sentence` and :func:`best_route_sentence` (the route comparison),
-:func:`ml_sentence` (the paper's LM against maximum likelihood) and :func:`rank_sentence`.
+:func:`sweep_figure`; and in words for the chapter: :func:`condition_sentence` (up to which
+value of a sweep a verdict holds) and :func:`claim_conditions` (the conditions stated beside the
+verdicts), :func:`basin_sentence` and :func:`basin_condition` (the basin
+of convergence, and up to which start error the published count holds),
+:func:`route_sentence`, :func:`best_route_sentence` and :func:`refit_sentence` (the route
+comparison, and what a refit of the two-step result on all equations does),
+:func:`robot_reading_sentence` (the paper's reading of Fig. 6 against the truth),
+:func:`control_sentence` (what a control came out as), :func:`ml_sentence` (the paper's LM
+against maximum likelihood) and :func:`rank_sentence`.
 """
 
 from __future__ import annotations
@@ -19,12 +25,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from calstudy.claims import Judged, verdict_runs  # noqa: E402
+from calstudy.core.errors import CalibrationError  # noqa: E402
 from calstudy.papers.selfcal.experiments import (  # noqa: E402
     NULL,
+    NULL_ROBOT_NOISE,
     ONE_STEP,
     ONE_STEP_ML,
     ORACLE,
+    REFITS,
     ROUTES,
+    TOLERANCE_CLASS_SIGMAS,
 )
 from calstudy.papers.selfcal.report import (  # noqa: E402
     UNITS,
@@ -63,8 +74,8 @@ def sweep_table(calib: pd.DataFrame, sweep: pd.DataFrame, key: str, own: float) 
         )
         one = sub[sub["method"] == ONE_STEP].sort_values("trial")
         iterations = poor_start_iterations(one)
-        robot = method_column(sub, ONE_STEP, "robot_param_error") / method_column(
-            sub, NULL, "robot_param_error"
+        robot = method_column(sub, ONE_STEP, "robot_tol_error") / method_column(
+            sub, NULL, "robot_tol_error"
         )
         rows.append(
             {
@@ -235,6 +246,178 @@ def basin_sentence(table: pd.DataFrame, bound: float) -> str:
     ]
     counts = sorted({int(n) for n in table["trials"]})
     return "; ".join(parts) + f" (N = {_join([str(n) for n in counts])} per start scale)"
+
+
+def condition_sentence(verdicts: pd.DataFrame, key: str, claim: str, own: float, label: str):
+    """Up to which value of the sweep ``key`` the verdict of ``claim`` at the scenario's own
+    value ``own`` holds, from the rows of :func:`sweep_verdicts`.
+
+    ``"holds up to compliance scale 2 (reproduced at 0, 1 and 2); not reproduced at 4"``, or
+    ``"holds at every compliance scale swept, up to 4 (reproduced)"``; ``label`` names the
+    swept input. Points below ``own`` with another verdict are named too.
+
+    Raises
+    ------
+    CalibrationError
+        If the rows have no point at ``own`` for ``claim`` (:func:`calstudy.claims.verdict_runs`
+        for empty rows).
+    """
+    points = verdicts[verdicts["claim"] == claim].sort_values(key)
+    runs = verdict_runs(points[key].tolist(), points["verdict"].tolist())
+    at = [i for i, (_, values) in enumerate(runs) if own in values]
+    if not at:
+        raise CalibrationError(f"{claim}: the sweep of {key} has no point at {own:g}")
+    i = at[0]
+    verdict, values = runs[i]
+    listed = _join([f"{v:g}" for v in values])
+    if len(runs) == 1:
+        return f"holds at every {label} swept, up to {values[-1]:g} ({verdict})"
+    text = f"holds up to {label} {values[-1]:g} ({verdict} at {listed})"
+    if i + 1 < len(runs):
+        after = runs[i + 1]
+        text += f"; {after[0]} at {_join([f'{v:g}' for v in after[1]])}"
+        text += "".join(
+            f", {v} at {_join([f'{x:g}' for x in vals])}" for v, vals in runs[i + 2 :]
+        )
+    if i > 0:
+        before = "; ".join(
+            f"{v} at {_join([f'{x:g}' for x in vals])}" for v, vals in runs[:i]
+        )
+        text += f"; below it {before}"
+    return text
+
+
+def basin_condition(table: pd.DataFrame, bound: float, scenario: Scenario, share=0.95) -> str:
+    """Up to which start error the published count holds, from
+    :func:`calstudy.papers.selfcal.report.basin_table`: the largest start scale up to which at
+    least ``share`` of the trials at every scale reach the good start's solution within
+    ``bound`` iterations (the v2 rule for a bound: its 95th percentile meets it), with that
+    start's offsets in mm and degrees, and the share at the next scale swept.
+
+    ``scenario.poor_start`` gives the offsets of scale 1.
+    """
+    table = table.sort_values("start_scale")
+    ok = (table["within_published_share"] >= share).to_numpy()
+    n = int(np.argmin(ok)) if not ok.all() else len(ok)
+    counts = _join([str(c) for c in sorted({int(t) for t in table["trials"]})])
+    tail = f" (N = {counts} per start scale)"
+    if n == 0:
+        first = table.iloc[0]
+        return (
+            f"within {bound:g} iterations in fewer than {share:.0%} of trials at every start "
+            f"scale swept, from {first['start_scale']:g} ({first['within_published_share']:.0%})"
+            + tail
+        )
+    last = table.iloc[n - 1]
+    p, s = scenario.poor_start, float(last["start_scale"])
+    text = (
+        f"within {bound:g} iterations in at least {share:.0%} of trials up to a start error of "
+        f"{s:g} x the scenario's very poor start (base {s * p.base_mm:g} mm and "
+        f"{s * p.base_deg:g} deg, sensor {s * p.sensor_mm:g} mm and {s * p.sensor_deg:g} deg, "
+        f"robot lengths {s * p.robot_length_mm:g} mm and angles {s * p.robot_angle_deg:g} deg "
+        "off)"
+    )
+    if n < len(table):
+        nxt = table.iloc[n]
+        text += (
+            f"; at {nxt['start_scale']:g} x in {nxt['within_published_share']:.0%}"
+            f", {nxt['same_solution_share']:.0%} reaching the same solution at all"
+        )
+    else:
+        text += ", the farthest swept"
+    return text + tail
+
+
+#: the claims whose verdicts the compliance and arm-weight sweeps condition
+SWEPT_CLAIMS = (
+    "selfcal.identification",
+    "selfcal.robot_params",
+    "selfcal.residual",
+    "selfcal.one_step",
+)
+
+
+def claim_conditions(
+    scenario: Scenario,
+    basin: pd.DataFrame,
+    compliance_verdicts: pd.DataFrame,
+    arm_verdicts: pd.DataFrame,
+) -> dict[str, str]:
+    """The condition stated beside each verdict in ``claims.csv``: for the convergence claim the
+    start error up to which it holds (:func:`basin_condition` of the basin table), for the
+    others the size of the unmodelled joint compliance and the share of the arm's own weight up
+    to which they hold (:func:`condition_sentence` of the two sweeps' verdicts)."""
+    out = {
+        "selfcal.convergence": basin_condition(
+            basin, scenario.published.convergence_iterations, scenario
+        )
+    }
+    c = scenario.compliance
+    for cid in SWEPT_CLAIMS:
+        payload = condition_sentence(
+            compliance_verdicts, "compliance_scale", cid, c.scale, "compliance scale"
+        )
+        arm = condition_sentence(
+            arm_verdicts,
+            "arm_weight_fraction",
+            cid,
+            c.arm_weight_fraction,
+            "share of the arm's weight",
+        )
+        out[cid] = f"unmodelled joint compliance: {payload}; arm's own weight: {arm}"
+    return out
+
+
+def refit_sentence(calib: pd.DataFrame) -> str:
+    """What refitting the two-step result on all equations does, from the trial rows: the
+    largest scaled parameter step that refitting the base alone makes, the largest distance of
+    the full joint refit from the one-step result, and the median distance of the two-step
+    result from the one-step result (mm, angles as mm at 1 m) with the median paired ratio of
+    their mean validation errors."""
+    base, full = REFITS
+    two = ROUTES[-1]
+    moved = method_column(calib, base, "step_from_two_step")
+    to_one = method_column(calib, full, "step_from_one_step")
+    apart = method_column(calib, two, "step_from_one_step")
+    ratio = method_column(calib, base, "val_mean_mm") / method_column(calib, two, "val_mean_mm")
+    return (
+        f"re-fitting the base on all equations moves the two-step result by at most "
+        f"{moved.max():.2g} mm (mean validation error ratio {np.median(ratio):.6g} median), a "
+        f"full joint refit from it lands within {to_one.max():.2g} mm of the one-step result, "
+        f"and the two-step result lies {np.median(apart):.3g} mm (median) from it "
+        f"(parameter distances, angles as mm at 1 m; N = {moved.size})"
+    )
+
+
+def robot_reading_sentence(calib: pd.DataFrame) -> str:
+    """The paper's reading of Fig. 6 (every identified robot change within
+    :data:`~calstudy.papers.selfcal.experiments.TOLERANCE_CLASS_SIGMAS` standard deviations of the
+    tolerance class) for the one-step route and for the null that reports the nominal robot
+    plus noise of the tolerance class: the share of trials where it holds; and the study's
+    reading, identified against true change (RMS in tolerance units, median)."""
+    k = TOLERANCE_CLASS_SIGMAS
+    parts = []
+    for name, method in (("one-step", ONE_STEP), ("nominal plus noise", NULL_ROBOT_NOISE)):
+        within = np.mean(method_column(calib, method, "robot_change_max_sigmas") <= k)
+        error = np.median(method_column(calib, method, "robot_tol_error"))
+        parts.append((name, within, error))
+    manufacturing = np.median(method_column(calib, NULL, "robot_tol_error"))
+    text = "; ".join(f"{n} {w:.0%}" for n, w, _ in parts)
+    errors = ", ".join(f"{n} {e:.3g}" for n, _, e in parts)
+    return (
+        f"every identified change within {k:g} tolerance standard deviations of nominal: {text} "
+        f"of trials; identified against true change, RMS in tolerance units (median): "
+        f"{errors}, the manufacturing error itself {manufacturing:.3g} "
+        f"(N = {calib['trial'].nunique()})"
+    )
+
+
+def control_sentence(judged: Judged, which: str = "null") -> str:
+    """What a control came out as: ``"median 1.9 [1.7, 2.1], not reproduced"``."""
+    v = judged.null if which == "null" else judged.oracle
+    if v is None:
+        return "no control"
+    return f"median {v.median:.3g} [{v.ci_low:.3g}, {v.ci_high:.3g}], {v.verdict}"
 
 
 def sweep_figure(table: pd.DataFrame, key: str, scenario: Scenario, title: str, xlabel: str):

@@ -9,7 +9,8 @@ exterior step fits the base pose to the tracker's readings (Kabsch). The routes:
 robot), :func:`three_step_alternated` (hand-eye and robot alternated, then exterior) and
 :func:`two_step` (sensor and robot jointly, then exterior). The three-step routes begin with the
 same hand-eye fit (:func:`hand_eye`): a caller that runs several computes it once and hands it
-to each (``first``).
+to each (``first``). :func:`refit` fits chosen groups of a route's result again on all the
+equations of the one-step model (the base alone, or everything: a final joint refit).
 
 Frames: ``part`` is the laser tracker's frame, ``sensor`` the scanner's. Millimetres and radians.
 """
@@ -191,3 +192,33 @@ def two_step(meas: Measurements, robot: Robot, start, model: GlobalModel | None 
         meas, _own_frame_start(robot, start), _mask(SENSOR, ROBOT), model
     )
     return _exterior(meas, p, centres)
+
+
+def refit(
+    meas: Measurements, params, *groups: slice, model: GlobalModel | None = None
+) -> np.ndarray:
+    """``params`` with the parameter ``groups`` (slices such as ``BASE``) refitted on all the
+    equations of the one-step model (tracker readings, the paper's unweighted LM), the others
+    held; all 30 when no group is given (a final joint refit).
+
+    Parameters
+    ----------
+    meas : Measurements
+        The calibration measurements.
+    params : array_like, shape (30,)
+        The start, e.g. a route's result (mm, rad).
+    *groups : slice
+        Groups of the 30 parameters to refit (:data:`calstudy.selfcal.model.BASE`, ``ROBOT``,
+        ``SENSOR``).
+
+    Returns
+    -------
+    numpy.ndarray, shape (30,)
+
+    Raises
+    ------
+    CalibrationError
+        If LM does not converge (:func:`calstudy.selfcal.identify.identify`).
+    """
+    free = _mask(*groups) if groups else None
+    return identify(meas, params, free=free, model=model, max_evaluations=200).params

@@ -165,6 +165,11 @@ class Compliance(Inputs):
     """The ``[compliance]`` table of data/selfcal/scenario.toml."""
 
     payload_kg: NonNegativeFinite
+    link_masses_kg: Annotated[list[NonNegativeFinite], Field(min_length=6, max_length=6)] = [
+        0.0
+    ] * 6
+    arm_weight_fraction: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = 0.0
+    arm_weight_sweep: list[Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]] = [0.0]
     stiffness_nm_per_rad: Annotated[list[PositiveFinite], Field(min_length=6, max_length=6)]
     scale: NonNegativeFinite
     sweep_scales: Annotated[list[NonNegativeFinite], Field(min_length=1)]

@@ -216,14 +216,38 @@ def tracker_sigma(scenario: Scenario, points_part) -> np.ndarray:
 GRAVITY_MPS2 = 9.81
 
 
-def joint_deflection(scenario: Scenario, robot: Robot, Q, scale: float | None = None):
-    """Joint deflections (m, 6) rad of a compliant robot under the sensor's payload.
+def link_gravity_torques(robot: Robot, q, masses_kg) -> np.ndarray:
+    """Joint torques (6,) N m that the links' own weight loads the joints with at ``q`` (rad).
 
-    Static joint compliance: ``K dq = J(q)^T F`` with ``F`` the payload's weight (-z of the robot
-    base frame, ``payload_kg``) at the flange, ``J`` the flange Jacobian (mm/rad, so the torque
-    is divided by 1000 for N m) and ``K`` the joint stiffnesses of the scenario (N m/rad),
-    multiplied by ``1/scale``. ``scale`` (default ``scenario.compliance.scale``) 0 removes the
-    error: the true robot then lies in the model class.
+    Each link's mass (``masses_kg``, one per link) sits at the midpoint of the link, between the
+    origins of its two DH frames; gravity acts along -z of the robot base frame. Joint ``j``
+    carries the links from ``j`` outward and turns about the z axis of frame ``j - 1``.
+    """
+    frames = [robot.base]
+    for link, angle in zip(robot.links, q, strict=True):
+        frames.append(frames[-1] @ link.transform(angle))
+    origins = np.array([f[:3, 3] for f in frames])
+    centres = 0.5 * (origins[:-1] + origins[1:])
+    weights = -np.asarray(masses_kg, float)[:, None] * GRAVITY_MPS2 * np.array([0.0, 0.0, 1.0])
+    torque = np.zeros(len(robot.links))
+    for j in range(len(robot.links)):
+        axis, at = frames[j][:3, 2], origins[j]
+        moments = np.cross(centres[j:] - at, weights[j:])
+        torque[j] = float(axis @ moments.sum(axis=0))
+    return torque / 1000.0
+
+
+def joint_deflection(scenario: Scenario, robot: Robot, Q, scale: float | None = None):
+    """Joint deflections (m, 6) rad of a compliant robot under the sensor's payload and the
+    arm's own weight.
+
+    Static joint compliance: ``K dq = J(q)^T F + tau_links(q)`` with ``F`` the payload's weight
+    (-z of the robot base frame, ``payload_kg``) at the flange, ``J`` the flange Jacobian (mm/rad,
+    so the torque is divided by 1000 for N m), ``tau_links`` the torques of the links' own
+    weight (``link_masses_kg``, :func:`link_gravity_torques`) and ``K`` the joint stiffnesses of
+    the scenario (N m/rad), multiplied by ``1/scale``. ``scale`` (default
+    ``scenario.compliance.scale``) 0 removes the error: the true robot then lies in the model
+    class.
     """
     scale = scenario.compliance.scale if scale is None else float(scale)
     Q = np.asarray(Q, float)
@@ -231,6 +255,10 @@ def joint_deflection(scenario: Scenario, robot: Robot, Q, scale: float | None = 
         return np.zeros_like(Q)
     force = np.array([0.0, 0.0, -scenario.compliance.payload_kg * GRAVITY_MPS2])
     torque = np.array([robot.jacobian(q)[:3].T @ force for q in Q]) / 1000.0
+    share = scenario.compliance.arm_weight_fraction
+    masses = share * np.asarray(scenario.compliance.link_masses_kg, float)
+    if share > 0 and masses.any():
+        torque = torque + np.array([link_gravity_torques(robot, q, masses) for q in Q])
     return scale * torque / np.asarray(scenario.compliance.stiffness_nm_per_rad, float)
 
 
