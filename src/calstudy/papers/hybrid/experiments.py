@@ -440,16 +440,44 @@ def _production_setup(n_values, scenario_toml: str) -> dict:
             f"n values up to {max(n_values)} exceed n_compensation_max "
             f"{protocol.n_compensation_max}"
         )
-    return {"scenario": scenario, "n_values": n_values}
+    # version 2: each trial also runs the station with the robot's error off (two stations)
+    return {"scenario": scenario, "n_values": n_values, "version": 2}
+
+
+def _coordinate_size(run: dict, scenario: Scenario) -> tuple[float, float]:
+    """Median |mean deviation| before compensation over the coordinates not fixed by the frame,
+    and the median panel-to-panel scatter of the same coordinates (mm)."""
+    before = before_compensation(run, scenario.production.protocol.n_before)
+    free = ~before["fixed"]
+    return float(np.median(np.abs(before["mean"][free]))), float(np.median(before["std"][free]))
 
 
 def production_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     """One drawn and calibrated station run through the paper's protocol: one row per ``n`` of
-    ``setup["n_values"]`` with the before-compensation figures and the Table 1 figures."""
+    ``setup["n_values"]`` with the before-compensation figures and the Table 1 figures.
+
+    Two more stations with the robot's error switched off (the true robot equal to the nominal
+    model, the cause the paper names): the same station draws and products
+    (``systematic_coord_robot_off_mm``, ``scatter_robot_off_mm``), and an independent station
+    (``systematic_coord_floor_mm``): the systematic size that the calibration's noise alone
+    leaves, the floor the systematic error is judged against."""
     scenario = setup["scenario"]
     ps = calibrated_station(child_rng(rng, "station"))
     run = simulate_run(ps, scenario, child_rng(rng, "production"))
     system, rows = trial_summary(run, scenario, setup["n_values"])
+    off = calibrated_station(child_rng(rng, "station"), robot_error_scale=0.0)
+    size_off, scatter_off = _coordinate_size(
+        simulate_run(off, scenario, child_rng(rng, "production")), scenario
+    )
+    floor = calibrated_station(child_rng(rng, "calibration-noise floor"), robot_error_scale=0.0)
+    size_floor, _ = _coordinate_size(
+        simulate_run(floor, scenario, child_rng(rng, "floor production")), scenario
+    )
+    system |= {
+        "systematic_coord_robot_off_mm": size_off,
+        "scatter_robot_off_mm": scatter_off,
+        "systematic_coord_floor_mm": size_floor,
+    }
     return [system | r for r in rows]
 
 

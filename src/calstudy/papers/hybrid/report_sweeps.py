@@ -44,7 +44,7 @@ CLAIMS = {
         pooled=True,
     ),
     "hybrid.systematic": ClaimColumns(
-        "systematic_coord_median_mm", baseline="scatter_median_mm"
+        "systematic_coord_median_mm", baseline="systematic_coord_floor_mm"
     ),
     "hybrid.deviation": ClaimColumns(
         "within_0p3",
