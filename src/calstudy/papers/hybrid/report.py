@@ -260,19 +260,66 @@ def summarise_rps(rps):
     )
 
 
+#: an orthogonality defect (largest entry of R^T R - I) above this is a non-orthogonal solution
+NON_ORTHOGONAL = 1e-6
+
+
 def summarise_penalty_sweep(sweep):
-    """Per start and penalty ``M``: converged share, mean evaluations and orthogonality defect,
-    and the largest difference from the SO(3) solution (from :func:`rps_penalty_sweep`)."""
+    """Per start and penalty ``M``: converged share, share of the trials whose solution is not
+    orthogonal (defect above :data:`NON_ORTHOGONAL`) though it meets Eq. 3, mean evaluations,
+    mean orthogonality defect and Eq. 4 residual, and the largest difference from the SO(3)
+    solution (from :func:`calstudy.papers.hybrid.experiments.rps_penalty_experiment`)."""
+    sweep = sweep.assign(
+        non_orthogonal=sweep["converged"].astype(bool)
+        & (sweep["orthogonality_defect"] > NON_ORTHOGONAL)
+    )
     return (
         sweep.groupby(["start", "penalty"], sort=False)
         .agg(
             converged_share=("converged", "mean"),
+            non_orthogonal_share=("non_orthogonal", "mean"),
             evaluations=("evaluations", "mean"),
             orthogonality_defect=("orthogonality_defect", "mean"),
+            eq4_residual_max=("eq4_residual", "max"),
             excess_over_so3_max_mm=("excess_over_so3_mm", lambda v: float(np.abs(v).max())),
         )
         .reset_index()
     )
+
+
+def penalty_far_start_sentence(sweep: pd.DataFrame) -> str:
+    """What the far start of the penalty sweep shows, in one sentence, from its trial rows
+    (:func:`calstudy.papers.hybrid.experiments.rps_penalty_experiment`): over the penalties
+    swept, the share of trials that failed and the share that met Eq. 3 with a matrix that is
+    not orthogonal, against the near starts; and how well those matrices meet Eq. 4."""
+    summary = summarise_penalty_sweep(sweep)
+    far = summary["start"].str.startswith("nominal turned")
+    if not far.any():
+        raise CalibrationError("the penalty sweep has no far start; rerun it")
+    start = summary.loc[far, "start"].iloc[0]
+
+    def span(values):
+        lo, hi = 100.0 * float(np.min(values)), 100.0 * float(np.max(values))
+        return f"{lo:.3g} %" if lo == hi else f"{lo:.3g}-{hi:.3g} %"
+
+    f, near = summary[far], summary[~far]
+    text = (
+        f"from the {start.replace('nominal', 'nominal fixture pose')} the penalty method fails "
+        f"(a singular or reflected matrix) in {span(1.0 - f['converged_share'])} of the trials "
+        f"and ends on a matrix that is not orthogonal (largest entry of R^T R - I above "
+        f"{NON_ORTHOGONAL:g}) in {span(f['non_orthogonal_share'])}, over the penalties swept; "
+        f"from the near starts in {span(1.0 - near['converged_share'])} and "
+        f"{span(near['non_orthogonal_share'])}"
+    )
+    bad = sweep[sweep["converged"].astype(bool) & (sweep["orthogonality_defect"] > NON_ORTHOGONAL)]
+    if len(bad):
+        text += (
+            f". At those matrices the six conditions of Eq. 4 hold to "
+            f"{bad['eq4_residual'].max():.2g} while R^T R differs from the identity by up to "
+            f"{bad['orthogonality_defect'].max():.3g}, and the frame is off by up to "
+            f"{bad['excess_over_so3_mm'].abs().max():.3g} mm more than the SO(3) solution"
+        )
+    return text
 
 
 # ---------------------------------------------------------------------------------------------
