@@ -35,6 +35,10 @@ from calstudy.papers.hybrid.simulate import (
     make_station,
     simulate_sphere_measurements,
 )
+from calstudy.papers.hybrid.translation_rotation import (
+    translation_rotation_crb,
+    translation_rotation_ml,
+)
 
 SCENARIOS = {
     # the paper's station: kinematic model error, repeatability and sensor noise
@@ -98,7 +102,10 @@ def handeye_trial(
     Methods: the paper's (``"sphere"``); the maximum likelihood of the sensor noise model
     (``"ML"``: every centre weighted by its full covariance from the sensor model, the strong
     y-z correlation of the line laser included); the Cramer-Rao bound of that model at the
-    truth (``"CRB"``, an expected RMS); the controls: the design mounting (``"null control"``,
+    truth (``"CRB"``, an expected RMS); the rotation from the pure translations alone, its
+    bound (``"CRB translations"``) and its fit weighted by each centre's covariance
+    (``"weighted rotation"``), both without a translation (NaN); the controls: the design
+    mounting (``"null control"``,
     doing nothing) and the paper's method on noise-free centres (``"oracle control"``); with
     ``baselines`` the five OpenCV AX = XB methods fed with the hole target's pose seen at the
     same robot poses.
@@ -123,19 +130,23 @@ def handeye_trial(
     # centres the sensor would report without noise at the actual poses
     chain = actual @ truth
     clean = np.einsum("nji,nj->ni", chain[:, :3, :3], station.sphere.centre - chain[:, :3, 3])
-    crb = sphere_handeye_crb(
-        meas.flange2base,
-        clean,
-        station.laser.centre_covariance(clean, radius),
-        truth,
-        station.sphere.centre,
-    )
+    crb_cov = station.laser.centre_covariance(clean, radius)
+    crb = sphere_handeye_crb(meas.flange2base, clean, crb_cov, truth, station.sphere.centre)
+    is_t = meas.group == "translation"
     out["CRB"] = (
         float(np.rad2deg(np.sqrt(np.trace(crb[3:6, 3:6])))),
         float(np.sqrt(np.trace(crb[:3, :3]))),
     )
+    # the rotation from the pure translations alone: its bound, and the fit weighted by each
+    # centre's covariance (the paper's SVD weighs them equally); no translation (NaN)
+    f_t, c_t = meas.select("translation")
+    out["CRB translations"] = (
+        translation_rotation_crb(f_t, clean[is_t], crb_cov[is_t], truth[:3, :3]),
+        float("nan"),
+    )
+    weighted = translation_rotation_ml(f_t, c_t, cov[is_t], paper.value[:3, :3])
+    out["weighted rotation"] = (err(geo.make_transform(weighted, truth[:3, 3]))[0], float("nan"))
     out["null control"] = err(design_mounting(truth))
-    is_t = meas.group == "translation"
     oracle = sphere_handeye(
         meas.flange2base[is_t], clean[is_t], meas.flange2base[~is_t], clean[~is_t]
     )
@@ -184,7 +195,8 @@ def handeye_run(
 
 def _handeye_setup(baselines: bool) -> dict:
     n_trans, n_rot = load_station_moves()
-    return {"n_trans": n_trans, "n_rot": n_rot, "baselines": bool(baselines)}
+    # version 2: the rotation from the pure translations (its bound, a weighted fit) per trial
+    return {"n_trans": n_trans, "n_rot": n_rot, "baselines": bool(baselines), "version": 2}
 
 
 def load_station_moves() -> tuple[int, int]:

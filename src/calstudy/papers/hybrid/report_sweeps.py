@@ -68,7 +68,7 @@ def handeye_ratios(trials: pd.DataFrame, keys=()) -> pd.DataFrame:
     rot = trials.pivot_table(index=index, columns="method", values="rotation_error_deg")
     trans = trials.pivot_table(index=index, columns="method", values="translation_error_mm")
     out = pd.DataFrame(index=rot.index)
-    for m in rot.columns.drop("CRB"):
+    for m in rot.columns.drop(["CRB", "CRB translations", "weighted rotation"], errors="ignore"):
         out[m] = np.maximum(rot[m] / rot["CRB"], trans[m] / trans["CRB"])
     return out.reset_index()
 
