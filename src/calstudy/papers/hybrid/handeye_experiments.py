@@ -167,16 +167,19 @@ def handeye_run(
     n_rot: int | None = None,
     translation_range_mm: float | None = None,
     across_plane_range_mm: float | None = None,
+    translation_pattern: str = "random",
 ) -> list[dict]:
     """One hand-eye trial: a drawn station, its calibration run, one row per method.
 
     ``translation_range_mm`` and ``across_plane_range_mm`` override the ranges of the pure
-    translations of ``[calibration_moves]`` in ``station.toml``. Columns: ``method,
+    translations of ``[calibration_moves]`` in ``station.toml``; ``translation_pattern``
+    "designed" puts the translations on a fixed pattern instead of drawing them. Columns: ``method,
     rotation_error_deg, translation_error_mm, laser_sigma_mm, n_translations, n_pose_changes``
     (``CRB`` rows hold the bound's expected RMS of the trial's poses).
     """
     station = make_station(rng, sigma_point_mm=sigma_point_mm, **check_scenario(scenario))
     station = with_move_ranges(station, translation_range_mm, across_plane_range_mm)
+    station = replace(station, translation_pattern=translation_pattern)
     n_trans = int(setup["n_trans"])
     n_rot = int(setup["n_rot"] if n_rot is None else n_rot)
     errors = handeye_trial(station, n_trans, n_rot, rng, baselines=bool(setup["baselines"]))
@@ -277,6 +280,16 @@ def handeye_ranges_experiment(
             raise CalibrationError(f"no values of {key} to sweep; give at least one")
         points += [{"parameter": key, "value": float(v)} for v in values]
     return Experiment("handeye_ranges", handeye_range_run, _handeye_setup(False), n_trials, points)
+
+
+def handeye_pattern_experiment(n_trials: int = 30) -> Experiment:
+    """The hand-eye with the pure translations drawn at random (the study's default) and on a
+    designed pattern (:data:`calstudy.papers.hybrid.simulate.DESIGNED_SHIFTS`), sensor noise
+    only: points ``{"translation_pattern": "random" | "designed"}``."""
+    points = [
+        {"scenario": "sensor noise only", "translation_pattern": p} for p in ("random", "designed")
+    ]
+    return Experiment("handeye_pattern", handeye_run, _handeye_setup(False), n_trials, points)
 
 
 def _sensor_sigma(sensor_sigma_mm) -> np.ndarray:

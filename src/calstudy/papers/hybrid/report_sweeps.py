@@ -102,6 +102,31 @@ def summarise_handeye_sweep(trials: pd.DataFrame, keys) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def pattern_sentence(summary: pd.DataFrame) -> str:
+    """One sentence from :func:`summarise_handeye_sweep` over ``translation_pattern``: the
+    median hand-eye ratio with its interval, the 95th percentile and the verdict with the pure
+    translations on the designed pattern and drawn at random."""
+    rows = summary.set_index("translation_pattern")
+    missing = {"designed", "random"} - set(rows.index)
+    if missing:
+        raise CalibrationError(f"the pattern sweep lacks {sorted(missing)}")
+
+    def text(name):
+        r = rows.loc[name]
+        interval = (
+            "" if np.isnan(r["ci_low"]) else f" ({r['ci_low']:.3g}-{r['ci_high']:.3g})"
+        )
+        return (
+            f"median ratio {r['median_ratio']:.3g}{interval}, 95th percentile "
+            f"{r['p95_ratio']:.3g}, {r['verdict']}"
+        )
+
+    return (
+        f"with the pure translations on a designed pattern (each move along a new direction, "
+        f"the full ranges): {text('designed')}; drawn at random: {text('random')}"
+    )
+
+
 def _bound_points(ratios: pd.DataFrame, by, claim_id: str) -> list:
     """:func:`calstudy.claims.judge_along` on the claim's figure alone (its bound:
     :data:`CRB_MULTIPLE` or :data:`ML_MULTIPLE`)."""
