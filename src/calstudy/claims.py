@@ -24,7 +24,13 @@ import pandas as pd
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import DATA_DIR
 from calstudy.core.verdicts import Verdict as RuleVerdict
-from calstudy.core.verdicts import check_null_control, judge, judge_controls, oracle_gate
+from calstudy.core.verdicts import (
+    check_null_control,
+    judge,
+    judge_controls,
+    judge_rms_ratio,
+    oracle_gate,
+)
 
 #: The four verdicts of the claims register, in the order the book counts them.
 VERDICTS = ("reproduced", "direction only", "not reproduced", "not testable")
@@ -138,6 +144,13 @@ class ClaimColumns:
     mechanism : str, optional
         The error source the method targets, named in the note when the oracle control is not
         significant (required with the controls).
+    pooled : bool, default False
+        Judge a ``bound`` claim by the RMS of ``figure`` over the RMS of ``baseline`` pooled
+        over the trials (:func:`calstudy.core.verdicts.judge_rms_ratio`) instead of the 95th
+        percentile of a per-trial figure; the null control is then set against ``baseline``
+        and the oracle control against ``oracle_baseline``.
+    oracle_baseline : str, optional
+        The rival's error in the oracle's simulation (pooled only; ``baseline`` if empty).
     """
 
     figure: str
@@ -145,12 +158,23 @@ class ClaimColumns:
     null: str = ""
     oracle: str = ""
     mechanism: str = ""
+    pooled: bool = False
+    oracle_baseline: str = ""
 
     def __post_init__(self) -> None:
         if bool(self.null) != bool(self.oracle) or bool(self.null) != bool(self.mechanism):
             raise CalibrationError(
                 f"claim columns of {self.figure!r}: null {self.null!r}, oracle {self.oracle!r} "
                 f"and mechanism {self.mechanism!r} go together (all three or none)"
+            )
+        if self.pooled and not self.baseline:
+            raise CalibrationError(
+                f"claim columns of {self.figure!r}: a pooled ratio needs its baseline column"
+            )
+        if self.oracle_baseline and not (self.pooled and self.oracle):
+            raise CalibrationError(
+                f"claim columns of {self.figure!r}: oracle_baseline {self.oracle_baseline!r} "
+                "applies only to a pooled claim with an oracle control"
             )
 
 
@@ -219,6 +243,8 @@ def judge_claim(
         own checks (:func:`calstudy.core.verdicts.judge`).
     """
     kind, direction = claim_rule(claim_id)
+    if columns.pooled:
+        return _judge_pooled(claim_id, trials, columns, kind, direction, reference, min_trials)
     rule: dict = {"kind": kind, "direction": direction, "min_trials": min_trials}
     if reference is not None:
         rule["bound" if kind == "bound" else "null"] = reference
@@ -234,6 +260,25 @@ def judge_claim(
         published=published,
         **rule,
     )
+    return Judged(oracle_gate(claim, oracle, columns.mechanism), null, oracle)
+
+
+def _judge_pooled(claim_id, trials, columns, kind, direction, bound, min_trials) -> Judged:
+    """:func:`judge_claim` for ``columns.pooled``: the RMS ratios of the claim and its controls
+    (:func:`calstudy.core.verdicts.judge_rms_ratio`), the claim gated by its oracle."""
+    if kind != "bound" or bound is None:
+        raise CalibrationError(
+            f"{claim_id}: a pooled RMS ratio is judged against a bound (register kind 'bound' "
+            f"and reference); the register says kind {kind!r}, reference {bound!r}"
+        )
+    rule = {"bound": bound, "direction": direction, "min_trials": min_trials}
+    base = _column(trials, columns.baseline, claim_id)
+    claim = judge_rms_ratio(_column(trials, columns.figure, claim_id), base, **rule)
+    if not columns.null:
+        return Judged(claim)
+    null = judge_rms_ratio(_column(trials, columns.null, claim_id), base, **rule)
+    oracle_base = _column(trials, columns.oracle_baseline or columns.baseline, claim_id)
+    oracle = judge_rms_ratio(_column(trials, columns.oracle, claim_id), oracle_base, **rule)
     return Judged(oracle_gate(claim, oracle, columns.mechanism), null, oracle)
 
 
@@ -289,7 +334,8 @@ TOO_FEW = "too few trials"
 
 
 def verdict_or_none(make):
-    """``make()``, or None when there are too few trials for an interval of the median.
+    """``make()``, or None when there are too few trials for an interval of the median (or of
+    a pooled RMS ratio).
 
     Parameters
     ----------
@@ -310,7 +356,7 @@ def verdict_or_none(make):
     try:
         return make()
     except CalibrationError as exc:
-        if "interval for the median" not in str(exc):
+        if "interval for the median" not in str(exc) and "interval of the RMS" not in str(exc):
             raise
         return None
 

@@ -25,7 +25,12 @@ from typing import Any
 import numpy as np
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.stats import interval_level, median_interval, trial_values
+from calstudy.core.stats import (
+    interval_level,
+    median_interval,
+    rms_ratio_interval,
+    trial_values,
+)
 
 #: The four verdicts of the claims register.
 VERDICTS = ("reproduced", "direction only", "not reproduced", "not testable")
@@ -363,6 +368,71 @@ def judge(
         raise CalibrationError(f"bound {bound!r} applies only to kind 'bound', not {kind!r}")
     band = (float(factor), float(band_pp))
     return _judge_effect(kind, direction, s, baseline, null, published, band, level, min_trials)
+
+
+def judge_rms_ratio(
+    after: object,
+    before: object,
+    *,
+    bound: float,
+    direction: str = "lower",
+    level: float = 0.95,
+    min_trials: int = 200,
+) -> Verdict:
+    """A requirement on a pooled, paired figure: the RMS of ``after`` over the RMS of ``before``
+    on the same trials must meet ``bound`` (a ``"bound"`` verdict, rule 7 read for a pooled
+    statistic).
+
+    Rule 7 asks the 95th percentile of a per-trial figure to meet the bound. A per-trial ratio
+    of two errors that share an error source has a tail set by its small denominators, which
+    even a perfect method cannot meet; the pooled ratio has no such tail. It is ``reproduced``
+    when its whole confidence interval (:func:`calstudy.core.stats.rms_ratio_interval`) meets
+    the bound, ``direction only`` when the estimate does but the interval reaches beyond it,
+    ``not reproduced`` when the estimate does not.
+
+    Parameters
+    ----------
+    after, before : array_like, shape (N,)
+        Per trial, the method's error and the rival's (or no method's) error on the same data.
+    bound : float
+        The largest (``"lower"``) or smallest (``"higher"``) RMS ratio that meets the
+        requirement.
+    direction : {"lower", "higher"}, default "lower"
+    level : float, default 0.95
+        Coverage of the interval.
+    min_trials : int, default 200
+        Rule 1: fewer trials do not change the verdict, but the note says so.
+
+    Returns
+    -------
+    Verdict
+        Kind ``"bound"``: ``median`` and ``effect_median`` hold the RMS ratio, the interval its
+        confidence interval, ``null`` the bound, ``replication_rate`` the share of trials whose
+        own ratio meets the bound, ``p95`` NaN (no per-trial figure is judged).
+
+    Raises
+    ------
+    CalibrationError
+        On a bad direction, level or bound, and as :func:`calstudy.core.stats.rms_ratio_interval`.
+    """
+    _check_choice("direction", direction, DIRECTIONS)
+    bound = _finite("bound", bound)
+    ratio, lo, hi = rms_ratio_interval(after, before, level)
+    a, b = trial_values("after", after), trial_values("before", before)
+    lower = direction == "lower"
+    sign = 1.0 if lower else -1.0  # meeting the bound: sign * (figure - bound) <= 0
+    far = hi if lower else lo
+    estimate_ok, interval_ok = sign * (ratio - bound) <= 0, sign * (far - bound) <= 0
+    rate = float(np.mean(sign * (a - bound * b) <= 0))
+    op = "<=" if lower else ">="
+    note = (
+        f"RMS ratio {ratio:.3g} [{lo:.3g}, {hi:.3g}] (paired, pooled over trials): estimate "
+        f"{'meets' if estimate_ok else 'misses'} the bound {op} {bound:.3g}, interval "
+        f"{'meets' if interval_ok else 'reaches beyond'} it; {_tail(rate, a.size, min_trials)}"
+    )
+    figures = (ratio, lo, hi, ratio, lo, hi, bound)
+    verdict = _rule5(estimate_ok, interval_ok)
+    return Verdict(verdict, "bound", a.size, *figures, estimate_ok, interval_ok, rate, _NAN, note)
 
 
 def not_testable(reason: str, *, kind: str = "value", n: int = 0) -> Verdict:

@@ -21,6 +21,10 @@ def _claim_inputs(size_mm, scatter_mm, within, uncompensated, r_counts, n=200):
             "systematic_median_mm": 1.7 * size_mm + rng.normal(0, 0.01, n),
             "coord_above_2mm": 50.0,
             "scatter_median_mm": scatter_mm + rng.normal(0, 0.001, n),
+            # the robot's error off: the same stations and an independent one (the floor)
+            "systematic_coord_robot_off_mm": 0.1 + rng.normal(0, 0.02, n),
+            "scatter_robot_off_mm": scatter_mm + rng.normal(0, 0.001, n),
+            "systematic_coord_floor_mm": 0.1 + rng.normal(0, 0.02, n),
             "lilliefors_not_rejected": 95.0,
             "mean_nonzero": 90.0,
             "within_0p3": within + rng.normal(0, 0.5, n),
@@ -49,7 +53,8 @@ def test_claims_reproduced_when_the_trials_match_the_paper():
 
 
 def test_claims_fail_without_an_effect_or_with_another_distribution():
-    # a mean deviation no larger than the scatter is not systematic; compensation that gains
+    # a mean deviation below the calibration-noise floor is not systematic; compensation that
+    # gains
     # nothing over the raw readings is no effect; every r above 0.9 is not the paper's spread
     rows, _ = report.production_claims(
         _claim_inputs(0.05, 0.06, 96.0, 96.0, np.array([168, 0, 0, 0, 0])), 10, "nb"
@@ -70,16 +75,38 @@ def test_correlation_distance_of_stations_drawn_from_the_published_bins():
 
 def test_robot_error_sweep_summary_uses_the_claims_verdicts():
     parts = []
-    for scale, size in ((1.0, 1.0), (1.5, 3.0)):
+    for scale, size in ((0.0, 0.1), (1.0, 1.0), (1.5, 3.0)):
         trials = _claim_inputs(size, 0.06, 96.0, 30.0, PUBLISHED_R, n=20)
         parts.append(trials.assign(robot_error_scale=scale))
     summary = report.summarise_robot_error_sweep(pd.concat(parts))
-    assert summary["robot_error_scale"].tolist() == [1.0, 1.5]
-    assert summary["systematic_verdict"].tolist() == ["direction only", "reproduced"]
-    assert summary["deviation_verdict"].tolist() == ["reproduced"] * 2
-    expected = np.median(parts[1]["systematic_coord_median_mm"])
-    assert summary["systematic_coord_median_mm"].iloc[1] == pytest.approx(expected)
+    assert summary["robot_error_scale"].tolist() == [0.0, 1.0, 1.5]
+    # the floor is each station's own size with the robot's error off (factor 0)
+    verdicts = ["not reproduced", "direction only", "reproduced"]
+    assert summary["systematic_verdict"].tolist() == verdicts
+    assert summary["deviation_verdict"].tolist() == ["reproduced"] * 3
+    expected = np.median(parts[2]["systematic_coord_median_mm"])
+    assert summary["systematic_coord_median_mm"].iloc[2] == pytest.approx(expected)
+    no_floor = pd.concat(parts[1:]).drop(columns="systematic_coord_floor_mm")
+    without = report.summarise_robot_error_sweep(no_floor)
+    assert without["systematic_verdict"].tolist() == ["no robot-off point"] * 2
     assert (summary["stations"] == 20).all()
+
+
+def test_the_robot_off_control_sees_the_cause_and_catches_a_test_that_cannot():
+    trials = _claim_inputs(3.0, 0.06, 96.0, 30.0, PUBLISHED_R)
+    floor, scatter, sentence = report.systematic_robot_off(trials)
+    assert not floor.significant and "not significant, so the test sees its cause" in sentence
+    # the same robot-off stations judged against the panel scatter pass without the cause
+    assert scatter.significant and "passes without the cause" in sentence
+    assert f"{floor.median:.3g} mm" in sentence
+    # a systematic error that stays with the robot's error off (a biased calibration, say):
+    # the test cannot see its cause, and the claim is not testable
+    biased = trials["systematic_coord_robot_off_mm"] + 0.3
+    broken = trials.assign(systematic_coord_robot_off_mm=biased)
+    rows, _ = report.production_claims(broken, 10, "nb")
+    assert rows[0].verdict == "not testable"
+    assert rows[0].note.startswith("the test cannot see its cause")
+    assert "so the test cannot see its cause" in report.systematic_robot_off(broken)[2]
 
 
 def test_table1_from_csv_files_equals_table1_from_arrays(tmp_path):

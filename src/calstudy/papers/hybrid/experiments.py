@@ -29,7 +29,7 @@ from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment, child_rng, trial_rng
 from calstudy.core.schema import with_inputs
 from calstudy.estimators.fitting import fit_homography, homography_to_pose, solve_pnp
-from calstudy.estimators.workpiece import rps_frame_penalty, rps_frame_so3
+from calstudy.estimators.workpiece import orthogonality, rps_frame_penalty, rps_frame_so3
 from calstudy.handeye import sphere_handeye
 from calstudy.models.robots import load_robot, perturb_robot, pose_errors
 from calstudy.papers.hybrid.compensation import analyse_run, before_compensation
@@ -254,6 +254,7 @@ def rps_trial(
                     np.rad2deg(geo.rotation_error(geo.project_to_so3(r), station.base2work_true))
                 ),
                 "orthogonality_defect": float(np.abs(r.T @ r - np.eye(3)).max()),
+                "eq4_residual": float(np.abs(orthogonality(r)).max()),
                 "evaluations": est.iterations,
             }
         )
@@ -303,29 +304,40 @@ def stationary_pixel_experiment(pixel_sigmas=None, n_trials: int = 30) -> Experi
     return Experiment("stationary_pixel", stationary_run, {"version": 3}, n_trials, points)
 
 
+#: the far start of the penalty sweep: the nominal fixture pose turned by this angle (deg)
+FAR_START_DEG = 90.0
+
+
 def rps_penalty_run(setup: dict, rng: np.random.Generator) -> list[dict]:
-    """How the 3-2-1 solution depends on the penalty ``M`` of Eq. 5, from two starting points.
+    """How the 3-2-1 solution depends on the penalty ``M`` of Eq. 5, from three starting points.
 
     A station with its true stationary calibration (only datum noise matters), the datums
-    measured once, then the penalty LM for every ``M`` from the nominal fixture pose and from
-    the identity, against the SO(3) solution on the same data. Failures are rows with
-    ``converged`` False, not hidden.
+    measured once, then the penalty LM for every ``M`` from the nominal fixture pose, from the
+    identity and from a far start (the nominal pose turned by ``FAR_START_DEG`` about an axis
+    drawn per trial), against the SO(3) solution on the same data. Failures are rows with
+    ``converged`` False, not hidden; ``eq4_residual`` is the largest of the six conditions of
+    Eq. 4 at the solution, ``orthogonality_defect`` the largest entry of ``R^T R - I``.
     """
     penalties = [float(m) for m in setup["penalties"]]
     station = make_station(rng)
+    axis = child_rng(rng, "far start").normal(size=3)
+    turn = geo.rotvec_to_matrix(np.deg2rad(FAR_START_DEG) * axis / np.linalg.norm(axis))
+    far = station.base2work_nominal.copy()
+    far[:3, :3] = turn @ far[:3, :3]
+    # the reference: the SO(3) solution from the nominal fixture pose, on the same datums
+    so3 = rps_trial(station, station.statcam2base_true, child_rng(rng, "datums"), [])[0]
     rows = []
     for start_name, start in (
         ("nominal fixture pose", station.base2work_nominal),
         ("identity", np.eye(4)),
+        (f"nominal turned {FAR_START_DEG:g} deg", far),
     ):
         st = replace(station, base2work_nominal=start)
-        try:
-            trial = rps_trial(st, station.statcam2base_true, child_rng(rng, "datums"), penalties)
-        except CalibrationError:
-            trial = []
-        so3 = next((r for r in trial if r["solver"] == "SO(3)"), None)
         for m in penalties:
-            r = next((r for r in trial if r["penalty"] == m), None)
+            try:  # each M alone, on the same datums: one failure does not hide the others
+                r = rps_trial(st, station.statcam2base_true, child_rng(rng, "datums"), [m])[0]
+            except CalibrationError:
+                r = None
             rows.append(
                 {
                     "start": start_name,
@@ -333,9 +345,10 @@ def rps_penalty_run(setup: dict, rng: np.random.Generator) -> list[dict]:
                     "converged": r is not None,
                     "evaluations": np.nan if r is None else r["evaluations"],
                     "orthogonality_defect": np.nan if r is None else r["orthogonality_defect"],
+                    "eq4_residual": np.nan if r is None else r["eq4_residual"],
                     "frame_error_mm": np.nan if r is None else r["frame_error_mm"],
                     "excess_over_so3_mm": np.nan
-                    if r is None or so3 is None
+                    if r is None
                     else r["frame_error_mm"] - so3["frame_error_mm"],
                 }
             )
@@ -344,7 +357,7 @@ def rps_penalty_run(setup: dict, rng: np.random.Generator) -> list[dict]:
 
 def rps_penalty_experiment(penalties=(1e-6, 1e-3, 1.0, 1e3, 1e6), n_trials: int = 30):
     """The penalty sweep of Eq. 5 (all penalties inside each trial, on the same datums)."""
-    setup = {"penalties": [float(m) for m in penalties]}
+    setup = {"penalties": [float(m) for m in penalties], "far_start_deg": FAR_START_DEG}
     return Experiment("rps_penalty", rps_penalty_run, setup, n_trials)
 
 
@@ -440,16 +453,44 @@ def _production_setup(n_values, scenario_toml: str) -> dict:
             f"n values up to {max(n_values)} exceed n_compensation_max "
             f"{protocol.n_compensation_max}"
         )
-    return {"scenario": scenario, "n_values": n_values}
+    # version 2: each trial also runs the station with the robot's error off (two stations)
+    return {"scenario": scenario, "n_values": n_values, "version": 2}
+
+
+def _coordinate_size(run: dict, scenario: Scenario) -> tuple[float, float]:
+    """Median |mean deviation| before compensation over the coordinates not fixed by the frame,
+    and the median panel-to-panel scatter of the same coordinates (mm)."""
+    before = before_compensation(run, scenario.production.protocol.n_before)
+    free = ~before["fixed"]
+    return float(np.median(np.abs(before["mean"][free]))), float(np.median(before["std"][free]))
 
 
 def production_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     """One drawn and calibrated station run through the paper's protocol: one row per ``n`` of
-    ``setup["n_values"]`` with the before-compensation figures and the Table 1 figures."""
+    ``setup["n_values"]`` with the before-compensation figures and the Table 1 figures.
+
+    Two more stations with the robot's error switched off (the true robot equal to the nominal
+    model, the cause the paper names): the same station draws and products
+    (``systematic_coord_robot_off_mm``, ``scatter_robot_off_mm``), and an independent station
+    (``systematic_coord_floor_mm``): the systematic size that the calibration's noise alone
+    leaves, the floor the systematic error is judged against."""
     scenario = setup["scenario"]
     ps = calibrated_station(child_rng(rng, "station"))
     run = simulate_run(ps, scenario, child_rng(rng, "production"))
     system, rows = trial_summary(run, scenario, setup["n_values"])
+    off = calibrated_station(child_rng(rng, "station"), robot_error_scale=0.0)
+    size_off, scatter_off = _coordinate_size(
+        simulate_run(off, scenario, child_rng(rng, "production")), scenario
+    )
+    floor = calibrated_station(child_rng(rng, "calibration-noise floor"), robot_error_scale=0.0)
+    size_floor, _ = _coordinate_size(
+        simulate_run(floor, scenario, child_rng(rng, "floor production")), scenario
+    )
+    system |= {
+        "systematic_coord_robot_off_mm": size_off,
+        "scatter_robot_off_mm": scatter_off,
+        "systematic_coord_floor_mm": size_floor,
+    }
     return [system | r for r in rows]
 
 

@@ -35,6 +35,10 @@ from calstudy.papers.hybrid.simulate import (
     make_station,
     simulate_sphere_measurements,
 )
+from calstudy.papers.hybrid.translation_rotation import (
+    translation_rotation_crb,
+    translation_rotation_ml,
+)
 
 SCENARIOS = {
     # the paper's station: kinematic model error, repeatability and sensor noise
@@ -98,7 +102,10 @@ def handeye_trial(
     Methods: the paper's (``"sphere"``); the maximum likelihood of the sensor noise model
     (``"ML"``: every centre weighted by its full covariance from the sensor model, the strong
     y-z correlation of the line laser included); the Cramer-Rao bound of that model at the
-    truth (``"CRB"``, an expected RMS); the controls: the design mounting (``"null control"``,
+    truth (``"CRB"``, an expected RMS); the rotation from the pure translations alone, its
+    bound (``"CRB translations"``) and its fit weighted by each centre's covariance
+    (``"weighted rotation"``), both without a translation (NaN); the controls: the design
+    mounting (``"null control"``,
     doing nothing) and the paper's method on noise-free centres (``"oracle control"``); with
     ``baselines`` the five OpenCV AX = XB methods fed with the hole target's pose seen at the
     same robot poses.
@@ -123,19 +130,23 @@ def handeye_trial(
     # centres the sensor would report without noise at the actual poses
     chain = actual @ truth
     clean = np.einsum("nji,nj->ni", chain[:, :3, :3], station.sphere.centre - chain[:, :3, 3])
-    crb = sphere_handeye_crb(
-        meas.flange2base,
-        clean,
-        station.laser.centre_covariance(clean, radius),
-        truth,
-        station.sphere.centre,
-    )
+    crb_cov = station.laser.centre_covariance(clean, radius)
+    crb = sphere_handeye_crb(meas.flange2base, clean, crb_cov, truth, station.sphere.centre)
+    is_t = meas.group == "translation"
     out["CRB"] = (
         float(np.rad2deg(np.sqrt(np.trace(crb[3:6, 3:6])))),
         float(np.sqrt(np.trace(crb[:3, :3]))),
     )
+    # the rotation from the pure translations alone: its bound, and the fit weighted by each
+    # centre's covariance (the paper's SVD weighs them equally); no translation (NaN)
+    f_t, c_t = meas.select("translation")
+    out["CRB translations"] = (
+        translation_rotation_crb(f_t, clean[is_t], crb_cov[is_t], truth[:3, :3]),
+        float("nan"),
+    )
+    weighted = translation_rotation_ml(f_t, c_t, cov[is_t], paper.value[:3, :3])
+    out["weighted rotation"] = (err(geo.make_transform(weighted, truth[:3, 3]))[0], float("nan"))
     out["null control"] = err(design_mounting(truth))
-    is_t = meas.group == "translation"
     oracle = sphere_handeye(
         meas.flange2base[is_t], clean[is_t], meas.flange2base[~is_t], clean[~is_t]
     )
@@ -156,16 +167,19 @@ def handeye_run(
     n_rot: int | None = None,
     translation_range_mm: float | None = None,
     across_plane_range_mm: float | None = None,
+    translation_pattern: str = "random",
 ) -> list[dict]:
     """One hand-eye trial: a drawn station, its calibration run, one row per method.
 
     ``translation_range_mm`` and ``across_plane_range_mm`` override the ranges of the pure
-    translations of ``[calibration_moves]`` in ``station.toml``. Columns: ``method,
+    translations of ``[calibration_moves]`` in ``station.toml``; ``translation_pattern``
+    "designed" puts the translations on a fixed pattern instead of drawing them. Columns: ``method,
     rotation_error_deg, translation_error_mm, laser_sigma_mm, n_translations, n_pose_changes``
     (``CRB`` rows hold the bound's expected RMS of the trial's poses).
     """
     station = make_station(rng, sigma_point_mm=sigma_point_mm, **check_scenario(scenario))
     station = with_move_ranges(station, translation_range_mm, across_plane_range_mm)
+    station = replace(station, translation_pattern=translation_pattern)
     n_trans = int(setup["n_trans"])
     n_rot = int(setup["n_rot"] if n_rot is None else n_rot)
     errors = handeye_trial(station, n_trans, n_rot, rng, baselines=bool(setup["baselines"]))
@@ -184,7 +198,8 @@ def handeye_run(
 
 def _handeye_setup(baselines: bool) -> dict:
     n_trans, n_rot = load_station_moves()
-    return {"n_trans": n_trans, "n_rot": n_rot, "baselines": bool(baselines)}
+    # version 2: the rotation from the pure translations (its bound, a weighted fit) per trial
+    return {"n_trans": n_trans, "n_rot": n_rot, "baselines": bool(baselines), "version": 2}
 
 
 def load_station_moves() -> tuple[int, int]:
@@ -265,6 +280,16 @@ def handeye_ranges_experiment(
             raise CalibrationError(f"no values of {key} to sweep; give at least one")
         points += [{"parameter": key, "value": float(v)} for v in values]
     return Experiment("handeye_ranges", handeye_range_run, _handeye_setup(False), n_trials, points)
+
+
+def handeye_pattern_experiment(n_trials: int = 30) -> Experiment:
+    """The hand-eye with the pure translations drawn at random (the study's default) and on a
+    designed pattern (:data:`calstudy.papers.hybrid.simulate.DESIGNED_SHIFTS`), sensor noise
+    only: points ``{"translation_pattern": "random" | "designed"}``."""
+    points = [
+        {"scenario": "sensor noise only", "translation_pattern": p} for p in ("random", "designed")
+    ]
+    return Experiment("handeye_pattern", handeye_run, _handeye_setup(False), n_trials, points)
 
 
 def _sensor_sigma(sensor_sigma_mm) -> np.ndarray:

@@ -53,6 +53,14 @@ def _rz(angle: float) -> np.ndarray:
 RX_PI = np.diag([1.0, -1.0, -1.0])
 
 
+#: the designed pure translations, in units of the ranges (along the laser line, across the
+#: plane, along the viewing direction; the first is the reference pose): each move spans a new
+#: direction, so the centred differences of Eq. 11 are never nearly collinear
+DESIGNED_SHIFTS = np.array(
+    [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 1.0, -1.0], [1.0, -1.0, 1.0]]
+)
+
+
 @dataclass
 class HybridStation:
     """A drawn station: robots, sensors, targets and the truth of every transform (mm, rad).
@@ -83,6 +91,7 @@ class HybridStation:
     datum_sigma: float
     free_direction: float
     config: StationFile | None = field(default=None, repr=False)
+    translation_pattern: str = "random"
     _sphere_ref: np.ndarray | None = field(default=None, repr=False)
     _ik_memo: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -168,7 +177,9 @@ class HybridStation:
         Translations: the reference pose taught on the true robot, then moves of the flange
         position within +-``translation_range_mm`` in the controller's frame at constant nominal
         orientation, restricted to +-``across_plane_range_mm`` across the laser plane so the
-        stripe stays on its side. Pose changes: the sensor tilted about the sphere centre by
+        stripe stays on its side: drawn at random, or with ``translation_pattern`` "designed"
+        at the corners of :data:`DESIGNED_SHIFTS` (the full ranges, along independent
+        directions). Pose changes: the sensor tilted about the sphere centre by
         ``rotation_min_deg`` to ``rotation_range_deg`` about random axes, each taught on the true
         robot (all four from ``[calibration_moves]`` of ``station.toml``). Translations and
         pose changes draw from their own streams of ``rng``: a pose change drawn again because
@@ -183,6 +194,12 @@ class HybridStation:
         span = cfg.translation_range_mm
         across = cfg.across_plane_range_mm
         shifts = trans_rng.uniform(-1.0, 1.0, (n_trans, 3))
+        if self.translation_pattern == "designed":
+            shifts = DESIGNED_SHIFTS[np.arange(n_trans) % len(DESIGNED_SHIFTS)]
+        elif self.translation_pattern != "random":
+            raise CalibrationError(
+                f"translation pattern {self.translation_pattern!r}; use 'random' or 'designed'"
+            )
         shifts_sensor = shifts * np.array([span, across, span])
         shifts_sensor[0] = 0.0
         shifts_base = shifts_sensor @ ref[:3, :3].T
