@@ -3,6 +3,7 @@ adapter that judges a point by the report's rule."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +12,12 @@ import pytest
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import trial_rows
+from calstudy.core.paths import RESULTS_DIR
 from calstudy.core.trialcache import TrialCache
 from calstudy.papers.selfcal import experiments, report, robustness
 from calstudy.papers.selfcal.scenario import load_scenario
+
+STEM = "03_selfcal_one_step_identification"
 
 
 def test_overrides_reach_the_factory_and_key_the_trial_cache():
@@ -69,3 +73,51 @@ def test_only_refuses_an_input_the_map_does_not_screen():
         robustness.map_spec("", only=["scanner.nothing"])
     spec = robustness.map_spec("", only=["tracker.u0_mm"])
     assert [item.key for item in spec.inputs] == ["tracker.u0_mm"]
+
+
+def spot_check(folder, count: int = 3) -> int:
+    """Recompute trial 0 of ``count`` points of the map in ``folder`` (chosen by the seed) and
+    compare each claim's statistic with the stored one; the number of points checked."""
+    params = json.loads((folder / "run.json").read_text())["parameters"]
+    trials = pd.read_csv(folder / "trials_robustness.csv", keep_default_na=False,
+                         na_values={"value": [""], "value2": [""]})
+    spec = robustness.map_spec(params["scenario_toml"], params["robustness_inputs"])
+    first = trials[trials["trial"] == 0].reset_index(drop=True)
+    rng = np.random.default_rng(params["seed"])
+    for _, row in first.iloc[rng.choice(len(first), size=count, replace=False)].iterrows():
+        setting = robustness.point_setting(
+            spec, [row["input"], row["input2"]], [row["value"], row["value2"]]
+        )
+        rows = trial_rows(spec.experiment(robustness.GROUP, setting, 1), params["seed"], 0, 0)
+        got = robustness.claim_statistics(rows)[row["claim"]][0]
+        assert got == pytest.approx(row["statistic"], rel=1e-8), dict(row)
+    return count
+
+
+def test_spot_check_of_a_map(tmp_path):
+    """A map written as the notebook writes it, recomputed point by point; a changed stored
+    statistic is found."""
+    from calstudy.core.robustness import robustness_map
+    from calstudy.io import results
+    from calstudy.io.runs import TRIALS_FLOAT_FORMAT
+
+    inputs = ["tracker.u0_mm"]
+    spec = robustness.map_spec("", inputs)
+    _, trials = robustness_map(spec, 3, n_screen=6, n_sweep=6, sweep_size=2,
+                               engine={"n_jobs": 1, "cache_dir": tmp_path / "cache"})
+    results.write_table(trials, tmp_path / "trials_robustness.csv", TRIALS_FLOAT_FORMAT)
+    run = {"parameters": {"seed": 3, "scenario_toml": "", "robustness_inputs": inputs}}
+    (tmp_path / "run.json").write_text(json.dumps(run))
+    assert spot_check(tmp_path, count=len(trials[trials["trial"] == 0])) > 0
+    trials.loc[trials["trial"] == 0, "statistic"] *= 1.01
+    results.write_table(trials, tmp_path / "trials_robustness.csv", TRIALS_FLOAT_FORMAT)
+    with pytest.raises(AssertionError):
+        spot_check(tmp_path, count=len(trials[trials["trial"] == 0]))
+
+
+def test_spot_check_of_the_committed_map():
+    """A few stored trials of the committed map, chosen by the seed, recomputed and compared."""
+    folder = RESULTS_DIR / STEM
+    if not (folder / "trials_robustness.csv").is_file():
+        pytest.skip("no committed robustness map yet")
+    assert spot_check(folder) == 3
