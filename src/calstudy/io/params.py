@@ -117,6 +117,10 @@ class Notebook03(NotebookParameters):
     selection_sizes: Counts
     candidates_per_sphere: Count
     n_pose_replications: Replications
+    n_screen_trials: Replications
+    n_robust_trials: Replications
+    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
+    robustness_inputs: list[str]
 
 
 class Notebook04(NotebookParameters):

@@ -86,6 +86,7 @@ FACTORIES = frozenset(
                 "compliance_sweep",
                 "noise_sweep",
                 "pose_selection",
+                "robustness",
             )
         ),
     }

@@ -11,6 +11,8 @@ rebuild it from ``experiments.json`` and recompute stored trials:
 - :func:`compliance_sweep_experiment`: the same trial at several sizes of the unmodelled joint
   compliance; :func:`arm_weight_sweep_experiment`: with the arm's own weight on the joints.
 - :func:`noise_sweep_experiment`: the same trial with all noise scaled.
+- :func:`robustness_experiment`: the same trial on the scenario with some inputs overridden (a
+  point of the robustness map, :mod:`calstudy.papers.selfcal.robustness`).
 - :func:`basin_experiment`: :func:`basin_trial`, convergence from starts farther and farther away.
 - :func:`pose_selection_experiment`: :func:`pose_selection_trial`, D-optimal against random
   measuring poses of the same number.
@@ -380,6 +382,21 @@ def calibration_trial(
 def calibration_experiment(scenario_toml: str = "", n_trials: int = 200) -> Experiment:
     """The experiment that decides the five claims, at the scenario's compliance."""
     return _experiment("calibration", calibration_trial, scenario_toml, n_trials)
+
+
+def robustness_experiment(
+    scenario_toml: str = "", n_trials: int = 10, overrides: dict | None = None
+) -> Experiment:
+    """One point of a robustness map: :func:`calibration_trial` on the scenario with
+    ``overrides`` (dotted keys of ``scenario.toml``, set before it is validated and checked
+    against their ledger ranges). The name is the same at every point, so every point runs the
+    same trials (paired seeds); the cache key holds the overrides."""
+    key = scenario_key(scenario_toml)
+    if overrides:
+        record = json.dumps({"scenario": key, "overrides": overrides}, sort_keys=True)
+        key = hashlib.sha256(record.encode()).hexdigest()
+    scenario = load_scenario(scenario_toml or None, overrides)
+    return Experiment("robustness", calibration_trial, scenario, n_trials, ({},), key)
 
 
 def compliance_sweep_experiment(scenario_toml: str = "", n_trials: int = 30) -> Experiment:
