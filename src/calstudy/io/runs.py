@@ -76,11 +76,18 @@ FACTORIES = frozenset(
         ),
         *(
             f"calstudy.papers.hybrid.handeye_experiments:{name}_experiment"
-            for name in ("handeye", "handeye_moves", "handeye_noise", "handeye_ranges")
+            for name in (
+                "handeye",
+                "handeye_moves",
+                "handeye_noise",
+                "handeye_pattern",
+                "handeye_ranges",
+            )
         ),
         *(
             f"calstudy.papers.selfcal.experiments:{name}_experiment"
             for name in (
+                "arm_weight_sweep",
                 "basin",
                 "calibration",
                 "compliance_sweep",
