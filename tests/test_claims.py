@@ -153,3 +153,15 @@ def test_paper_modules_judge_claims_through_the_register_only():
         "not_testable",
     }
     assert rule_imports("from calstudy.core import verdicts") == {"verdicts"}
+
+
+def test_too_few_trials_is_its_own_error_and_a_sweep_point_reads_none():
+    from calstudy.claims import verdict_or_none
+    from calstudy.core.errors import TooFewTrials
+    from calstudy.core.stats import median_interval
+
+    with pytest.raises(TooFewTrials, match="interval for the median"):
+        median_interval([1.0, 2.0, 3.0])
+    assert verdict_or_none(lambda: median_interval([1.0, 2.0, 3.0])) is None
+    with pytest.raises(CalibrationError, match="non-finite"):
+        verdict_or_none(lambda: median_interval([1.0] * 10 + [float("nan")]))

@@ -121,3 +121,13 @@ def test_a_models_cache_key_is_its_fields_not_its_cached_properties():
     assert fresh.nominal_robot.name  # fills a cached property
     assert _scenario_digest(fresh, "x") == digest
     assert _scenario_digest(with_inputs(fresh, {"scanner.sigma_point_mm": 0.022}), "x") != digest
+
+
+def test_a_file_that_is_not_toml_is_named_once(tmp_path):
+    from calstudy.core.schema import Schema, load_model
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text("x = [1, \n")
+    with pytest.raises(CalibrationError) as info:
+        load_model(bad, Schema, "a scenario")
+    assert str(info.value).count(str(bad)) == 1, str(info.value)

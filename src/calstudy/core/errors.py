@@ -10,6 +10,11 @@ class CalibrationError(ValueError):
     """
 
 
+class TooFewTrials(CalibrationError):
+    """Too few trials for the interval a verdict needs (of the median, or of a pooled RMS
+    ratio): a sweep point with a handful of trials is then written "too few trials"."""
+
+
 class CalibrationWarning(UserWarning):
     """A result that is returned but should not be trusted without a look: a goodness-of-fit
     test failed (the message says which measurements disagree). Notebooks show it in red."""

@@ -44,7 +44,7 @@ from pydantic import BaseModel
 from calstudy.core import montecarlo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.ledger import tables
-from calstudy.core.verdicts import median_interval
+from calstudy.core.stats import median_interval
 
 #: stages of a map row, in the order they run
 STAGES = ("base", "screen", "sweep", "grid")

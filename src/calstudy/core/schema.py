@@ -449,8 +449,9 @@ def load_model(
     path = _existing(path, what)
     key = (*file_key(path), model, repr(sorted((overrides or {}).items())))
     if key not in _MODELS:
+        table = read_toml(path, what)  # its errors name the file
         try:
-            table = apply_overrides(read_toml(path, what), overrides)
+            table = apply_overrides(table, overrides)
         except CalibrationError as exc:
             raise CalibrationError(f"{path}: {exc}") from None
         loaded = validate(model, table, path, study=is_study_file(path))
@@ -604,7 +605,6 @@ __all__ = [
     "Texts",
     "Vec2",
     "Vec3",
-    "apply_overrides",
     "file_key",
     "format_errors",
     "is_study_file",

@@ -13,7 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from calstudy.core.errors import CalibrationError
+from calstudy.core.errors import CalibrationError, TooFewTrials
 
 
 def finite_samples(name: str, samples, min_count: int = 1) -> np.ndarray:
@@ -184,7 +184,7 @@ def median_ranks(n: int, level: float = 0.95) -> tuple[int, int, float]:
     j = int(np.count_nonzero(cdf <= alpha_half))
     if j == 0:
         n_min = next(m for m in range(1, 2000) if binom.cdf(0, m, 0.5) <= alpha_half)
-        raise CalibrationError(
+        raise TooFewTrials(
             f"{n} samples cannot give a {100 * level:g} % interval for the median "
             f"(the full range covers {100 * (1 - 2 * 0.5**n):.3g} %); at least {n_min} needed"
         )
@@ -289,7 +289,7 @@ def rms_ratio_interval(after, before, level: float = 0.95) -> tuple[float, float
             f"after has {a.size} trials and before {b.size}; expected the same N (paired)"
         )
     if a.size < MIN_POOLED_TRIALS:
-        raise CalibrationError(
+        raise TooFewTrials(
             f"{a.size} trials cannot give an interval of the RMS ratio; at least "
             f"{MIN_POOLED_TRIALS} needed (as for the median's)"
         )
