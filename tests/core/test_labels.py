@@ -45,3 +45,10 @@ def test_every_claim_of_the_register_has_words():
     ids = set(claim_register()["id"])
     assert ids <= set(CLAIM_LABELS), sorted(ids - set(CLAIM_LABELS))
     assert len(set(CLAIM_LABELS.values())) == len(CLAIM_LABELS)  # no two claims alike
+
+
+def test_plain_writes_scenario_inputs_by_their_dotted_keys_as_words():
+    assert plain("scanner.sigma_point_mm: holds") == "scanner sigma point (mm): holds"
+    assert plain("sensor.design_zyx_deg[1]") == "sensor design zyx [1] (deg)"
+    kept = "see robustness.csv, data/dualarm/scenario.toml, e.g. this, calstudy.io.tolerance"
+    assert plain(kept) == kept

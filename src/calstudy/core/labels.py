@@ -119,9 +119,32 @@ def label(name: object, unit: str | None = None) -> str:
     return f"{words} ({unit})" if unit else words
 
 
+#: a scenario input by its dotted key (``scanner.sigma_point_mm``, ``sensor.design_zyx_deg[1]``);
+#: single letters (``e.g.``), longer dotted names and file names are left alone
+_DOTTED = re.compile(
+    r"(?<![\w./-])([a-z][a-z0-9_]+)\.([a-z][a-z0-9_]+)(\[\d+\])?(?![\w/]|\.\w)"
+)
+#: endings of file names, not inputs
+_FILE_ENDINGS = {"csv", "toml", "png", "json", "py", "ipynb", "md", "html", "yml", "yaml", "txt"}
+
+
+def _input_words(m: re.Match) -> str:
+    table, name, index = m.group(1), m.group(2), m.group(3) or ""
+    if name in _FILE_ENDINGS:
+        return m.group(0)
+    words = label(name)
+    if index:
+        stem, paren, unit = words.partition(" (")
+        words = f"{stem} {index}{' (' + unit if paren else ''}"
+    return f"{table.replace('_', ' ')} {words}"
+
+
 def plain(text: object) -> str:
-    """A generated sentence with claim ids and bare snake_case identifiers as words:
-    ``"hybrid.handeye against translation_range_mm: ..."`` -> ``"hand-eye calibration against
-    range of the pure translations (mm): ..."``; file names (``x_y.csv``) stay as they are."""
+    """A generated sentence with claim ids, scenario inputs by their dotted keys and bare
+    snake_case identifiers as words: ``"hybrid.handeye against translation_range_mm: ..."`` ->
+    ``"hand-eye calibration against range of the pure translations (mm): ..."``,
+    ``"scanner.sigma_point_mm"`` -> ``"scanner sigma point (mm)"``; file names (``x_y.csv``)
+    stay as they are."""
     s = _CLAIM_ID.sub(lambda m: claim_label(m.group(0)), str(text))
+    s = _DOTTED.sub(_input_words, s)
     return _IDENT.sub(lambda m: label(m.group(0)), s)

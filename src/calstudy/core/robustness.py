@@ -43,6 +43,7 @@ from pydantic import BaseModel
 
 from calstudy.core import montecarlo
 from calstudy.core.errors import CalibrationError
+from calstudy.core.labels import plain
 from calstudy.core.ledger import tables
 from calstudy.core.stats import median_interval
 
@@ -548,7 +549,7 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
                 "verdicts": "; ".join(taken),
                 "depends_on": "; ".join(depends),
                 "thresholds": " | ".join(parts),
-                "sentence": head + body + tail + ".",
+                "sentence": plain(head + body + tail + "."),
             }
         )
     return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))

@@ -2,9 +2,10 @@
 verdicts the claim takes over that input's range.
 
 :func:`read_maps` collects the notebooks' maps (``results/<notebook>/robustness.csv``, written
-by :func:`calstudy.core.robustness.robustness_map`); :func:`grid_figure` draws them: one row per
-claim with a map, one column per input that matters to at least one claim (screened and found
-to change a verdict or move a statistic), and a last column for all other screened inputs. A
+by :func:`calstudy.core.robustness.robustness_map`); :func:`grid_figure` draws them: one column per
+claim with a map, one row per input that matters to at least one claim (screened and found to
+change a verdict or move a statistic), and a last row for all other screened inputs (inputs down,
+so that the figure's text keeps its size in the book's column however many inputs matter). A
 cell is split into one stripe per verdict taken over the input's range (the base and the sweep), in
 the verdict colours of the book; an input the claim's computation does not read is left
 blank.
@@ -20,7 +21,7 @@ from calstudy.core.paths import RESULTS_DIR
 
 #: the map of one notebook, beside its other results
 MAP_NAME = "robustness.csv"
-#: the column of the inputs that matter to no claim of a row
+#: the row of the inputs that matter to no claim of a column
 OTHERS = "other inputs"
 
 
@@ -86,37 +87,45 @@ def grid_figure(maps: pd.DataFrame, path: str | Path, colours: dict) -> tuple[Pa
     from matplotlib.figure import Figure
     from matplotlib.patches import Patch, Rectangle
 
+    from calstudy.core.labels import CLAIM_LABELS, claim_label, plain
     from calstudy.io.results import write_figure
 
     cells, claims, inputs = cell_verdicts(maps)
-    longest = max(len(label) for label in inputs)
-    bottom = 0.4 + 0.055 * longest  # room for the rotated input names, in
-    width, height = max(2.6 + 0.36 * len(inputs), 6.5), bottom + 0.6 + 0.32 * len(claims)
-    fig = Figure(figsize=(width, height))
+    # inputs down, claims across: the figure grows in height with the inputs, so its text
+    # keeps its size in the book's column however many inputs matter
+    input_names = [plain(label) for label in inputs]
+    claim_names = [claim_label(c) if c in CLAIM_LABELS else c for c in claims]
+    left = 0.3 + 0.07 * max(len(name) for name in input_names)  # room for the input names, in
+    bottom = 0.3 + 0.06 * max(len(name) for name in claim_names)  # the rotated claim names
+    cols = max(len(claims), 2)
+    width = left + 0.45 * cols + 0.3
+    height = bottom + 0.7 + 0.3 * len(inputs)
+    fig = Figure(figsize=(max(width, 4.5), height))
     ax = fig.add_axes(
-        (2.2 / width, bottom / height, 1 - 2.4 / width, 0.32 * len(claims) / height)
+        (left / max(width, 4.5), bottom / height, 0.45 * cols / max(width, 4.5),
+         0.3 * len(inputs) / height)
     )
     seen = []
-    for i, claim in enumerate(claims):
-        for j, label in enumerate(inputs):
+    for j, claim in enumerate(claims):
+        for i, label in enumerate(inputs):
             verdicts = cells.get((claim, label), [])
             for k, v in enumerate(verdicts):
                 step = 1.0 / len(verdicts)
-                box = Rectangle((j, i + k * step), 1, step, color=colours.get(v, "k"), lw=0)
+                box = Rectangle((j + k * step, i), step, 1, color=colours.get(v, "k"), lw=0)
                 ax.add_patch(box)
                 seen += [v] if v not in seen else []
             ax.add_patch(Rectangle((j, i), 1, 1, fill=False, ec="white", lw=1.5))
-    ax.set_xlim(0, len(inputs))
-    ax.set_ylim(len(claims), 0)
-    ax.set_xticks([j + 0.5 for j in range(len(inputs))], inputs, rotation=60, ha="right",
+    ax.set_xlim(0, len(claims))
+    ax.set_ylim(len(inputs), 0)
+    ax.set_xticks([j + 0.5 for j in range(len(claims))], claim_names, rotation=60, ha="right",
                   fontsize=9)
-    ax.set_yticks([i + 0.5 for i in range(len(claims))], claims, fontsize=9)
+    ax.set_yticks([i + 0.5 for i in range(len(inputs))], input_names, fontsize=9)
     ax.tick_params(length=0)
     for side in ax.spines.values():
         side.set_visible(False)
     handles = [Patch(color=colours.get(v, "k"), label=v) for v in seen]
-    fig.legend(handles=handles, loc="upper left", ncol=min(len(handles), 4), fontsize=9,
-               frameon=False, bbox_to_anchor=(0.01, 0.99))
+    fig.legend(handles=handles, loc="upper left", ncol=min(len(handles), 2), fontsize=9,
+               frameon=False, bbox_to_anchor=(0.01, 0.995))
     path = Path(path)
     write_figure(fig, path)
     conditional = sum(

@@ -75,9 +75,15 @@ def test_only_refuses_an_input_the_map_does_not_screen():
     assert [item.key for item in spec.inputs] == ["tracker.u0_mm"]
 
 
+def _same_value(column: pd.Series, value) -> pd.Series:
+    """Rows of ``column`` equal to ``value``, NaN (no second input) equal to NaN."""
+    return column.isna() if pd.isna(value) else column.eq(value)
+
+
 def spot_check(folder, count: int = 3) -> int:
-    """Recompute trial 0 of ``count`` points of the map in ``folder`` (chosen by the seed) and
-    compare each claim's statistic with the stored one; the number of points checked."""
+    """Recompute ``count`` points of the map in ``folder`` (chosen by the seed), all their
+    trials (one-step's figure divides by the route best over the point's trials), and compare
+    trial 0's statistic of each claim with the stored one; the number of points checked."""
     params = json.loads((folder / "run.json").read_text())["parameters"]
     trials = pd.read_csv(folder / "trials_robustness.csv", keep_default_na=False,
                          na_values={"value": [""], "value2": [""]})
@@ -88,7 +94,20 @@ def spot_check(folder, count: int = 3) -> int:
         setting = robustness.point_setting(
             spec, [row["input"], row["input2"]], [row["value"], row["value2"]]
         )
-        rows = trial_rows(spec.experiment(robustness.GROUP, setting, 1), params["seed"], 0, 0)
+        same = (
+            (trials["stage"] == row["stage"])
+            & (trials["input"] == row["input"])
+            & (trials["input2"] == row["input2"])
+            & _same_value(trials["value"], row["value"])
+            & _same_value(trials["value2"], row["value2"])
+            & (trials["claim"] == row["claim"])
+        )
+        n = int(trials.loc[same, "trial"].max()) + 1
+        experiment = spec.experiment(robustness.GROUP, setting, n)
+        rows = pd.concat(
+            [pd.DataFrame(trial_rows(experiment, params["seed"], 0, t)) for t in range(n)],
+            ignore_index=True,
+        )
         got = robustness.claim_statistics(rows)[row["claim"]][0]
         assert got == pytest.approx(row["statistic"], rel=1e-8), dict(row)
     return count
