@@ -51,6 +51,7 @@ from scipy import stats
 from calstudy.core.errors import CalibrationError, CalibrationWarning
 from calstudy.core.geometry import matrix_to_euler_zyx
 from calstudy.core.schema import load_model
+from calstudy.core.stats import interval_level
 from calstudy.core.userfile import (
     ANGLE_UNITS,
     LENGTH_UNITS,
@@ -599,7 +600,7 @@ class CellFit:
         """Half-widths (30,) of the ``level`` intervals of the parameters, mm and rad: the standard
         deviation times the normal quantile (declared noise) or Student's t with :attr:`dof`;
         NaN for the fixed parameters."""
-        _check_level(level)
+        level = interval_level(level)
         std = np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
         with np.errstate(invalid="ignore"):
             quantile = np.where(
@@ -613,7 +614,7 @@ class CellFit:
         """The bound of ``d^T C^-1 d`` (``d`` the identified parameters' error, ``C`` their
         covariance) of the joint ``level`` region: the chi-square quantile with as many degrees of
         freedom as parameters identified (declared noise), else ``p F(p, region_dof)``."""
-        _check_level(level)
+        level = interval_level(level)
         p = self.n_identified
         if math.isinf(self.region_dof):
             return float(stats.chi2.ppf(level, p))
@@ -625,11 +626,6 @@ class CellFit:
         d = angle_wrap(np.asarray(params, float) - self.params)[self.free]
         c = self.covariance[np.ix_(self.free, self.free)]
         return bool(d @ np.linalg.solve(c, d) <= self.region_limit(level))
-
-
-def _check_level(level: float) -> None:
-    if not 0.0 < level < 1.0:
-        raise CalibrationError(f"level = {level}: a probability strictly between 0 and 1")
 
 
 def subset(meas: Measurements, keep) -> Measurements:

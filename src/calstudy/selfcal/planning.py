@@ -33,8 +33,6 @@ from calstudy.selfcal.identify import Measurements, scaled_jacobian
 from calstudy.selfcal.measured import CellFit, MeasuredCell, identify_measurements
 from calstudy.selfcal.model import N_PARAMS, default_model
 
-#: the sensor geometry keys a cell's ``[sensor]`` table may give
-SENSOR_KEYS = ("standoff_mm", "field_mm", "depth_mm")
 #: random selections of the same size that the planned poses are compared with
 RANDOM_SELECTIONS = 200
 #: replications of the measured comparison of planned and random poses (the notebook's default)

@@ -80,9 +80,9 @@ def test_estimated_noise_widens_the_intervals_and_the_region(cell):
     assert np.all(fit.half_widths() > norm.ppf(0.975) * std)
     assert fit.region_limit() > chi2.ppf(0.95, 30)
     for level in (0.0, 1.0, 1.5):
-        with pytest.raises(CalibrationError, match=f"level = {level}: a probability"):
+        with pytest.raises(CalibrationError, match=f"level is {level}; expected strictly between"):
             fit.half_widths(level)
-        with pytest.raises(CalibrationError, match=f"level = {level}: a probability"):
+        with pytest.raises(CalibrationError, match=f"level is {level}; expected strictly between"):
             fit.region_limit(level)
 
 
