@@ -131,3 +131,9 @@ def firsts(name, point, trials, seed=SEED):
 def toy_experiment(n_trials: int = 4, scale: float = 1.0) -> Experiment:
     """A named experiment factory with JSON-able arguments (for calstudy.io.runs)."""
     return Experiment("toy", noisy_solve, Scenario(scale=scale), n_trials, POINTS)
+
+
+def slow_first_failure(scenario, rng):
+    """Fails always; half the trials (by their first draw) take 0.6 s to do so."""
+    time.sleep(0.6 if rng.uniform() > 0.5 else 0.0)
+    raise ValueError("this setting cannot run")

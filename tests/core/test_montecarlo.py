@@ -465,3 +465,21 @@ def test_streams_are_new_at_every_call_and_independent_of_draw_counts():
             streams(rng, *bad)
     with pytest.raises(CalibrationError, match="SeedSequence"):
         streams(np.random.RandomState(1), "a")
+
+
+def test_the_failure_reported_is_the_first_trial_whatever_finishes_first():
+    """Every trial fails; trial 0 takes longest, so a worker finishes another one first. The
+    message names trial 0 all the same (the same text with any number of workers)."""
+    from mc_trials import slow_first_failure
+
+    from calstudy.core.montecarlo import Experiment, run, trial_rng
+
+    seed = next(
+        s for s in range(100)
+        if trial_rng(s, "fails", {}, 0).uniform() > 0.5
+        and trial_rng(s, "fails", {}, 1).uniform() <= 0.5
+    )
+    exp = Experiment("fails", slow_first_failure, None, 4)
+    for n_jobs in (1, 2):
+        with pytest.raises(CalibrationError, match=r"trial 0 failed: ValueError"):
+            run(exp, seed, n_jobs=n_jobs, progress=False)

@@ -599,7 +599,8 @@ def run(
     ------
     CalibrationError
         On bad arguments, and when a trial raises (the message names the experiment, point and
-        trial; the trial's exception is the ``__cause__``). Trials finished before are kept in
+        trial: the first in order that fails, whatever the number of workers; the trial's
+        exception is the ``__cause__``). Trials finished before are kept in
         the cache.
     """
     if not isinstance(experiment, Experiment):
@@ -635,6 +636,7 @@ def run(
     with bar, _outcomes(pending, n_jobs, scheduler) as outcomes:
         for p, t, rows, error in outcomes:
             if error is not None:
+                p, t, error = _first_failure(jobs, exp.n_trials, done, p, t, error)
                 raise _trial_error(exp, seed, p, t, error) from error
             done[p, t] = rows
             if cache is not None:
@@ -642,6 +644,28 @@ def run(
             bar.set_description_str(labels[p], refresh=False)
             bar.update()
     return _frame(exp, done)
+
+
+def _first_failure(
+    jobs: Sequence[_PointJob],
+    n_trials: int,
+    done: Mapping[tuple[int, int], Rows],
+    p: int,
+    t: int,
+    error: BaseException,
+) -> tuple[int, int, BaseException]:
+    """The failure to report: the first (point, trial), in order, that fails, whichever worker
+    finished first. The trials before ``(p, t)`` that have not finished are run here, one by
+    one, until one fails (an error path: a few trials at most when a setting cannot run)."""
+    for job in jobs[: p + 1]:
+        for trial in range(t if job.index == p else n_trials):
+            if (job.index, trial) in done:
+                continue
+            with _one_blas_thread():
+                q, s, _, err = _run_trial(job, trial, False)
+            if err is not None:
+                return q, s, err
+    return p, t, error
 
 
 def _trial_error(exp: Experiment, seed: int, p: int, t: int, error: BaseException) -> Exception:
