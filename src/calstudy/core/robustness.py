@@ -33,6 +33,7 @@ interrupted map goes on where it stopped, and its rows do not depend on the numb
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -45,6 +46,7 @@ from calstudy.core import montecarlo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.labels import plain
 from calstudy.core.ledger import tables
+from calstudy.core.paths import REPO_ROOT
 from calstudy.core.stats import median_interval
 
 #: stages of a map row, in the order they run
@@ -272,7 +274,9 @@ class _Runner:
             exp = self.spec.experiment(group, dict(setting), n)
             rows = montecarlo.run(exp, self.seed, **self.engine)
         except CalibrationError as exc:
-            return {}, {}, str(exc).splitlines()[0][:300]
+            # the map is a result: a study file is named from the repository, not this machine
+            text = str(exc).splitlines()[0].replace(f"{REPO_ROOT}{os.sep}", "")
+            return {}, {}, text[:300]
         stats = self.spec.statistics(group, rows)
         stats = {c: np.asarray(s, dtype=float) for c, s in stats.items()}
         for claim, values in stats.items():

@@ -137,3 +137,15 @@ def test_spot_check_of_the_committed_map():
     if not (folder / "trials_robustness.csv").is_file():
         pytest.skip("no committed robustness map yet")
     assert spot_check(folder) == 3
+
+
+def test_committed_map_names_no_path_of_a_machine():
+    """A map point whose setting cannot be loaded records the file from the repository
+    (``data/dualarm/scenario.toml``), not by an absolute path of the machine that ran it."""
+    import re
+
+    absolute = re.compile(r"(^|[\s'\"(,])/\w[\w.-]*/[\w./-]*\.toml")
+    for name in ("robustness.csv", "robustness_claims.csv"):
+        path = RESULTS_DIR / STEM / name
+        if path.is_file():
+            assert not absolute.search(path.read_text()), name
