@@ -559,7 +559,18 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
     return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
 
 
+def point_setting(spec: MapSpec, labels: Sequence[str], values: Sequence[float]) -> dict:
+    """The setting of a map row: its inputs (labels) at its values, for rebuilding a point."""
+    by_label = {item.label: item for item in spec.inputs}
+    setting: dict = {}
+    for label, value in zip(labels, values, strict=True):
+        if label:
+            setting.update(by_label[label].setting(value))
+    return setting
+
+
 __all__ = [
+    "point_setting",
     "MAP_COLUMNS",
     "STAGES",
     "SUMMARY_COLUMNS",

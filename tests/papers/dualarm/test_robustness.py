@@ -12,6 +12,7 @@ import pytest
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import trial_rows
 from calstudy.core.paths import RESULTS_DIR
+from calstudy.core.robustness import point_setting
 from calstudy.core.schema import apply_overrides
 from calstudy.papers.dualarm import experiments, report, robustness
 from calstudy.papers.dualarm.scenario import load_published, load_scenario
@@ -121,7 +122,7 @@ def spot_check(folder, count: int = 3) -> int:
     first = trials[trials["trial"] == 0].reset_index(drop=True)
     rng = np.random.default_rng(params["seed"])
     for _, row in first.iloc[rng.choice(len(first), size=count, replace=False)].iterrows():
-        setting = robustness.point_setting(
+        setting = point_setting(
             spec, [row["input"], row["input2"]], [row["value"], row["value2"]]
         )
         part = robustness.CLAIM_PARTS[row["claim"]]

@@ -13,6 +13,7 @@ import pytest
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import trial_rows
 from calstudy.core.paths import RESULTS_DIR
+from calstudy.core.robustness import point_setting
 from calstudy.core.trialcache import TrialCache
 from calstudy.papers.selfcal import experiments, report, robustness
 from calstudy.papers.selfcal.scenario import load_scenario
@@ -91,7 +92,7 @@ def spot_check(folder, count: int = 3) -> int:
     first = trials[trials["trial"] == 0].reset_index(drop=True)
     rng = np.random.default_rng(params["seed"])
     for _, row in first.iloc[rng.choice(len(first), size=count, replace=False)].iterrows():
-        setting = robustness.point_setting(
+        setting = point_setting(
             spec, [row["input"], row["input2"]], [row["value"], row["value2"]]
         )
         same = (

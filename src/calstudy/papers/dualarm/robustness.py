@@ -220,13 +220,3 @@ def map_spec(
         return judge_claims(rows, published)
 
     return MapSpec(CLAIM_PARTS, tuple(inputs), experiment, statistics, judge, tuple(skipped))
-
-
-def point_setting(spec: MapSpec, labels: Sequence[str], values: Sequence[float]) -> dict:
-    """The setting of a map row: its inputs (labels) at its values, for rebuilding a point."""
-    by_label = {item.label: item for item in spec.inputs}
-    setting: dict = {}
-    for label, value in zip(labels, values, strict=True):
-        if label:
-            setting.update(by_label[label].setting(value))
-    return setting
