@@ -612,11 +612,14 @@ ROBUSTNESS_COLUMNS = ("robustness", "depends_on", "thresholds")
 ROBUSTNESS_SUMMARY = "robustness_claims.csv"
 
 
+def notebook_files(root: Path, name: str) -> list[Path]:
+    """Every ``<root>/<notebook>/<name>``, sorted, hidden folders skipped."""
+    return sorted(p for p in root.glob(f"*/{name}") if not p.parent.name.startswith("."))
+
+
 def _with_robustness(df: pd.DataFrame, root: Path) -> pd.DataFrame:
     """``df`` with the :data:`ROBUSTNESS_COLUMNS` of every claim that has a map."""
-    found = sorted(
-        p for p in root.glob(f"*/{ROBUSTNESS_SUMMARY}") if not p.parent.name.startswith(".")
-    )
+    found = notebook_files(root, ROBUSTNESS_SUMMARY)
     frames = [pd.read_csv(p, dtype=str, keep_default_na=False) for p in found]
     cols = ["id", *ROBUSTNESS_COLUMNS]
     maps = pd.concat(frames, ignore_index=True)[cols] if frames else pd.DataFrame(columns=cols)
@@ -651,8 +654,7 @@ def aggregate_claims(results_root: str | Path | None = None) -> pd.DataFrame:
     root = RESULTS_DIR if results_root in (None, "") else Path(results_root)
     if not root.is_dir():
         raise FileNotFoundError(f"results folder not found: {root}")
-    found = sorted(p for p in root.glob("*/claims.csv") if not p.parent.name.startswith("."))
-    frames = [read_claims(p) for p in found]
+    frames = [read_claims(p) for p in notebook_files(root, "claims.csv")]
     if frames:
         df = pd.concat(frames, ignore_index=True)[list(CLAIM_COLUMNS)]
     else:

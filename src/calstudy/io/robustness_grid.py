@@ -18,6 +18,7 @@ from pathlib import Path
 import pandas as pd
 
 from calstudy.core.paths import RESULTS_DIR
+from calstudy.io.results import notebook_files
 
 #: the map of one notebook, beside its other results
 MAP_NAME = "robustness.csv"
@@ -39,9 +40,8 @@ def read_maps(results_root: str | Path | None = None) -> pd.DataFrame:
         The maps (empty, without columns, if none exists).
     """
     root = RESULTS_DIR if results_root in (None, "") else Path(results_root)
-    found = sorted(p for p in root.glob(f"*/{MAP_NAME}") if not p.parent.name.startswith("."))
     frames = []
-    for path in found:
+    for path in notebook_files(root, MAP_NAME):
         table = pd.read_csv(path, keep_default_na=False, na_values={"value": [""]})
         frames.append(table.assign(notebook=path.parent.name))
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
