@@ -80,6 +80,7 @@ FACTORIES = frozenset(
                 "handeye",
                 "handeye_moves",
                 "handeye_noise",
+                "handeye_noise_model",
                 "handeye_pattern",
                 "handeye_ranges",
             )

@@ -159,6 +159,22 @@ def summarise_ranges(trials: pd.DataFrame) -> pd.DataFrame:
     return out.rename(columns={"value": "value_mm"})
 
 
+def summarise_noise_model(trials: pd.DataFrame) -> pd.DataFrame:
+    """The noise-model sweep (``handeye_noise_model_experiment``): per input and value the
+    columns of :func:`summarise_handeye_sweep`, and the RMS rotation error of the paper's
+    unweighted SVD over a covariance-weighted fit of the same pure translations
+    (``svd_over_weighted``, what weighting the centres gains)."""
+    out = summarise_handeye_sweep(trials, ["parameter", "value"])
+    rot = trials.pivot_table(
+        index=["parameter", "value", "trial"], columns="method", values="rotation_error_deg"
+    )
+    gain = rot.groupby(level=["parameter", "value"], sort=False).apply(
+        lambda g: float(np.sqrt(np.mean(g["sphere"] ** 2) / np.mean(g["weighted rotation"] ** 2)))
+    )
+    keys = pd.MultiIndex.from_frame(out[["parameter", "value"]])
+    return out.assign(svd_over_weighted=gain.reindex(keys).to_numpy())
+
+
 #: "works" criterion of hybrid.stationary (the study's: the paper states no accuracy for the
 #: stationary sensors): the homography chain's RMS field error, pooled over the trials, at most
 #: this multiple of the PnP chain's (maximum likelihood for the pixel noise) on the same images
