@@ -85,6 +85,10 @@ class Notebook01(NotebookParameters):
         PositiveFinite | Annotated[list[PositiveFinite], Field(min_length=3, max_length=3)]
     )
     misfit: Literal["raise", "flag"]
+    n_screen_trials: Replications
+    n_robust_trials: Replications
+    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
+    robustness_inputs: list[str]
 
 
 class Notebook02(NotebookParameters):

@@ -74,6 +74,7 @@ FACTORIES = frozenset(
                 "stationary_pixel",
             )
         ),
+        "calstudy.papers.hybrid.station_robustness:robustness_experiment",
         *(
             f"calstudy.papers.hybrid.handeye_experiments:{name}_experiment"
             for name in (

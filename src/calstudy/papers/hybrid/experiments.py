@@ -37,6 +37,7 @@ from calstudy.papers.hybrid.handeye_experiments import (
     SCENARIOS,
     check_scenario,
     paper_moves,
+    station_config,
 )
 from calstudy.papers.hybrid.scenario import (
     SWEEP_KEYS,
@@ -211,13 +212,15 @@ def rps_trial(
     statcam2base: np.ndarray,
     rng: np.random.Generator,
     penalties=(1e4,),
+    so3: bool = True,
 ) -> list[dict]:
     """Locate the panel once by the 3-2-1 rule with the calibrated stationary sensors A, B, C.
 
     The datum points are measured in the first three stationary sensors' frames with noise and
     mapped to the base frame with their calibrated poses ``statcam2base[:3]``. Returns one row
-    per solver (the penalty LM for each ``M``, and the SO(3) solution) with the frame error: the
-    largest displacement it causes at the panel's corners and datums (mm), and the rotation error.
+    per solver (the penalty LM for each ``M``, and with ``so3`` the SO(3) solution) with the
+    frame error: the largest displacement it causes at the panel's corners and datums (mm), and
+    the rotation error.
     """
     free = np.zeros((3, 3))
     free[0, 0] = rng.uniform(-1, 1) * station.free_direction  # along the slot
@@ -233,7 +236,7 @@ def rps_trial(
     corners = np.array([[0, 0, 0], [length, 0, 0], [0, width, 0], [length, width, 0]], dtype=float)
     check_pts_base = geo.apply(work2base_true, np.vstack([corners, station.datums_work]))
     rows = []
-    solvers = [(f"penalty M={m:g}", m) for m in penalties] + [("SO(3)", None)]
+    solvers = [(f"penalty M={m:g}", m) for m in penalties] + ([("SO(3)", None)] if so3 else [])
     for name, m in solvers:
         if m is None:
             est = rps_frame_so3(measured, station.datums_work, station.base2work_nominal)
@@ -274,11 +277,13 @@ def stationary_run(
     """One station: the sphere hand-eye (4 + 6 moves), the ten stationary sensors by Eq. 23 and
     the 3-2-1 frame from the calibrated sensors A, B, C.
 
-    ``pixel_sigma`` overrides the hole-centre noise of ``station.toml`` (px). Rows with
+    ``pixel_sigma`` overrides the hole-centre noise of ``station.toml`` (px), and
+    ``setup["overrides"]``, if given, other inputs of it by their dotted keys. Rows with
     ``step == "stationary"``: ``sensor, variant`` and the errors of :func:`stationary_trial`;
     rows with ``step == "rps"``: the columns of :func:`rps_trial`.
     """
-    station = make_station(rng, pixel_sigma=pixel_sigma, **check_scenario(scenario))
+    config = station_config(setup.get("overrides"))
+    station = make_station(rng, pixel_sigma=pixel_sigma, config=config, **check_scenario(scenario))
     meas, _ = simulate_sphere_measurements(station, *paper_moves(station), rng)
     s2f = sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
     rows = stationary_trial(station, s2f, child_rng(rng, "stationary sensors"))
@@ -335,7 +340,8 @@ def rps_penalty_run(setup: dict, rng: np.random.Generator) -> list[dict]:
         st = replace(station, base2work_nominal=start)
         for m in penalties:
             try:  # each M alone, on the same datums: one failure does not hide the others
-                r = rps_trial(st, station.statcam2base_true, child_rng(rng, "datums"), [m])[0]
+                datums = child_rng(rng, "datums")
+                r = rps_trial(st, station.statcam2base_true, datums, [m], so3=False)[0]
             except CalibrationError:
                 r = None
             rows.append(

@@ -238,6 +238,42 @@ def stationary_numbers(stationary: pd.DataFrame) -> dict:
     } | station_against_design(stationary)
 
 
+def handeye_judged(handeye: pd.DataFrame, min_trials: int = 200) -> Judged:
+    """``hybrid.handeye`` by its rule (:func:`calibration_claims`) on the hand-eye trial rows,
+    with its null and oracle controls (``min_trials``: rule 1, fewer are named in the note)."""
+    fig = handeye_figures(handeye)
+    columns = CLAIMS["hybrid.handeye"]
+    return judge_claim(
+        "hybrid.handeye", fig, columns, reference=CRB_MULTIPLE, min_trials=min_trials
+    )
+
+
+def stationary_judged(stationary: pd.DataFrame, min_trials: int = 200) -> Judged:
+    """``hybrid.stationary`` by its rule (:func:`calibration_claims`) on the stationary trial
+    rows, with its null and oracle controls."""
+    st = stationary_figures(stationary)
+    columns = CLAIMS["hybrid.stationary"]
+    return judge_claim(
+        "hybrid.stationary", st, columns, reference=ML_MULTIPLE, min_trials=min_trials
+    )
+
+
+def rps_judged(stationary: pd.DataFrame) -> Judged:
+    """``hybrid.rps``: not testable, with the largest difference of the penalty and SO(3)
+    frame errors over the trials of :data:`VERDICT_SCENARIO` in the reason."""
+    rps = stationary[(stationary["step"] == "rps") & (stationary["scenario"] == VERDICT_SCENARIO)]
+    pen = rps[rps["solver"].str.startswith("penalty")].set_index("trial")["frame_error_mm"]
+    so3 = rps[rps["solver"] == "SO(3)"].set_index("trial")["frame_error_mm"].reindex(pen.index)
+    diff = float(np.abs(pen - so3).max())
+    reason = (
+        "identical by construction: 6 datum coordinates fix the 6 unknowns of the frame, so the "
+        "penalty LM (Eq. 5) and the SO(3) solution solve the same exactly determined system; "
+        f"their frame errors differ by {'less than 1e-6' if diff < 1e-6 else f'up to {diff:.2g}'}"
+        f" mm over {len(pen)} trials"
+    )
+    return Judged(not_testable(reason, kind="ratio", n=len(pen)))
+
+
 def calibration_claims(handeye, stationary, notebook: str):
     """Claim rows of ``hybrid.handeye``, ``hybrid.stationary``, ``hybrid.rps`` and the control
     rows, by the v2 rule, from the trial tables of notebook 01.
@@ -257,7 +293,7 @@ def calibration_claims(handeye, stationary, notebook: str):
     Returns (claim rows, control rows).
     """
     fig = handeye_figures(handeye)
-    he = judge_claim("hybrid.handeye", fig, CLAIMS["hybrid.handeye"], reference=CRB_MULTIPLE)
+    he = handeye_judged(handeye)
     ml = judge_claim("hybrid.handeye", fig, ClaimColumns("ML"), reference=CRB_MULTIPLE).claim
     note = (
         f"sphere method / CRB (max of rotation, translation), sensor noise only: "
@@ -275,7 +311,7 @@ def calibration_claims(handeye, stationary, notebook: str):
     ]
     controls = control_rows("hybrid.handeye", he)
     st = stationary_figures(stationary)
-    v = judge_claim("hybrid.stationary", st, CLAIMS["hybrid.stationary"], reference=ML_MULTIPLE)
+    v = stationary_judged(stationary)
     station = station_against_design(stationary)
     rows.append(
         claim_row(
@@ -293,20 +329,10 @@ def calibration_claims(handeye, stationary, notebook: str):
         )
     )
     controls += control_rows("hybrid.stationary", v)
-    rps = stationary[(stationary["step"] == "rps") & (stationary["scenario"] == VERDICT_SCENARIO)]
-    pen = rps[rps["solver"].str.startswith("penalty")].set_index("trial")["frame_error_mm"]
-    so3 = rps[rps["solver"] == "SO(3)"].set_index("trial")["frame_error_mm"].reindex(pen.index)
-    diff = float(np.abs(pen - so3).max())
-    reason = (
-        "identical by construction: 6 datum coordinates fix the 6 unknowns of the frame, so the "
-        "penalty LM (Eq. 5) and the SO(3) solution solve the same exactly determined system; "
-        f"their frame errors differ by {'less than 1e-6' if diff < 1e-6 else f'up to {diff:.2g}'}"
-        f" mm over {len(pen)} trials"
-    )
     rows.append(
         claim_row(
             "hybrid.rps",
-            Judged(not_testable(reason, kind="ratio", n=len(pen))),
+            rps_judged(stationary),
             published="",
             unit="frame error ratio",
             notebook=notebook,
