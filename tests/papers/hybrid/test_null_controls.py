@@ -10,6 +10,7 @@ import pytest
 
 from calstudy.core import geometry as geo
 from calstudy.core.montecarlo import child_rng, trial_rng
+from calstudy.core.stats import rms_ratio_interval
 from calstudy.papers.hybrid import experiments, handeye_experiments, report
 from calstudy.papers.hybrid.simulate import make_station
 
@@ -70,3 +71,20 @@ def test_stationary_null_passes_when_the_sensors_sit_on_their_drawing(mounting, 
     null = report.stationary_judged(_stationary_rows(*mounting), min_trials=N).null
     assert (null.verdict == "reproduced") is passes
     assert (null.median <= 1.5) is passes
+
+
+def test_the_stationary_criterion_against_a_chain_that_skips_the_cmm():
+    """The images-only homography chain with the target's back-to-front transform from its
+    drawing (the CMM step skipped) is worse than the paper's chain on the same images (its
+    offset error adds), and the sentence says whether the criterion tells it apart."""
+    rows = _stationary_rows(0.8 / 3, 0.5 / 3)
+    st = report.stationary_figures(rows)
+    broken, lo, _ = rms_ratio_interval(st["drawing target, homography"],
+                                       st["images only, homography"])
+    assert broken > 1.0 and lo > 1.0
+    numbers = report.skip_cmm_numbers(rows)
+    ratio = numbers["stationary_skip_cmm_ratio"]
+    assert ratio == pytest.approx(
+        rms_ratio_interval(st["drawing target, homography"], st["images only, pnp"])[0]
+    )
+    assert ("tells it from" in numbers["stationary_skip_cmm_sentence"]) is (ratio > 1.5)

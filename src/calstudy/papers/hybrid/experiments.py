@@ -67,6 +67,7 @@ STATIONARY_VARIANTS = (
     "design pose",
     "exact target, homography",
     "exact target, pnp",
+    "drawing target, homography",
 )
 
 
@@ -138,7 +139,9 @@ def stationary_trial(
     error; the null control of ``hybrid.stationary``); ``"exact target, homography|pnp"``
     (the images-only chains with a target made exactly to its drawing and its back-to-front
     transform known exactly: the hole tolerance and the CMM error removed, the pixel noise kept;
-    the oracle control).
+    the oracle control); ``"drawing target, homography"`` (the images-only homography chain with
+    the back-to-front transform taken from the target's drawing: the CMM step skipped, a broken
+    chain that the claim's criterion should tell from the paper's).
 
     ``variants`` (a subset of :data:`STATIONARY_VARIANTS`) selects the rows computed; every image
     is drawn whatever the selection, so the generator leaves the trial in the same state and a
@@ -191,6 +194,8 @@ def stationary_trial(
                 paper = name in ("homography", "pnp")
                 flange, hand = (reported, sensor2flange) if paper else (actual, s2f_true)
                 b2f = b2f_exact if exact else station.back2front_cmm
+                if name.startswith("drawing target"):
+                    b2f = b2f_exact  # the drawing's transform, the made target's images
                 est = stationary_sensor_to_base(flange, hand, *poses[method, exact], b2f)
             rows.append(
                 {
@@ -296,7 +301,7 @@ def stationary_run(
 def stationary_experiment(n_trials: int = 200) -> Experiment:
     """Stationary sensors and the 3-2-1 frame in both scenarios (points ``scenario``)."""
     points = [{"scenario": name} for name in SCENARIOS]
-    return Experiment("stationary", stationary_run, {"version": 3}, n_trials, points)
+    return Experiment("stationary", stationary_run, {"version": 4}, n_trials, points)
 
 
 def stationary_pixel_experiment(pixel_sigmas=None, n_trials: int = 30) -> Experiment:
@@ -306,7 +311,7 @@ def stationary_pixel_experiment(pixel_sigmas=None, n_trials: int = 30) -> Experi
     if len(values) == 0:
         raise CalibrationError("no pixel noise values to sweep; give at least one")
     points = [{"scenario": "sensor noise only", "pixel_sigma": float(v)} for v in values]
-    return Experiment("stationary_pixel", stationary_run, {"version": 3}, n_trials, points)
+    return Experiment("stationary_pixel", stationary_run, {"version": 4}, n_trials, points)
 
 
 #: the far start of the penalty sweep: the nominal fixture pose turned by this angle (deg)

@@ -94,7 +94,7 @@ def robustness_experiment(group: str, n_trials: int = 10, overrides: dict | None
         setup = {**handeye_experiments._handeye_setup(False), **extra}
         trial = handeye_experiments.handeye_run
     elif group == "stationary":
-        setup, trial = {"version": 3, **extra}, experiments.stationary_run
+        setup, trial = {"version": 4, **extra}, experiments.stationary_run
     else:
         raise CalibrationError(f"unknown trial group {group!r}; use 'handeye' or 'stationary'")
     return Experiment(f"robustness_{group}", trial, setup, n_trials, point)
