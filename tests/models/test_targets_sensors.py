@@ -303,3 +303,29 @@ def test_circle_image_refuses_mismatched_shapes():
         circle_image_centres(k, [[0.0, 0.0, 500.0]], [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]], 5.0)
     with pytest.raises(CalibrationError, match="camera matrix"):
         circle_image_centres(np.eye(4), [[0.0, 0.0, 500.0]], [[0.0, 0.0, 1.0]], 5.0)
+
+
+def test_line_laser_noise_beyond_the_stripe_matches_its_covariance(rng):
+    """A centre-noise floor and a weaker y-(x, z) correlation: 20,000 shots against the
+    covariance the ML and the bound use; the correlation is scaled, the y variance kept."""
+    c = np.array([4.0, stripe_offset_recommended(R), 180.0])
+    plain = LineLaserSensor().centre_covariance(c, R)
+    sensor = LineLaserSensor(centre_floor_mm=0.004, correlation_scale=0.5)
+    shots = sensor.measure_sphere_centre(np.tile(c, (20000, 1)), R, rng)
+    empirical, model = np.cov(shots.T), sensor.centre_covariance(c, R)
+    np.testing.assert_allclose(np.diag(model), np.diag(plain) + 0.004**2)
+    np.testing.assert_allclose(np.diag(model), np.diag(empirical), rtol=0.05)
+    np.testing.assert_allclose(model[1, 2], 0.5 * plain[1, 2])
+    assert abs(model[1, 2] - empirical[1, 2]) < 0.05 * np.sqrt(model[1, 1] * model[2, 2])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"centre_floor_mm": -0.01}, r"centre_floor_mm must be >= 0; got -0.01"),
+        ({"correlation_scale": 1.5}, r"correlation_scale must be in \[0, 1\]; got 1.5"),
+    ],
+)
+def test_line_laser_noise_beyond_the_stripe_refuses_bad_values(kwargs, match):
+    with pytest.raises(CalibrationError, match=match):
+        LineLaserSensor(**kwargs)

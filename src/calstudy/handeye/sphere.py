@@ -227,8 +227,28 @@ def sphere_centre_in_base(flange2base, centres, sensor2flange) -> np.ndarray:
     return (np.einsum("nij,nj->ni", chain[:, :3, :3], x_f) + chain[:, :3, 3]).mean(axis=0)
 
 
-def _whitening(sensor_sigma, n: int) -> np.ndarray:
-    """(n, 3, 3) whitening matrices ``W`` (``W^T W = cov^-1``) of a sigma or a covariance."""
+def whitening(sensor_sigma, n: int) -> np.ndarray:
+    """Whitening matrices of ``n`` measured centres: ``W_i`` with ``W_i^T W_i = cov_i^-1``.
+
+    Parameters
+    ----------
+    sensor_sigma : float, array_like of shape (3,), (3, 3) or (n, 3, 3)
+        Standard deviation of a centre (one value or one per sensor axis, mm), or the
+        covariance of every centre (one for all, or one each, mm^2).
+    n : int
+        Number of centres.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, 3, 3)
+        ``W_i = L_i^-1`` for the Cholesky factor ``L_i`` of ``cov_i`` (symmetrised).
+
+    Raises
+    ------
+    CalibrationError
+        If a sigma is not positive and finite, a covariance is not finite, has another shape or
+        is not positive definite.
+    """
     if np.ndim(sensor_sigma) <= 1:
         sigma = _check_sigma(sensor_sigma)
         return np.broadcast_to(np.diag(1.0 / sigma), (n, 3, 3)).copy()
@@ -370,7 +390,7 @@ def sphere_handeye_ml(
         names = [f"id {i}" for i in id_arr]
     if poses.shape[0] < 3:
         raise CalibrationError(f"ML hand-eye needs at least 3 poses; got {poses.shape[0]}")
-    problem = _SphereProblem(poses, x_f, _whitening(sensor_sigma, poses.shape[0]), init[:3, :3])
+    problem = _SphereProblem(poses, x_f, whitening(sensor_sigma, poses.shape[0]), init[:3, :3])
     x_b0 = sphere_centre_in_base(poses, x_f, init)
     x0 = np.concatenate([init[:3, 3], np.zeros(3), x_b0])
     est = levenberg_marquardt(
@@ -422,7 +442,7 @@ def sphere_handeye_crb(flange2base, centres_true, sensor_sigma, sensor2flange, x
     """
     poses, x_f = _check_measurements("CRB", flange2base, centres_true)
     t = geo.check_transform("sensor2flange", sensor2flange)
-    problem = _SphereProblem(poses, x_f, _whitening(sensor_sigma, poses.shape[0]), t[:3, :3])
+    problem = _SphereProblem(poses, x_f, whitening(sensor_sigma, poses.shape[0]), t[:3, :3])
     x = np.concatenate([t[:3, 3], np.zeros(3), geo.check_shape("x_b", x_b, (3,))])
     jac = problem.jacobian(x)
     check_condition(

@@ -69,6 +69,11 @@ class Notebook01(NotebookParameters):
     n_sweep_trials: Count
     noise_levels_mm: Positives
     rotation_moves: Annotated[list[Annotated[int, Field(ge=3, le=MAX_COUNT)]], Field(min_length=1)]
+    centre_floors_mm: NonNegatives
+    correlation_scales: Annotated[
+        list[Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]],
+        Field(min_length=1, max_length=MAX_COUNT),
+    ]
     translation_ranges_mm: Positives | None
     across_plane_ranges_mm: Positives | None
     pixel_sigmas: NonNegatives | None
@@ -80,6 +85,10 @@ class Notebook01(NotebookParameters):
         PositiveFinite | Annotated[list[PositiveFinite], Field(min_length=3, max_length=3)]
     )
     misfit: Literal["raise", "flag"]
+    n_screen_trials: Replications
+    n_robust_trials: Replications
+    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
+    robustness_inputs: list[str]
 
 
 class Notebook02(NotebookParameters):

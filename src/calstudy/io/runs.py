@@ -74,12 +74,14 @@ FACTORIES = frozenset(
                 "stationary_pixel",
             )
         ),
+        "calstudy.papers.hybrid.station_robustness:robustness_experiment",
         *(
             f"calstudy.papers.hybrid.handeye_experiments:{name}_experiment"
             for name in (
                 "handeye",
                 "handeye_moves",
                 "handeye_noise",
+                "handeye_noise_model",
                 "handeye_pattern",
                 "handeye_ranges",
             )

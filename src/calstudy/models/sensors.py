@@ -268,6 +268,16 @@ class LineLaserSensor:
         circle, because the plain Kasa fit is biased on the visible arc (at the default noise
         about 1e-3 mm in x-z and 2e-3 mm in y, a tenth of the per-shot scatter in y) and a
         sensor's own software would not leave that bias in; ``"kasa"`` keeps the algebraic fit.
+    centre_floor_mm : float
+        Standard deviation (mm, per axis) of an independent, isotropic error added to every
+        measured centre beyond the stripe model (the sensor's own calibration over its field,
+        the sphere's form): 0 leaves the stripe model as the whole noise.
+    correlation_scale : float
+        Factor in [0, 1] on the correlation between the y error and the x, z errors that the
+        known-radius reconstruction gives: the y error of a shot becomes ``s e_y + sqrt(1 - s^2)
+        sigma_y n`` with ``n`` standard normal and ``sigma_y`` its linearised standard deviation,
+        so its variance stays and its covariances with x and z scale by ``s``. 1 (default) is
+        the stripe model as derived.
     """
 
     sigma_point_mm: float = 0.02
@@ -275,6 +285,8 @@ class LineLaserSensor:
     arc_half_angle_deg: float = 70.0
     side: int = 1
     circle_fit: str = "geometric"
+    centre_floor_mm: float = 0.0
+    correlation_scale: float = 1.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.sigma_point_mm) and self.sigma_point_mm >= 0):
@@ -290,6 +302,12 @@ class LineLaserSensor:
         if self.circle_fit not in CIRCLE_METHODS:
             raise CalibrationError(
                 f"circle_fit must be one of {CIRCLE_METHODS}; got {self.circle_fit!r}"
+            )
+        if not (np.isfinite(self.centre_floor_mm) and self.centre_floor_mm >= 0):
+            raise CalibrationError(f"centre_floor_mm must be >= 0; got {self.centre_floor_mm}")
+        if not 0 <= self.correlation_scale <= 1:
+            raise CalibrationError(
+                f"correlation_scale must be in [0, 1]; got {self.correlation_scale}"
             )
 
     def _check_geometry(self, c: np.ndarray, radius: float, r: np.ndarray) -> None:
@@ -381,6 +399,14 @@ class LineLaserSensor:
             )
         y = self.side * np.sqrt(np.maximum(radius_mm**2 - fit_r**2, 0.0))
         out = np.column_stack([fit_xz[:, 0], y, fit_xz[:, 1]])
+        # the parts beyond the stripe model draw after it: at their defaults nothing is drawn
+        if self.correlation_scale < 1:
+            s = self.correlation_scale
+            sigma_y = np.sqrt(self._stripe_covariance(c, radius_mm, r)[:, 1, 1])
+            noise = rng.normal(0.0, 1.0, len(c))
+            out[:, 1] = c[:, 1] + s * (out[:, 1] - c[:, 1]) + np.sqrt(1 - s**2) * sigma_y * noise
+        if self.centre_floor_mm > 0:
+            out = out + rng.normal(0.0, self.centre_floor_mm, out.shape)
         return out[0] if single else out
 
     def centre_covariance(self, centres_sensor, radius_mm: float) -> np.ndarray:
@@ -392,6 +418,8 @@ class LineLaserSensor:
         ``(x, y, z) = (cx, side sqrt(R^2 - r^2), cz)`` maps it with ``dy/dr = -side r / |y|``.
         The y-z (and x-y) correlation this gives is strong (about -0.97 at the reference stand-off
         and R/4 stripe offset): a per-axis sigma misses it.
+        ``correlation_scale`` scales the covariances of y with x and z, and ``centre_floor_mm``
+        adds its variance to every axis, as :meth:`measure_sphere_centre` draws them.
 
         Parameters
         ----------
@@ -417,6 +445,17 @@ class LineLaserSensor:
             raise CalibrationError(f"sphere radius must be positive; got {radius_mm} mm")
         r = np.sqrt(np.maximum(radius_mm**2 - c[:, 1] ** 2, 0.0))
         self._check_geometry(c, radius_mm, r)
+        cov = self._stripe_covariance(c, radius_mm, r)
+        if self.correlation_scale < 1:
+            cov[:, 1, [0, 2]] *= self.correlation_scale
+            cov[:, [0, 2], 1] *= self.correlation_scale
+        if self.centre_floor_mm > 0:
+            cov = cov + self.centre_floor_mm**2 * np.eye(3)
+        return cov[0] if single else cov
+
+    def _stripe_covariance(self, c: np.ndarray, radius_mm: float, r: np.ndarray) -> np.ndarray:
+        """The stripe model's linearised covariance of centres ``c (N, 3)`` (stripe radii
+        ``r``), before the parts beyond it."""
         towards_sensor = np.arctan2(-c[:, 2], -c[:, 0])
         half = np.deg2rad(self.arc_half_angle_deg)
         angles = towards_sensor[:, None] + np.linspace(-half, half, self.n_points)[None, :]
@@ -426,8 +465,7 @@ class LineLaserSensor:
         jac[:, 0, 0] = 1.0
         jac[:, 2, 1] = 1.0
         jac[:, 1, 2] = -self.side * r / np.abs(c[:, 1])
-        cov = jac @ cov_fit @ np.swapaxes(jac, 1, 2)
-        return cov[0] if single else cov
+        return jac @ cov_fit @ np.swapaxes(jac, 1, 2)
 
     def centre_std(
         self, centre_sensor, radius_mm: float, rng: np.random.Generator, n_shots: int = 500

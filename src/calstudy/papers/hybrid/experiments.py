@@ -37,6 +37,7 @@ from calstudy.papers.hybrid.handeye_experiments import (
     SCENARIOS,
     check_scenario,
     paper_moves,
+    station_config,
 )
 from calstudy.papers.hybrid.scenario import (
     SWEEP_KEYS,
@@ -66,6 +67,7 @@ STATIONARY_VARIANTS = (
     "design pose",
     "exact target, homography",
     "exact target, pnp",
+    "drawing target, homography",
 )
 
 
@@ -137,7 +139,9 @@ def stationary_trial(
     error; the null control of ``hybrid.stationary``); ``"exact target, homography|pnp"``
     (the images-only chains with a target made exactly to its drawing and its back-to-front
     transform known exactly: the hole tolerance and the CMM error removed, the pixel noise kept;
-    the oracle control).
+    the oracle control); ``"drawing target, homography"`` (the images-only homography chain with
+    the back-to-front transform taken from the target's drawing: the CMM step skipped, a broken
+    chain that the claim's criterion should tell from the paper's).
 
     ``variants`` (a subset of :data:`STATIONARY_VARIANTS`) selects the rows computed; every image
     is drawn whatever the selection, so the generator leaves the trial in the same state and a
@@ -190,6 +194,8 @@ def stationary_trial(
                 paper = name in ("homography", "pnp")
                 flange, hand = (reported, sensor2flange) if paper else (actual, s2f_true)
                 b2f = b2f_exact if exact else station.back2front_cmm
+                if name.startswith("drawing target"):
+                    b2f = b2f_exact  # the drawing's transform, the made target's images
                 est = stationary_sensor_to_base(flange, hand, *poses[method, exact], b2f)
             rows.append(
                 {
@@ -211,13 +217,15 @@ def rps_trial(
     statcam2base: np.ndarray,
     rng: np.random.Generator,
     penalties=(1e4,),
+    so3: bool = True,
 ) -> list[dict]:
     """Locate the panel once by the 3-2-1 rule with the calibrated stationary sensors A, B, C.
 
     The datum points are measured in the first three stationary sensors' frames with noise and
     mapped to the base frame with their calibrated poses ``statcam2base[:3]``. Returns one row
-    per solver (the penalty LM for each ``M``, and the SO(3) solution) with the frame error: the
-    largest displacement it causes at the panel's corners and datums (mm), and the rotation error.
+    per solver (the penalty LM for each ``M``, and with ``so3`` the SO(3) solution) with the
+    frame error: the largest displacement it causes at the panel's corners and datums (mm), and
+    the rotation error.
     """
     free = np.zeros((3, 3))
     free[0, 0] = rng.uniform(-1, 1) * station.free_direction  # along the slot
@@ -233,7 +241,7 @@ def rps_trial(
     corners = np.array([[0, 0, 0], [length, 0, 0], [0, width, 0], [length, width, 0]], dtype=float)
     check_pts_base = geo.apply(work2base_true, np.vstack([corners, station.datums_work]))
     rows = []
-    solvers = [(f"penalty M={m:g}", m) for m in penalties] + [("SO(3)", None)]
+    solvers = [(f"penalty M={m:g}", m) for m in penalties] + ([("SO(3)", None)] if so3 else [])
     for name, m in solvers:
         if m is None:
             est = rps_frame_so3(measured, station.datums_work, station.base2work_nominal)
@@ -274,11 +282,13 @@ def stationary_run(
     """One station: the sphere hand-eye (4 + 6 moves), the ten stationary sensors by Eq. 23 and
     the 3-2-1 frame from the calibrated sensors A, B, C.
 
-    ``pixel_sigma`` overrides the hole-centre noise of ``station.toml`` (px). Rows with
+    ``pixel_sigma`` overrides the hole-centre noise of ``station.toml`` (px), and
+    ``setup["overrides"]``, if given, other inputs of it by their dotted keys. Rows with
     ``step == "stationary"``: ``sensor, variant`` and the errors of :func:`stationary_trial`;
     rows with ``step == "rps"``: the columns of :func:`rps_trial`.
     """
-    station = make_station(rng, pixel_sigma=pixel_sigma, **check_scenario(scenario))
+    config = station_config(setup.get("overrides"))
+    station = make_station(rng, pixel_sigma=pixel_sigma, config=config, **check_scenario(scenario))
     meas, _ = simulate_sphere_measurements(station, *paper_moves(station), rng)
     s2f = sphere_handeye(*meas.select("translation"), *meas.select("rotation")).value
     rows = stationary_trial(station, s2f, child_rng(rng, "stationary sensors"))
@@ -291,7 +301,7 @@ def stationary_run(
 def stationary_experiment(n_trials: int = 200) -> Experiment:
     """Stationary sensors and the 3-2-1 frame in both scenarios (points ``scenario``)."""
     points = [{"scenario": name} for name in SCENARIOS]
-    return Experiment("stationary", stationary_run, {"version": 3}, n_trials, points)
+    return Experiment("stationary", stationary_run, {"version": 4}, n_trials, points)
 
 
 def stationary_pixel_experiment(pixel_sigmas=None, n_trials: int = 30) -> Experiment:
@@ -301,7 +311,7 @@ def stationary_pixel_experiment(pixel_sigmas=None, n_trials: int = 30) -> Experi
     if len(values) == 0:
         raise CalibrationError("no pixel noise values to sweep; give at least one")
     points = [{"scenario": "sensor noise only", "pixel_sigma": float(v)} for v in values]
-    return Experiment("stationary_pixel", stationary_run, {"version": 3}, n_trials, points)
+    return Experiment("stationary_pixel", stationary_run, {"version": 4}, n_trials, points)
 
 
 #: the far start of the penalty sweep: the nominal fixture pose turned by this angle (deg)
@@ -335,7 +345,8 @@ def rps_penalty_run(setup: dict, rng: np.random.Generator) -> list[dict]:
         st = replace(station, base2work_nominal=start)
         for m in penalties:
             try:  # each M alone, on the same datums: one failure does not hide the others
-                r = rps_trial(st, station.statcam2base_true, child_rng(rng, "datums"), [m])[0]
+                datums = child_rng(rng, "datums")
+                r = rps_trial(st, station.statcam2base_true, datums, [m], so3=False)[0]
             except CalibrationError:
                 r = None
             rows.append(

@@ -12,6 +12,7 @@ this module; a trial function is ``trial(setup, rng, **point) -> list[dict]``.
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -175,9 +176,15 @@ def handeye_run(
     translations of ``[calibration_moves]`` in ``station.toml``; ``translation_pattern``
     "designed" puts the translations on a fixed pattern instead of drawing them. Columns: ``method,
     rotation_error_deg, translation_error_mm, laser_sigma_mm, n_translations, n_pose_changes``
-    (``CRB`` rows hold the bound's expected RMS of the trial's poses).
+    (``CRB`` rows hold the bound's expected RMS of the trial's poses). ``setup["overrides"]``,
+    if given, sets inputs of ``station.toml`` by their dotted keys (:func:`station_config`).
     """
-    station = make_station(rng, sigma_point_mm=sigma_point_mm, **check_scenario(scenario))
+    station = make_station(
+        rng,
+        sigma_point_mm=sigma_point_mm,
+        config=station_config(setup.get("overrides")),
+        **check_scenario(scenario),
+    )
     station = with_move_ranges(station, translation_range_mm, across_plane_range_mm)
     station = replace(station, translation_pattern=translation_pattern)
     n_trans = int(setup["n_trans"])
@@ -194,6 +201,22 @@ def handeye_run(
         }
         for method, (rot, trans) in errors.items()
     ]
+
+
+#: validated stations by their overrides (JSON text): a trial reads its station from here
+_STATIONS: dict = {}
+
+
+def station_config(overrides=None):
+    """``station.toml`` with ``overrides`` (dotted keys -> values, validated against the
+    ledger ranges), or None for the file as it is (what :func:`make_station` then loads); read
+    once per process and set of overrides."""
+    if not overrides:
+        return None
+    key = json.dumps(overrides, sort_keys=True)
+    if key not in _STATIONS:
+        _STATIONS[key] = load_station(overrides=dict(overrides))
+    return _STATIONS[key]
 
 
 def _handeye_setup(baselines: bool) -> dict:
@@ -224,6 +247,38 @@ def handeye_moves_experiment(rotation_moves=(3, 4, 6, 10), n_trials: int = 30):
     """The hand-eye against the number of pose changes (4 translations), sensor noise only."""
     points = [{"n_rot": int(m)} for m in rotation_moves]
     return Experiment("handeye_moves", handeye_run, _handeye_setup(False), n_trials, points)
+
+
+#: the noise model's parts beyond the stripe (``[sensor]`` of ``station.toml``) that
+#: :func:`handeye_noise_model_experiment` sweeps, each alone
+NOISE_MODEL_KEYS = ("sensor.centre_floor_mm", "sensor.correlation_scale")
+
+
+def handeye_input_run(setup: dict, rng: np.random.Generator, parameter: str, value: float):
+    """One hand-eye trial (sensor noise only) with the input ``parameter`` of ``station.toml``
+    (a dotted key) at ``value``, validated against its ledger range; the rows of
+    :func:`handeye_run`."""
+    overrides = {**setup.get("overrides", {}), parameter: float(value)}
+    return handeye_run({**setup, "overrides": overrides}, rng)
+
+
+def handeye_noise_model_experiment(
+    centre_floors_mm=(0.0, 0.005, 0.01, 0.02),
+    correlation_scales=(0.5, 0.75, 0.9, 1.0),
+    n_trials: int = 30,
+) -> Experiment:
+    """The hand-eye against the assumed parts of the sensor noise model, sensor noise only:
+    the independent centre-noise floor (mm per axis) and the factor on the line laser's y-(x, z)
+    correlation, each moved alone (the other at its value in ``station.toml``): points
+    ``{"parameter": key, "value": v}`` with the keys of :data:`NOISE_MODEL_KEYS`."""
+    points = []
+    for key, values in zip(NOISE_MODEL_KEYS, (centre_floors_mm, correlation_scales), strict=True):
+        if len(values) == 0:
+            raise CalibrationError(f"no values of {key} to sweep; give at least one")
+        points += [{"parameter": key, "value": float(v)} for v in values]
+    return Experiment(
+        "handeye_noise_model", handeye_input_run, _handeye_setup(False), n_trials, points
+    )
 
 
 def with_move_ranges(

@@ -159,6 +159,34 @@ def summarise_ranges(trials: pd.DataFrame) -> pd.DataFrame:
     return out.rename(columns={"value": "value_mm"})
 
 
+def summarise_noise_model(trials: pd.DataFrame) -> pd.DataFrame:
+    """The noise-model sweep (``handeye_noise_model_experiment``): per input and value the
+    columns of :func:`summarise_handeye_sweep`, the RMS rotation error of the paper's
+    unweighted SVD over a covariance-weighted fit of the same pure translations
+    (``svd_over_weighted``, what weighting the centres gains), and the null control (the
+    design mounting) judged by the claim's rule there (``null_median_ratio``,
+    ``null_verdict``): where doing nothing meets the criterion, the test cannot fail."""
+    keys = ["parameter", "value"]
+    out = summarise_handeye_sweep(trials, keys)
+    nulls = judge_along(
+        handeye_ratios(trials, keys),
+        keys,
+        "hybrid.handeye",
+        ClaimColumns("null control"),
+        reference=CRB_MULTIPLE,
+    )
+    out["null_median_ratio"] = [float(np.median(sub["null control"])) for _, sub, _ in nulls]
+    out["null_verdict"] = [TOO_FEW if j is None else j.claim.verdict for _, _, j in nulls]
+    rot = trials.pivot_table(
+        index=["parameter", "value", "trial"], columns="method", values="rotation_error_deg"
+    )
+    gain = rot.groupby(level=["parameter", "value"], sort=False).apply(
+        lambda g: float(np.sqrt(np.mean(g["sphere"] ** 2) / np.mean(g["weighted rotation"] ** 2)))
+    )
+    index = pd.MultiIndex.from_frame(out[keys])
+    return out.assign(svd_over_weighted=gain.reindex(index).to_numpy())
+
+
 #: "works" criterion of hybrid.stationary (the study's: the paper states no accuracy for the
 #: stationary sensors): the homography chain's RMS field error, pooled over the trials, at most
 #: this multiple of the PnP chain's (maximum likelihood for the pixel noise) on the same images

@@ -114,6 +114,10 @@ class Sensor(Inputs):
     #: a circle fit needs at least 3 points
     n_points: Annotated[int, Field(ge=3, le=MAX_FEATURES * 100)]
     arc_half_angle_deg: Annotated[float, Field(gt=0, lt=90, allow_inf_nan=False)]
+    #: the noise model's parts beyond the stripe (LineLaserSensor): an independent centre-noise
+    #: floor (mm per axis) and the factor on the stripe model's y-(x, z) correlation
+    centre_floor_mm: noise_level(NOISE_BOUNDS, "sensor_mm")
+    correlation_scale: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
 
 
 class SphereTable(Inputs):

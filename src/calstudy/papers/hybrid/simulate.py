@@ -356,6 +356,8 @@ def make_station(
         sigma_point_mm=stripe.sigma_point_mm if sigma_point_mm is None else sigma_point_mm,
         n_points=stripe.n_points,
         arc_half_angle_deg=stripe.arc_half_angle_deg,
+        centre_floor_mm=stripe.centre_floor_mm,
+        correlation_scale=stripe.correlation_scale,
     )
     sphere = Sphere(radius_mm=cfg.sphere.radius_mm, centre=np.array(cfg.sphere.centre_mm))
     target, made, back2front_cmm = _make_target(cfg.target, target_rng)

@@ -18,6 +18,7 @@ from scipy.optimize import least_squares
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.handeye.sphere import whitening
 
 
 def _check(flange2base, centres, covariances):
@@ -36,8 +37,7 @@ def _check(flange2base, centres, covariances):
             f"the flange orientation changes by up to {spread:.3g} between the moves; the "
             "rotation from pure translations needs one orientation"
         )
-    # whitening: L_i^-1 with covariance_i = L_i L_i^T
-    whiten = np.linalg.inv(np.linalg.cholesky(cov))
+    whiten = whitening(cov, n)
     v = np.einsum("nji,nj->ni", poses[:, :3, :3], poses[:, :3, 3])
     return c, v, whiten
 
