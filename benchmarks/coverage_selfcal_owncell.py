@@ -6,8 +6,9 @@ spheres, the scanner's cap fits, the robot's repeatability and the tracker's rea
 sphere, shared by all views of it; and the same poses read as a tracker reflector on the flange
 (one-point probe, 27 parameters). Each cell is identified twice, with its noise declared
 (maximum likelihood, covariance from the declared noise, normal and chi-square quantiles) and
-without (least squares, covariance from the residual variances, Student's t and F with
-Satterthwaite's degrees of freedom), by ``experiments.interval_coverage``. The script counts how
+without (least squares, covariance from the residual variances, quantiles of the studentised
+errors simulated with the variance ratio drawn from its restricted likelihood), by
+``experiments.interval_coverage``. The script counts how
 often the truth lies within each parameter's 95 % interval and within the 95 % region of all the
 identified parameters, each with a 95 % Monte Carlo interval: Clopper-Pearson for the region (one
 per cell), a bootstrap over cells for the intervals pooled over the parameters (the parameters of

@@ -105,8 +105,9 @@ def test_balanced_one_way_layout_gives_the_anova_answers():
 def test_intervals_and_region_cover_with_few_groups():
     """Four groups of six, the shared variance a quarter of the own one: each parameter's 95 %
     interval and the joint 95 % region hold the truth 95 % of the time (99.9 % binomial bounds).
-    Satterthwaite's degrees of freedom at the estimate fail here: the shared variance is often
-    estimated at zero, and the intercept's interval then has 2 degrees of freedom or fewer."""
+    Satterthwaite's degrees of freedom at the estimate fail here (the intercept's interval
+    over-covers): the shared variance is often estimated at zero, and the intercept's degrees of
+    freedom then drop to a few."""
     rng = np.random.default_rng(6)
     n_groups, per_group, p, trials = 4, 6, 3, 800
     groups = np.repeat(np.arange(n_groups), per_group)
