@@ -98,8 +98,9 @@ def test_balanced_one_way_layout_gives_the_anova_answers():
             assert fit.interval_quantiles(level)[0] == pytest.approx(
                 stats.t.ppf(0.5 + level / 2, g - 1), rel=0.05
             )
-        # one parameter: the region is the interval squared
-        assert fit.region_quantile(0.95) == pytest.approx(fit.interval_quantiles(0.95)[0] ** 2)
+        # one parameter: the region is the interval squared (up to the quantiles' interpolation)
+        q = fit.interval_quantiles(0.95)[0]
+        assert fit.region_quantile(0.95) == pytest.approx(q**2, rel=1e-4)
 
 
 def test_intervals_and_region_cover_with_few_groups():
