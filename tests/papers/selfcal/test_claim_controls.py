@@ -13,7 +13,7 @@ from calstudy.claims import ClaimColumns, control_rows, judge_claim
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import child_rng, trial_rng
 from calstudy.core.schema import with_inputs
-from calstudy.papers.selfcal import report, report_sweeps
+from calstudy.papers.selfcal import experiments, report, report_sweeps
 from calstudy.papers.selfcal.experiments import (
     NULL_ROBOT_NOISE,
     NULL_ROBOT_NOMINAL,
@@ -242,6 +242,44 @@ def test_identification_null_passes_when_the_cell_is_the_nominal_one(scenario):
     assert judged.null.verdict == "reproduced"
     with pytest.raises(CalibrationError, match="test is broken"):
         control_rows("selfcal.identification", judged)
+
+
+@pytest.fixture(scope="module")
+def nominal_calib(scenario):
+    """12 calibration trials on cells that are exactly their nominal description (robot, base
+    from the layout, sensor from the bracket drawing; no compliance): every method as in the
+    study, only the drawn station replaced."""
+    sc = with_inputs(scenario, {"compliance.scale": 0.0})
+    draw = experiments.draw_station
+
+    def nominal_station(scenario, rng):
+        st = draw(scenario, rng)
+        return replace(
+            st,
+            true_robot=scenario.nominal_robot,
+            part2base=scenario.base.rough,
+            sensor2flange=scenario.sensor.design,
+            true_params=st.nominal_params,
+        )
+
+    rows = []
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(experiments, "draw_station", nominal_station)
+        for t in range(N_TRIALS):
+            for row in calibration_trial(sc, trial_rng(17, "calibration", {}, t)):
+                rows.append({"trial": t, **row})
+    return pd.DataFrame(rows)
+
+
+def test_one_step_null_passes_when_the_cell_is_the_nominal_one(nominal_calib):
+    """The null of selfcal.one_step (nothing identified, against the best multi-step route) on
+    exactly nominal cells beats the route, which only fits noise there: the control can come
+    out either way, and then the register's check calls the test broken."""
+    judged = _judge("selfcal.one_step", nominal_calib)
+    assert judged.null.verdict == "reproduced"
+    assert judged.null.median < 1.0
+    with pytest.raises(CalibrationError, match="test is broken"):
+        control_rows("selfcal.one_step", judged)
 
 
 def _measure(scenario, station, rng):
