@@ -561,13 +561,12 @@ class CellFit:
     notes : list of str
         What the fit fixed and why, and any rank warning (also issued as a
         :class:`~calstudy.core.errors.CalibrationWarning`).
-    dof : (30,) degrees of freedom of each identified parameter's variance: inf with declared
-        noise (normal intervals), else Satterthwaite's (Student's t intervals: the two variances
-        come from the residuals); NaN for the fixed parameters.
-    region_dof : float
-        Denominator degrees of freedom of the joint region of the identified parameters: inf
-        with declared noise (chi-square), else that of the F approximation of Fai and Cornelius
-        (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.region_dof`).
+    residual_errors : SharedErrorFit or None
+        None with declared noise (normal intervals, chi-square region); else the two variances
+        estimated from the residuals, whose simulated quantiles
+        (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.interval_quantiles`,
+        :meth:`~calstudy.estimators.shared_error.SharedErrorFit.region_quantile`) the intervals
+        and the region use.
     """
 
     fit: Identification
@@ -580,8 +579,7 @@ class CellFit:
     free: np.ndarray
     identifiability: pd.DataFrame
     notes: list[str]
-    dof: np.ndarray
-    region_dof: float
+    residual_errors: SharedErrorFit | None
 
     @property
     def params(self) -> np.ndarray:
@@ -598,27 +596,24 @@ class CellFit:
 
     def half_widths(self, level: float = 0.95) -> np.ndarray:
         """Half-widths (30,) of the ``level`` intervals of the parameters, mm and rad: the standard
-        deviation times the normal quantile (declared noise) or Student's t with :attr:`dof`;
-        NaN for the fixed parameters."""
+        deviation times the normal quantile (declared noise) or the simulated quantile of the
+        studentised error (:attr:`residual_errors`); NaN for the fixed parameters."""
         level = interval_level(level)
         std = np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
-        with np.errstate(invalid="ignore"):
-            quantile = np.where(
-                np.isinf(self.dof),
-                stats.norm.ppf(0.5 + level / 2),
-                stats.t.ppf(0.5 + level / 2, self.dof),
-            )
+        quantile = np.full(N_PARAMS, stats.norm.ppf(0.5 + level / 2))
+        if self.residual_errors is not None:
+            quantile[self.free] = self.residual_errors.interval_quantiles(level)
         return np.where(self.free, quantile * std, np.nan)
 
     def region_limit(self, level: float = 0.95) -> float:
         """The bound of ``d^T C^-1 d`` (``d`` the identified parameters' error, ``C`` their
         covariance) of the joint ``level`` region: the chi-square quantile with as many degrees of
-        freedom as parameters identified (declared noise), else ``p F(p, region_dof)``."""
+        freedom as parameters identified (declared noise), else the simulated quantile
+        (:attr:`residual_errors`)."""
         level = interval_level(level)
-        p = self.n_identified
-        if math.isinf(self.region_dof):
-            return float(stats.chi2.ppf(level, p))
-        return float(p * stats.f.ppf(level, p, self.region_dof))
+        if self.residual_errors is None:
+            return float(stats.chi2.ppf(level, self.n_identified))
+        return self.residual_errors.region_quantile(level)
 
     def in_region(self, params, level: float = 0.95) -> bool:
         """Whether ``params`` (30,) lie within the joint ``level`` region of the identified
@@ -787,9 +782,9 @@ def identify_measurements(
     With ``noise`` the fit is maximum likelihood and the covariance follows from the declared
     noise (normal intervals, chi-square region); without, least squares and the covariance from
     the residuals, with the tracker error shared by the views of one sphere
-    (:func:`shared_error_covariance`, REML), and intervals and region from Student's t and F with
-    the degrees of freedom of those two estimated variances (:attr:`CellFit.dof`,
-    :meth:`CellFit.half_widths`, :meth:`CellFit.region_limit`).
+    (:func:`shared_error_covariance`, REML), and intervals and region from the simulated
+    quantiles of the errors studentised by those two estimated variances
+    (:attr:`CellFit.residual_errors`, :meth:`CellFit.half_widths`, :meth:`CellFit.region_limit`).
 
     Parameters
     ----------
@@ -911,14 +906,11 @@ def identify_measurements(
     if weighted:
         cov[np.ix_(free, free)] = fit.estimate.covariance
         basis = DECLARED
-        dof, region_dof = np.where(free, math.inf, np.nan), math.inf
+        shared = None
     else:
         r = e[keep].ravel()  # the residuals of the kept rows at the fit
         shared = shared_error_covariance(jac[:, free], r, kept.sphere)
         cov[np.ix_(free, free)] = shared.covariance
-        dof = np.full(N_PARAMS, np.nan)
-        dof[free] = shared.dof()
-        region_dof = shared.region_dof()
         basis = RESIDUAL
     return CellFit(
         fit,
@@ -931,8 +923,7 @@ def identify_measurements(
         free,
         table,
         notes,
-        dof,
-        region_dof,
+        shared,
     )
 
 
@@ -945,7 +936,7 @@ def shared_error_covariance(jac: np.ndarray, residuals: np.ndarray, sphere) -> S
     views of the same sphere); :func:`calstudy.estimators.shared_error.shared_error_fit` estimates
     the two variances by REML and gives the sandwich ``(J^T J)^-1 J^T V J (J^T J)^-1``: unlike
     ``s^2 (J^T J)^-1`` it does not treat the views of one sphere as independent. With a few
-    spheres the shared variance is uncertain; the fit's degrees of freedom say how much.
+    spheres the shared variance is uncertain; the quantiles of the fit carry that uncertainty.
 
     Parameters
     ----------
@@ -956,9 +947,10 @@ def shared_error_covariance(jac: np.ndarray, residuals: np.ndarray, sphere) -> S
     Returns
     -------
     SharedErrorFit
-        ``covariance`` (p, p) in mm and rad, the two variances (mm^2) and the degrees of freedom
-        of intervals (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.dof`) and of the
-        joint region (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.region_dof`).
+        ``covariance`` (p, p) in mm and rad, the two variances (mm^2) and the quantiles of
+        intervals (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.interval_quantiles`)
+        and of the joint region
+        (:meth:`~calstudy.estimators.shared_error.SharedErrorFit.region_quantile`).
 
     Raises
     ------

@@ -13,7 +13,7 @@ from calstudy.claims import ClaimColumns, control_rows, judge_claim
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import child_rng, trial_rng
 from calstudy.core.schema import with_inputs
-from calstudy.papers.selfcal import report, report_sweeps
+from calstudy.papers.selfcal import experiments, report, report_sweeps
 from calstudy.papers.selfcal.experiments import (
     NULL_ROBOT_NOISE,
     NULL_ROBOT_NOMINAL,
@@ -22,6 +22,7 @@ from calstudy.papers.selfcal.experiments import (
     ROUTES,
     TOLERANCE_CLASS_SIGMAS,
     _cell,
+    _ideal_identification,
     _validate,
     calibration_trial,
     robot_tolerance,
@@ -33,12 +34,14 @@ from calstudy.papers.selfcal.simulate import (
     link_gravity_torques,
     simulate,
 )
+from calstudy.selfcal.identify import crb_covariance, identify
 from calstudy.selfcal.model import (
     BASE,
     IS_LENGTH,
     ROBOT,
     ROBOT_NAMES,
     SENSOR,
+    default_model,
     parameters_from_robot,
 )
 
@@ -196,6 +199,87 @@ def test_residual_null_passes_when_the_robot_is_the_nominal_one(scenario):
     assert judged.null.verdict == "reproduced"
     with pytest.raises(CalibrationError, match="test is broken"):
         control_rows("selfcal.residual", judged)
+
+
+def test_identification_null_passes_when_the_cell_is_the_nominal_one(scenario):
+    """The null of selfcal.identification (nothing identified: the good initial estimate) on
+    cells that are exactly their nominal description (robot, base from the layout, sensor from
+    the bracket drawing; no compliance) has no model error and meets the bound: the control can
+    come out either way, and then the register's check calls the test broken."""
+    sc = with_inputs(scenario, {"compliance.scale": 0.0})
+    model = default_model()
+    figures = {"model_over_crb": [], "null_model_over_crb": [], "oracle_model_over_crb": []}
+    for t in range(N_TRIALS):
+        rng = trial_rng(13, "calibration", {}, t)
+        st, _, _ = _cell(sc, rng, 0.0)
+        exact = replace(
+            st,
+            true_robot=sc.nominal_robot,
+            part2base=sc.base.rough,
+            sensor2flange=sc.sensor.design,
+            true_params=st.nominal_params,
+        )
+        meas, val = _measure(sc, exact, rng)
+        crb = crb_covariance(meas, exact.true_params, model)
+        _, jv = model.points_and_jacobian(exact.true_params, val.Q, val.C_true)
+        crb_rms = np.sqrt(np.trace(jv @ crb @ jv.T) / len(val))
+        fits = {
+            "": identify(meas, exact.nominal_params).params,
+            "null_": exact.nominal_params,
+            "oracle_": _ideal_identification(meas, exact),
+        }
+        for prefix, params in fits.items():
+            error = _validate(params, val, exact.true_params)["model_rms_mm"]
+            figures[prefix + "model_over_crb"].append(error / crb_rms)
+    assert np.max(figures["null_model_over_crb"]) < 1e-9  # the nominal cell is the truth
+    judged = judge_claim(
+        "selfcal.identification",
+        figures,
+        report.CLAIMS["selfcal.identification"],
+        reference=sc.protocol.crb_multiple,
+        min_trials=N_TRIALS,
+    )
+    assert judged.null.verdict == "reproduced"
+    with pytest.raises(CalibrationError, match="test is broken"):
+        control_rows("selfcal.identification", judged)
+
+
+@pytest.fixture(scope="module")
+def nominal_calib(scenario):
+    """12 calibration trials on cells that are exactly their nominal description (robot, base
+    from the layout, sensor from the bracket drawing; no compliance): every method as in the
+    study, only the drawn station replaced."""
+    sc = with_inputs(scenario, {"compliance.scale": 0.0})
+    draw = experiments.draw_station
+
+    def nominal_station(scenario, rng):
+        st = draw(scenario, rng)
+        return replace(
+            st,
+            true_robot=scenario.nominal_robot,
+            part2base=scenario.base.rough,
+            sensor2flange=scenario.sensor.design,
+            true_params=st.nominal_params,
+        )
+
+    rows = []
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(experiments, "draw_station", nominal_station)
+        for t in range(N_TRIALS):
+            for row in calibration_trial(sc, trial_rng(17, "calibration", {}, t)):
+                rows.append({"trial": t, **row})
+    return pd.DataFrame(rows)
+
+
+def test_one_step_null_passes_when_the_cell_is_the_nominal_one(nominal_calib):
+    """The null of selfcal.one_step (nothing identified, against the best multi-step route) on
+    exactly nominal cells beats the route, which only fits noise there: the control can come
+    out either way, and then the register's check calls the test broken."""
+    judged = _judge("selfcal.one_step", nominal_calib)
+    assert judged.null.verdict == "reproduced"
+    assert judged.null.median < 1.0
+    with pytest.raises(CalibrationError, match="test is broken"):
+        control_rows("selfcal.one_step", judged)
 
 
 def _measure(scenario, station, rng):

@@ -1,6 +1,6 @@
 """The 95 % intervals and the joint 95 % region of the own-cell identification cover the truth 95 %
 of the time over simulated cells, with the noise declared and without (the two residual variances
-then estimated, with Satterthwaite's degrees of freedom)."""
+then estimated, the quantiles simulated)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scipy.stats import binom, chi2, norm
+from scipy.stats import binom, chi2, f, norm, t
 
 from calstudy import CalibrationError
 from calstudy.core.errors import CalibrationWarning
@@ -76,8 +76,9 @@ def test_estimated_noise_widens_the_intervals_and_the_region(cell):
     bare = replace(meas, cov=None, tracker_cov=None, C_true=None, Q_true=None)
     fit = identify_measurements(bare, station.nominal_params)
     std = np.sqrt(np.diag(fit.covariance))
-    assert np.all(np.isfinite(fit.dof)) and np.all(fit.dof >= 2.0)
-    assert np.all(fit.half_widths() > norm.ppf(0.975) * std)
+    assert not fit.residual_errors.one_variance
+    # the simulated quantiles scatter by a percent or two about their value: on the whole wider
+    assert np.median(fit.half_widths() / std) > norm.ppf(0.975)
     assert fit.region_limit() > chi2.ppf(0.95, 30)
     for level in (0.0, 1.0, 1.5):
         with pytest.raises(CalibrationError, match=f"level is {level}; expected strictly between"):
@@ -97,6 +98,7 @@ def test_one_point_probe_without_declared_noise_has_one_variance(cell, scenario)
         fit = identify_measurements(bare, station.nominal_params)
     n, p = 3 * len(bare), fit.n_identified
     assert p == 27
-    np.testing.assert_allclose(fit.dof[fit.free], n - p, rtol=1e-9)
-    assert fit.region_dof == pytest.approx(n - p, rel=1e-9)
-    assert np.isnan(fit.dof[~fit.free]).all() and np.isnan(fit.half_widths()[~fit.free]).all()
+    std = np.sqrt(np.diag(fit.covariance))[fit.free]
+    np.testing.assert_allclose(fit.half_widths()[fit.free], t.ppf(0.975, n - p) * std, rtol=1e-12)
+    assert fit.region_limit() == pytest.approx(p * f.ppf(0.95, p, n - p), rel=1e-12)
+    assert np.isnan(fit.half_widths()[~fit.free]).all()
