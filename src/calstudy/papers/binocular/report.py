@@ -590,7 +590,7 @@ def calibration_sweep_figure(sweep: pd.DataFrame):
 
 
 # ----------------------------------------------------------------------------------------------
-# optics: calibration of the F-number (rule 11) and sweeps
+# optics sweeps
 
 #: The optics sweeps: trial column, label, unit.
 OPTICS = (
@@ -640,15 +640,6 @@ def loglog_crossing(x, y, goal: float) -> float | None:
             w = (lg - ly[i]) / (ly[i + 1] - ly[i])
             return float(math.exp(lx[i] + w * (lx[i + 1] - lx[i])))
     return None
-
-
-def calibrated_f_number(table: pd.DataFrame, target_mm: float) -> float | None:
-    """The F-number at which the median Table 2 RMSE without rectification meets ``target_mm``
-    (the paper's baseline), by log-log interpolation between the two points of the F-number
-    sweep ``table`` (:func:`optics_sweep_table`) that bracket it, to 0.01; None if none do."""
-    t = table.sort_values("f_number")
-    f = loglog_crossing(t["f_number"].to_numpy(), t["t2_without_mm"].to_numpy(), target_mm)
-    return None if f is None else float(round(f, 2))
 
 
 def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit: str) -> str:
