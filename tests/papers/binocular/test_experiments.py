@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.stats import median_interval
 from calstudy.core.paths import data_path
+from calstudy.core.stats import median_interval
 from calstudy.estimators import binocular as bino
 from calstudy.papers.binocular import experiments as ex
 from calstudy.papers.binocular.scenario import load_scenario

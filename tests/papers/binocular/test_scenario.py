@@ -71,7 +71,8 @@ def test_overrides_name_the_file_first_and_are_validated():
     rim = scn.load_scenario(overrides={"sensor.optics.mechanism": "rim"})
     assert rim.sensor.optics.mechanism == "rim"
     assert scn.load_scenario().sensor.optics.mechanism == "gaussian"  # the paper's Eq. 7
-    with pytest.raises(CalibrationError, match=r"optics\.mechanism = \"cat's eye\": is not one of 'gaussian' or 'rim'"):
+    bad = r"optics\.mechanism = \"cat's eye\": is not one of 'gaussian' or 'rim'"
+    with pytest.raises(CalibrationError, match=bad):
         scn.load_scenario(overrides={"sensor.optics.mechanism": "cat's eye"})
     for key in ("optics.f_number", "sensor.optics.f_numbr", "sensor"):
         with pytest.raises(CalibrationError, match=rf"override '{key}': '[^']*' names no input"):
