@@ -45,6 +45,11 @@ def test_conflicting_baselines_meet_in_the_weighted_middle_and_are_not_identifie
         figures, GRID, [Baseline("falls", 0.025, 0.3), Baseline("rises", 0.08, 0.3)]
     )
     assert wide.value == pytest.approx(fit.value, rel=3e-3) and wide.identified
+    # unequal spreads: weights 1 / s^2, ln x = (400 ln 4 + 25 ln 8) / 425
+    tight = joint_calibration(
+        figures, GRID, [Baseline("falls", 0.025, 0.05), Baseline("rises", 0.08, 0.2)]
+    )
+    assert tight.value == pytest.approx(4.0 * 2.0 ** (25.0 / 425.0), rel=3e-3)
 
 
 def test_a_baseline_beyond_the_range_pins_the_fit_to_its_end():
