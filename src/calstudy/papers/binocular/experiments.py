@@ -5,13 +5,15 @@ random (:mod:`calstudy.papers.binocular.simulate`) and returns one row per (robo
 camera calibration error scale): the images are rendered once, for the default errors, and every
 other scale changes only what the errors act on (the calibrated sensor that triangulates, the
 flange poses the controller reports), so the sweeps share the trial's draws. The same trial also
-runs the oracle controls (the calibration views exposed again without defocus; the points
-triangulated with the exact cameras; Fig. 13 with the true hand-eye matrix). :func:`field_trial`
-is the field check of Section 4.3. :func:`binocular_experiment` and :func:`field_experiment` are
-the factories of :func:`calstudy.io.runs.run_experiments`. :func:`optics_trial` and
-:func:`optics_experiment` run Table 2 alone over the optics the paper does not state (F-number,
-focused distance, dot size: :func:`with_optics`). :func:`defocus_shift` is the noise-free study of
-how defocus moves a detected centre, against depth and tilt.
+runs the controls: oracles (the calibration views exposed again without defocus; the exact sphere
+centres; Fig. 13 with the true hand-eye matrix) and nulls (each method where its error source is
+absent: those views rectified, those centres modified, the update started from the true
+matrix). :func:`field_trial` is the field check of Section 4.3. :func:`binocular_experiment`
+and :func:`field_experiment` are the factories of :func:`calstudy.io.runs.run_experiments`.
+:func:`optics_trial` and :func:`optics_experiment` run Table 2 alone over the optics the paper
+does not state (F-number, focused distance, dot size, the rim: :func:`with_optics`), under
+either defocus mechanism (``sensor.toml [optics] mechanism``). :func:`defocus_shift` is the
+noise-free study of how defocus moves a detected centre, against depth and tilt.
 """
 
 from __future__ import annotations
@@ -219,12 +221,14 @@ def binocular_trial(setup: Setup, rng, defocus: bool = True) -> list[dict]:
     ``calibration_scale`` 1 with every other ``robot_scale``; the default is (1, 1). Columns:
     the RMSEs of Table 2 (``t2_without``, ``t2_with``; ``t2_oracle`` from the calibration views
     exposed again without defocus: the same true poses and sharp images, fresh image noise; the
-    oracle control of the rectification), Table 3
-    (``t3_without``, ``t3_with``: the paper's protocol, scored on the very distances the
-    modification is fitted to), the leave-one-target-out check (``t3_holdout_without``,
-    ``t3_holdout_with``; ``t3_holdout_truecam``: without modification, triangulated with the
-    exact cameras, the oracle control of the modification), Fig. 13 (``fig13_preliminary``,
-    ``fig13_updated``; ``fig13_true``: with the true hand-eye matrix, the oracle control),
+    oracle control of the rectification; ``t2_null_with``: those views rectified, its null
+    control), Table 3 (``t3_without``, ``t3_with``: the paper's protocol, scored on the very
+    distances the modification is fitted to), the leave-one-target-out check
+    (``t3_holdout_without``, ``t3_holdout_with``; ``t3_holdout_exact`` and ``t3_null_with``: on
+    the exact sphere centres without and with the modification, its oracle and null controls,
+    :func:`exact_figures`; ``t3_holdout_truecam``: triangulated with the exact cameras), Fig. 13
+    (``fig13_preliminary``, ``fig13_updated``; ``fig13_true``: with the true hand-eye matrix, the
+    oracle control; ``fig13_null``: the update started from the true matrix, the null control),
     the hand-eye errors and the per-pair errors of Tables 2-3 (``err_{raw,rect,mod}_<pair>``).
     ``defocus=False`` switches the defocus off everywhere (a test of the oracle's reach).
     The world, the calibration and validation views, the tracker and the sharp images draw
