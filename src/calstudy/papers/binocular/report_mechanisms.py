@@ -21,7 +21,7 @@ from calstudy.papers.binocular.scenario import published
 
 #: The mechanisms' names in prose.
 MECHANISM_LABELS = {
-    "gaussian": "the paper's Gaussian blur (Eq. 7)",
+    "gaussian": "the paper's Gaussian blur of Eq. 7",
     "rim": "the lens-rim vignetting",
 }
 #: The Fig. 13 baseline's column in the F-number sweep: the preliminary matrix scored with P7
@@ -192,10 +192,10 @@ def premise_text(shift: pd.DataFrame) -> str:
     g = shift[shift["mechanism"] == "gaussian"]
     blurred, focused = g[g["coc_radius_px"] > 0], g[g["coc_radius_px"] == 0]
     return (
-        f"A symmetric blur of a symmetric dot leaves the ellipse centre in place only on a float "
-        f"image: there, the Gaussian of Eq. 7 moves the detected centre by at most "
-        f"{blurred['float_shift_px'].max():.2g} px (in focus {focused['float_shift_px'].max():.2g}"
-        f" px). Through the real chain (two 8-bit exposures, saturation, fusion by Eq. 3 and the "
+        f"On a float image a symmetric blur of a symmetric dot barely moves the ellipse centre: "
+        f"the Gaussian of Eq. 7 moves the detected centre by at most "
+        f"{blurred['float_shift_px'].max():.2g} px (in focus, where perspective and pixel sampling "
+        f"alone act, {focused['float_shift_px'].max():.2g} px). Through the real chain (two 8-bit exposures, saturation, fusion by Eq. 3 and the "
         f"Canny edge with its ellipse fit) the same blur moves it by up to "
         f"{blurred['shift_px'].max():.2g} px (median {blurred['shift_px'].median():.2g} px) at "
         f"circle-of-confusion radii up to {blurred['coc_radius_px'].max():.2g} px, against "
