@@ -140,12 +140,19 @@ class Notebook04(NotebookParameters):
     n_sweep_trials: Count
     robot_scales: NonNegatives
     calibration_scales: NonNegatives
-    f_numbers: Positives
+    f_numbers: Annotated[list[PositiveFinite], Field(min_length=2, max_length=MAX_COUNT)]
     focus_distances_mm: Positives
     dot_diameters_mm: Positives
     defocus_depths_mm: Positives
     defocus_tilts_deg: Tilts
     scenario_dir: str
+    #: the defocus mechanisms run, the claims table's first
+    mechanisms: Annotated[list[Literal["gaussian", "rim"]], Field(min_length=1, max_length=2)]
+    #: rim (radius, distance) mm at which the rim mechanism is calibrated, its main run's first
+    rim_geometries_mm: Annotated[
+        list[Annotated[list[PositiveFinite], Field(min_length=2, max_length=2)]],
+        Field(min_length=1, max_length=MAX_COUNT),
+    ]
 
 
 class Notebook05(NotebookParameters):

@@ -9,6 +9,7 @@ import pytest
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import data_path
+from calstudy.core.stats import median_interval
 from calstudy.estimators import binocular as bino
 from calstudy.papers.binocular import experiments as ex
 from calstudy.papers.binocular.scenario import load_scenario
@@ -19,6 +20,7 @@ from calstudy.papers.binocular.simulate import (
     reimage,
     view_calibrator,
 )
+from calstudy.papers.binocular.simulate import exact_points as sim_exact_points
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +28,13 @@ def scenario():
     return load_scenario()
 
 
-def test_defocus_shift_is_zero_in_focus_and_flips_sign_across_the_focus(scenario):
-    table = ex.defocus_shift(scenario, [850.0, 800.0, 900.0], tilts_deg=(0.0,))
+@pytest.fixture(scope="module")
+def rim_scenario():
+    return load_scenario(None, {"sensor.optics.mechanism": "rim"})
+
+
+def test_defocus_shift_is_zero_in_focus_and_flips_sign_across_the_focus(rim_scenario):
+    table = ex.defocus_shift(rim_scenario, [850.0, 800.0, 900.0], tilts_deg=(0.0,))
     assert table["coc_radius_px"].iloc[0] == 0.0
     # in focus, fronto-parallel: only pixel sampling (and the tiny eccentricity) act
     assert table["shift_px"].iloc[0] < 0.05
@@ -37,9 +44,43 @@ def test_defocus_shift_is_zero_in_focus_and_flips_sign_across_the_focus(scenario
     assert abs(near) > 10 * table["shift_px"].iloc[0]
 
 
-def test_optics_trial_oracle_removes_the_defocus_error(scenario):
+def test_a_symmetric_blur_moves_the_detected_centre_through_the_8_bit_chain_only(scenario):
+    """Eq. 7's Gaussian (the file's mechanism) barely moves the ellipse centre of the blurred
+    float image, but through the exposures, saturation, fusion and detector it does."""
+    assert scenario.sensor.optics.mechanism == "gaussian"
+    sc = ex.with_optics(scenario, f_number=4.0)
+    table = ex.defocus_shift(sc, [750.0, 850.0, 950.0], tilts_deg=(0.0, 20.0))
+    blurred = table[table["coc_radius_px"] > 0]
+    focused = table[table["coc_radius_px"] == 0]
+    assert blurred["float_shift_px"].max() < 0.15
+    assert blurred["shift_px"].max() > 5 * focused["shift_px"].max()
+    assert blurred["shift_px"].max() > 3 * blurred["float_shift_px"].max()
+    assert (table["mechanism"] == "gaussian").all()
+
+
+def test_the_mechanism_switch_changes_the_blur_spot_off_axis(scenario, rim_scenario):
+    """The same off-axis dot blurred by each mechanism: Eq. 7's spot is symmetric (the blurred
+    image's centroid stays where the sharp one's is), the rim's moves it."""
+    from calstudy.papers.binocular.simulate import render_blurred_dot
+
+    camera = scenario.rig.left
+    centre = 760.0 * np.array([0.2, 0.15, 1.0])
+    normal = np.array([0.0, 0.0, -1.0])
+    shifts = {}
+    for name, sc in (("gaussian", scenario), ("rim", rim_scenario)):
+        centroids = []
+        for delta in (None, 0.0):
+            _, origin, w = render_blurred_dot(sc, camera, centre, normal, delta_px=delta)
+            ys, xs = np.indices(w.shape)
+            centroids.append(origin + [np.sum(w * xs) / w.sum(), np.sum(w * ys) / w.sum()])
+        shifts[name] = float(np.hypot(*np.subtract(*centroids)))
+    assert shifts["gaussian"] < 0.02
+    assert shifts["rim"] > 0.3
+
+
+def test_optics_trial_oracle_removes_the_defocus_error(rim_scenario):
     # at f/2.8 the defocus error dominates each trial (at f/5.6 it is below the trial's noise)
-    setup = ex.Setup(ex.with_optics(scenario, f_number=2.8), (), ())
+    setup = ex.Setup(ex.with_optics(rim_scenario, f_number=2.8), (), ())
     rows = pd.DataFrame([ex.optics_trial(setup, np.random.default_rng(i)) for i in range(3)])
     assert (rows["t2_oracle"] < rows["t2_without"]).all()
     again = ex.optics_trial(setup, np.random.default_rng(0))
@@ -176,11 +217,11 @@ def test_handeye_chain_is_exact_without_defocus_noise_or_robot_error(scenario):
     assert row["fig13_exact_p7_preliminary"] < 0.05
 
 
-def test_handeye_chain_carries_the_defocus_error_to_fig13(scenario):
-    """With the defocus on (f/3.53, the calibrated aperture) and nothing else: the triangulated
+def test_handeye_chain_carries_the_defocus_error_to_fig13(rim_scenario):
+    """With the rim's defocus on (f/3.53) and nothing else: the triangulated
     points err more along the plate normal than across it, the calibrator poses tilt, and the
     preliminary matrix is millimetres off while the same views without defocus give it exactly."""
-    sc = ex.with_optics(_perfect_robot(scenario), f_number=3.53)
+    sc = ex.with_optics(_perfect_robot(rim_scenario), f_number=3.53)
     row = _chain(sc, Imaging(noise=False, defocus=True))
     assert row["shift_px_max"] > 1.0
     assert row["point_err_normal_mm"] > row["point_err_inplane_mm"]
@@ -208,3 +249,29 @@ def test_trials_run_on_one_opencv_thread_and_restore_the_setting(scenario, trial
         assert cv2.getNumThreads() == 3
     finally:
         cv2.setNumThreads(before)
+
+
+def test_the_observed_error_null_catches_a_modification_that_sees_the_scored_distance(scenario):
+    """The null control runs the modification on the exact sphere centres, where only the CMM's
+    error is left: the leave-one-target-out modification cannot improve them, but a broken one
+    that also uses the scored distance (the paper's circular reading) pulls them towards the
+    CMM standards and passes the null."""
+    rng = np.random.default_rng(5)
+    n, ratios_holdout, ratios_circular = 60, [], []
+    views = type("V", (), {})()
+    for _ in range(n):
+        world = draw_world(scenario, rng)
+        poses = [ex.viewpoints(scenario, scenario.calibrator2base, 1, rng)[1][0] for _ in range(3)]
+        views.sensor2base = np.array([p @ scenario.sensor2flange for p in poses])
+        exact8 = bino.with_virtual(sim_exact_points(scenario, views))
+        hold = ex.exact_figures(world, exact8)
+        ratios_holdout.append(hold["t3_null_with"] / hold["t3_holdout_exact"])
+        std = ex.standard_to_p7(world)[:6]
+        circular = bino.distances_to_p7(ex._modify(world, exact8)).mean(0)[:6]
+        unmodified = bino.distances_to_p7(exact8).mean(0)[:6]
+        ratios_circular.append(
+            np.sqrt(np.mean((circular - std) ** 2)) / np.sqrt(np.mean((unmodified - std) ** 2))
+        )
+    # the null control's rule: significant when the median ratio's 95 % interval lies below 1
+    assert median_interval(ratios_holdout)[2] > 1.0  # nothing to modify: the null holds
+    assert median_interval(ratios_circular)[2] < 1.0  # the broken method passes it: caught

@@ -11,8 +11,7 @@ from support import assert_same_table
 
 from calstudy.core.paths import RESULTS_DIR
 from calstudy.io.results import read_claims
-from calstudy.papers.binocular import report
-from calstudy.papers.binocular.scenario import published
+from calstudy.papers.binocular import report, report_mechanisms
 
 STEM = "04_binocular_correction"
 OUT = RESULTS_DIR / STEM
@@ -23,6 +22,21 @@ def frames():
     if not (OUT / "trials_binocular.csv").is_file():
         pytest.skip("results/04_binocular_correction has not been regenerated with the engine yet")
     return pd.read_csv(OUT / "trials_binocular.csv"), pd.read_csv(OUT / "trials_field.csv")
+
+
+def _run() -> dict:
+    return json.loads((OUT / "run.json").read_text())["parameters"]
+
+
+def _alternatives() -> dict:
+    """The other mechanisms' trials under the labels the notebook gives them."""
+    run = _run()
+    return {
+        f"{report_mechanisms.MECHANISM_LABELS[m]} (f/{run['f_numbers_fitted'][m]:.3g})": (
+            pd.read_csv(OUT / f"trials_binocular_{m}.csv")
+        )
+        for m in run["mechanisms"][1:]
+    }
 
 
 def _same(got: pd.DataFrame, name: str) -> None:
@@ -42,7 +56,7 @@ def test_tables(frames):
 
 def test_claims_and_controls(frames):
     trials, field = frames
-    claims, controls = report.claim_rows(trials, field, STEM)
+    claims, controls = report.claim_rows(trials, field, STEM, _alternatives())
     want = read_claims(OUT / "claims.csv")
     got = pd.DataFrame([c.__dict__ for c in claims])
     assert got["verdict"].tolist() == want["verdict"].tolist()
@@ -52,17 +66,38 @@ def test_claims_and_controls(frames):
     _same(pd.DataFrame(controls), "controls")
 
 
-def test_optics_sweeps_and_the_calibrated_f_number():
+def test_optics_sweeps_and_the_joint_calibration():
     if not (OUT / "trials_optics_sweep.csv").is_file():
         pytest.skip("results/04_binocular_correction has no optics sweeps yet")
-    fsweep = pd.read_csv(OUT / "trials_fnumber_sweep.csv")
+    run = _run()
+    headline = run["mechanisms"][0]
+    sweeps = {
+        m: pd.read_csv(
+            OUT / ("trials_fnumber_sweep.csv" if m == headline else f"trials_fnumber_sweep_{m}.csv")
+        )
+        for m in run["mechanisms"]
+    }
     osweep = pd.read_csv(OUT / "trials_optics_sweep.csv")
-    fnumber = report.optics_sweep_table(fsweep, "f_number")
+    fnumber = report.optics_sweep_table(sweeps[headline], "f_number")
     _same(fnumber, "fnumber_sweep")
     _same(report.optics_sweep_table(osweep, "focus_distance_mm"), "focus_distance_sweep")
     _same(report.optics_sweep_table(osweep, "dot_diameter_mm"), "dot_diameter_sweep")
     assert (fnumber["n"] >= 30).all()
-    run = json.loads((OUT / "run.json").read_text())["parameters"]
-    target = published("calibrator", "table2_rmse")[0]
-    calibrated = report.calibrated_f_number(fnumber, target)
-    assert run["f_number"] == (calibrated if calibrated is not None else 8.0)
+    geometries = [tuple(g) for g in run["rim_geometries_mm"]]
+    fits = {
+        (m, g): report_mechanisms.fit_mechanism(sweeps[m], g)
+        for m in run["mechanisms"]
+        for g in (geometries if m == "rim" else [None])
+    }
+    _same(report_mechanisms.joint_table(fits), "joint_calibration")
+    assert run["f_number"] == round(fits[(headline, None)].value, 2)
+
+
+def test_mechanism_verdicts(frames):
+    trials, _ = frames
+    run = _run()
+    headline = run["mechanisms"][0]
+    runs = {headline: (run["f_numbers_fitted"][headline], trials)}
+    for label, m in zip(_alternatives().values(), run["mechanisms"][1:], strict=True):
+        runs[m] = (run["f_numbers_fitted"][m], label)
+    _same(report_mechanisms.mechanism_table(runs), "mechanism_verdicts")

@@ -65,9 +65,15 @@ def test_overrides_name_the_file_first_and_are_validated():
     assert s.sensor.optics.f_number == 5.6 and s.dot_radius_mm == 2.0
     with pytest.raises(
         CalibrationError,
-        match=r"sensor\.toml: optics\.f_number = 2\.0: outside its plausible range",
+        match=r"sensor\.toml: optics\.f_number = 1\.4: outside its plausible range",
     ):
-        scn.load_scenario(overrides={"sensor.optics.f_number": 2.0})
+        scn.load_scenario(overrides={"sensor.optics.f_number": 1.4})
+    rim = scn.load_scenario(overrides={"sensor.optics.mechanism": "rim"})
+    assert rim.sensor.optics.mechanism == "rim"
+    assert scn.load_scenario().sensor.optics.mechanism == "gaussian"  # the paper's Eq. 7
+    bad = r"optics\.mechanism = \"cat's eye\": is not one of 'gaussian' or 'rim'"
+    with pytest.raises(CalibrationError, match=bad):
+        scn.load_scenario(overrides={"sensor.optics.mechanism": "cat's eye"})
     for key in ("optics.f_number", "sensor.optics.f_numbr", "sensor"):
         with pytest.raises(CalibrationError, match=rf"override '{key}': '[^']*' names no input"):
             scn.load_scenario(overrides={key: 5.6})

@@ -5,13 +5,15 @@ random (:mod:`calstudy.papers.binocular.simulate`) and returns one row per (robo
 camera calibration error scale): the images are rendered once, for the default errors, and every
 other scale changes only what the errors act on (the calibrated sensor that triangulates, the
 flange poses the controller reports), so the sweeps share the trial's draws. The same trial also
-runs the oracle controls (the calibration views exposed again without defocus; the points
-triangulated with the exact cameras; Fig. 13 with the true hand-eye matrix). :func:`field_trial`
-is the field check of Section 4.3. :func:`binocular_experiment` and :func:`field_experiment` are
-the factories of :func:`calstudy.io.runs.run_experiments`. :func:`optics_trial` and
-:func:`optics_experiment` run Table 2 alone over the optics the paper does not state (F-number,
-focused distance, dot size: :func:`with_optics`). :func:`defocus_shift` is the noise-free study of
-how defocus moves a detected centre, against depth and tilt.
+runs the controls: oracles (the calibration views exposed again without defocus; the exact sphere
+centres; Fig. 13 with the true hand-eye matrix) and nulls (each method where its error source is
+absent: those views rectified, those centres modified, the update started from the true
+matrix). :func:`field_trial` is the field check of Section 4.3. :func:`binocular_experiment`
+and :func:`field_experiment` are the factories of :func:`calstudy.io.runs.run_experiments`.
+:func:`optics_trial` and :func:`optics_experiment` run Table 2 alone over the optics the paper
+does not state (F-number, focused distance, dot size, the rim: :func:`with_optics`), under
+either defocus mechanism (``sensor.toml [optics] mechanism``). :func:`defocus_shift` is the
+noise-free study of how defocus moves a detected centre, against depth and tilt.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from calstudy.papers.binocular.simulate import (
     Views,
     World,
     draw_world,
+    exact_points,
     expose_and_fuse,
     observe_field_region,
     rectified_centre,
@@ -133,12 +136,14 @@ def distance_figures(world: World, cal: Views, val: Views, sharp: Views, model, 
     d_rect = bino.distances_to_p7(rect8).mean(0)
     d_mod = bino.distances_to_p7(mod8).mean(0)
     hold = np.mean(holdout_distances(rect8, world), axis=0)
-    sharp_raw, _ = sharp.points(model, tol)
+    sharp_raw, sharp_rect = sharp.points(model, tol)
     d_sharp = bino.distances_to_p7(bino.with_virtual(sharp_raw)).mean(0)
+    d_sharp_rect = bino.distances_to_p7(bino.with_virtual(sharp_rect)).mean(0)
     row = {
         "t2_without": rmse(d_raw - std),
         "t2_with": rmse(d_rect - std),
         "t2_oracle": rmse(d_sharp - std),
+        "t2_null_with": rmse(d_sharp_rect - std),
         "t3_without": rmse(d_rect - std),
         "t3_with": rmse(d_mod - std),
         "t3_holdout_without": rmse(hold[:, 0] - std[:6]),
@@ -164,15 +169,14 @@ def transformation_figures(scenario, state, flange, vflange, p7_standard: float)
     matrix and with the true one (the oracle control). The calibrator poses depend on the
     points alone: they are fitted once per ``state`` and kept in it."""
     if "poses" not in state:
-        state["poses"] = np.array(
-            [fit_rigid(scenario.layout[:6], r[:6]) for r in state["raw8"]]
-        )
+        state["poses"] = np.array([fit_rigid(scenario.layout[:6], r[:6]) for r in state["raw8"]])
     poses = state["poses"]
     pre = bino.preliminary_handeye(flange, poses)
     upd, _ = bino.correct_transformation(flange, pre, state["rect8"], state["mod8"])
     true = scenario.sensor2flange
+    null, _ = bino.correct_transformation(flange, true, state["rect8"], state["mod8"])
     row = {}
-    for label, h in (("preliminary", pre), ("updated", upd), ("true", true)):
+    for label, h in (("preliminary", pre), ("updated", upd), ("true", true), ("null", null)):
         d = np.array(
             [
                 np.linalg.norm(geo.apply(f @ h, p))
@@ -184,6 +188,20 @@ def transformation_figures(scenario, state, flange, vflange, p7_standard: float)
         row[f"rot_err_{label}_mrad"] = 1e3 * float(geo.rotation_error(h, true))
         row[f"trans_err_{label}_mm"] = float(geo.translation_error(h, true))
     return row
+
+
+def exact_figures(world: World, exact8) -> dict:
+    """The leave-one-target-out check on the exact points ``(n, 8, 3)`` of the calibration views
+    (:func:`calstudy.papers.binocular.simulate.exact_points` with P7, P8): without the
+    modification (``t3_holdout_exact``, the oracle control: the observed error removed) and with
+    it (``t3_null_with``, the null control: the modification where there is nothing to
+    modify), mm."""
+    std = standard_to_p7(world)[:6]
+    hold = np.mean(holdout_distances(exact8, world), axis=0)
+    return {
+        "t3_holdout_exact": rmse(hold[:, 0] - std),
+        "t3_null_with": rmse(hold[:, 1] - std),
+    }
 
 
 def _views(scenario, world, rng, imaging, model1):
@@ -203,12 +221,14 @@ def binocular_trial(setup: Setup, rng, defocus: bool = True) -> list[dict]:
     ``calibration_scale`` 1 with every other ``robot_scale``; the default is (1, 1). Columns:
     the RMSEs of Table 2 (``t2_without``, ``t2_with``; ``t2_oracle`` from the calibration views
     exposed again without defocus: the same true poses and sharp images, fresh image noise; the
-    oracle control of the rectification), Table 3
-    (``t3_without``, ``t3_with``: the paper's protocol, scored on the very distances the
-    modification is fitted to), the leave-one-target-out check (``t3_holdout_without``,
-    ``t3_holdout_with``; ``t3_holdout_truecam``: without modification, triangulated with the
-    exact cameras, the oracle control of the modification), Fig. 13 (``fig13_preliminary``,
-    ``fig13_updated``; ``fig13_true``: with the true hand-eye matrix, the oracle control),
+    oracle control of the rectification; ``t2_null_with``: those views rectified, its null
+    control), Table 3 (``t3_without``, ``t3_with``: the paper's protocol, scored on the very
+    distances the modification is fitted to), the leave-one-target-out check
+    (``t3_holdout_without``, ``t3_holdout_with``; ``t3_holdout_exact`` and ``t3_null_with``: on
+    the exact sphere centres without and with the modification, its oracle and null controls,
+    :func:`exact_figures`; ``t3_holdout_truecam``: triangulated with the exact cameras), Fig. 13
+    (``fig13_preliminary``, ``fig13_updated``; ``fig13_true``: with the true hand-eye matrix, the
+    oracle control; ``fig13_null``: the update started from the true matrix, the null control),
     the hand-eye errors and the per-pair errors of Tables 2-3 (``err_{raw,rect,mod}_<pair>``).
     ``defocus=False`` switches the defocus off everywhere (a test of the oracle's reach).
     The world, the calibration and validation views, the tracker and the sharp images draw
@@ -222,7 +242,8 @@ def binocular_trial(setup: Setup, rng, defocus: bool = True) -> list[dict]:
     cal, val = _views(scenario, world, rng, imaging, model1)
     p7_standard = tracker_p7_distance(scenario, child_rng(rng, "tracker"), imaging)
     sharp_rng = child_rng(rng, "sharp images")
-    sharp = reimage(scenario, cal, sharp_rng, Imaging(defocus=False), model1)
+    sharp = reimage(scenario, cal, sharp_rng, Imaging(defocus=False, rectify=True), model1)
+    exact = exact_figures(world, bino.with_virtual(exact_points(scenario, cal)))
     cal_scales = sorted({float(c) for c in setup.calibration_scales} | {0.0, 1.0})
     # The ray-gap tolerance guards against wrong matches; the gap of a true match grows with the
     # camera calibration error, so the guard widens with the calibration scale (values unchanged).
@@ -245,6 +266,7 @@ def binocular_trial(setup: Setup, rng, defocus: bool = True) -> list[dict]:
         row, state = figures[c]
         out = {"robot_scale": r, "calibration_scale": c, **row}
         out["t3_holdout_truecam"] = figures[0.0][0]["t3_holdout_without"]
+        out.update(exact)
         out["redrawn_views"] = cal.redrawn + val.redrawn
         out.update(transformation_figures(scenario, state, *reported[r], p7_standard))
         rows.append(out)
@@ -325,11 +347,18 @@ def field_trial(setup: Setup, rng) -> dict:
 # factories of the notebook's experiments
 
 
-def _scenario(scenario_dir: str, f_number: float | None = None) -> Scenario:
-    """The station of ``scenario_dir`` (default the paper's) with ``f_number`` (None: the
-    file's) read in place of ``sensor.toml [optics] f_number`` and validated as the file's."""
-    overrides = None if f_number is None else {"sensor.optics.f_number": float(f_number)}
-    return load_scenario(scenario_dir or None, overrides)
+def _scenario(
+    scenario_dir: str, f_number: float | None = None, mechanism: str | None = None
+) -> Scenario:
+    """The station of ``scenario_dir`` (default the paper's) with ``f_number`` and the defocus
+    ``mechanism`` (None: the file's) read in place of ``sensor.toml [optics] f_number`` and
+    ``mechanism`` and validated as the file's."""
+    overrides = {}
+    if f_number is not None:
+        overrides["sensor.optics.f_number"] = float(f_number)
+    if mechanism is not None:
+        overrides["sensor.optics.mechanism"] = str(mechanism)
+    return load_scenario(scenario_dir or None, overrides or None)
 
 
 def scenario_key(setup: Setup) -> str:
@@ -357,26 +386,30 @@ def binocular_experiment(
     robot_scales=ROBOT_SCALES,
     calibration_scales=CALIBRATION_SCALES,
     f_number: float | None = None,
+    mechanism: str | None = None,
+    name: str = "binocular",
 ) -> Experiment:
-    """The Monte Carlo of Tables 2-4 and Fig. 13 with both sweeps (:func:`binocular_trial`);
-    ``f_number`` replaces ``sensor.toml [optics] f_number`` (the calibrated value)."""
+    """The Monte Carlo of Tables 2-4 and Fig. 13 with both sweeps (:func:`binocular_trial`)
+    under experiment ``name``; ``f_number`` and ``mechanism`` replace ``sensor.toml [optics]``'s
+    (the calibrated value, the defocus mechanism)."""
     if n_trials < 1:
         raise CalibrationError(f"n_trials is {n_trials}; need at least 1")
     setup = Setup(
-        _scenario(scenario_dir, f_number),
+        _scenario(scenario_dir, f_number, mechanism),
         tuple(float(r) for r in robot_scales),
         tuple(float(c) for c in calibration_scales),
     )
-    return Experiment(
-        "binocular", binocular_trial, setup, int(n_trials), scenario_key=scenario_key(setup)
-    )
+    return Experiment(name, binocular_trial, setup, int(n_trials), scenario_key=scenario_key(setup))
 
 
 def field_experiment(
-    scenario_dir: str = "", n_trials: int = 30, f_number: float | None = None
+    scenario_dir: str = "",
+    n_trials: int = 30,
+    f_number: float | None = None,
+    mechanism: str | None = None,
 ) -> Experiment:
     """The Monte Carlo of Table 5 (:func:`field_trial`)."""
-    setup = Setup(_scenario(scenario_dir, f_number), (), ())
+    setup = Setup(_scenario(scenario_dir, f_number, mechanism), (), ())
     return Experiment("field", field_trial, setup, int(n_trials), scenario_key=scenario_key(setup))
 
 
@@ -388,7 +421,11 @@ OPTICS_KEYS = {
     "f_number": "sensor.optics.f_number",
     "focus_distance_mm": "sensor.optics.focus_distance_mm",
     "dot_diameter_mm": "calibrator.sbr.dot_diameter_mm",
+    "rim_radius_mm": "sensor.optics.rim_radius_mm",
+    "rim_distance_mm": "sensor.optics.rim_distance_mm",
 }
+#: The keys every optics sweep point carries (the rim's only when a sweep names them).
+OPTICS_DEFAULT_KEYS = ("f_number", "focus_distance_mm", "dot_diameter_mm")
 
 
 def with_optics(scenario: Scenario, **values) -> Scenario:
@@ -415,24 +452,31 @@ def optics_trial(
     f_number: float = 0.0,
     focus_distance_mm: float = 0.0,
     dot_diameter_mm: float = 0.0,
+    rim_radius_mm: float = 0.0,
+    rim_distance_mm: float = 0.0,
 ) -> dict:
-    """Table 2 of one trial (steps (a)-(f)) with other optics (0: the scenario's value): the
-    RMSE of the seven distances to P7 without (``t2_without``) and with (``t2_with``) the
-    rectification, and with the calibration views exposed again without defocus
-    (``t2_oracle``), at the default errors."""
+    """Table 2 of one trial (steps (a)-(f)) with other optics (0: the scenario's value; the rim
+    acts under the ``rim`` mechanism only): the RMSE of the seven distances to P7 without
+    (``t2_without``) and with (``t2_with``) the rectification, and with the calibration views
+    exposed again without defocus (``t2_oracle``), at the default errors; and the chain to
+    Fig. 13 (:func:`handeye_chain`)."""
     scenario = with_optics(
         setup.scenario,
         f_number=f_number or None,
         focus_distance_mm=focus_distance_mm or None,
         dot_diameter_mm=dot_diameter_mm or None,
+        rim_radius_mm=rim_radius_mm or None,
+        rim_distance_mm=rim_distance_mm or None,
     )
     imaging, world, model, tol, cal = _calibration_views(scenario, rng)
-    sharp = reimage(scenario, cal, child_rng(rng, "sharp images"), Imaging(defocus=False), model)
+    sharp_imaging = Imaging(defocus=False, rectify=True)
+    sharp = reimage(scenario, cal, child_rng(rng, "sharp images"), sharp_imaging, model)
     std = standard_to_p7(world)
     raw, rect = cal.points(model, tol)
-    sharp_raw, _ = sharp.points(model, tol)
+    sharp_raw, sharp_rect = sharp.points(model, tol)
     row = {}
-    for label, pts in (("without", raw), ("with", rect), ("oracle", sharp_raw)):
+    pairs = (("without", raw), ("with", rect), ("oracle", sharp_raw), ("null_with", sharp_rect))
+    for label, pts in pairs:
         d = bino.distances_to_p7(bino.with_virtual(pts)).mean(0)
         row[f"t2_{label}"] = rmse(d - std)
     row["redrawn_views"] = cal.redrawn
@@ -513,15 +557,24 @@ def handeye_chain(scenario, world: World, cal: Views, sharp: Views, model, tol: 
 
 
 def optics_experiment(
-    name: str, scenario_dir: str = "", n_trials: int = 30, points=(), f_number: float | None = None
+    name: str,
+    scenario_dir: str = "",
+    n_trials: int = 30,
+    points=(),
+    f_number: float | None = None,
+    mechanism: str | None = None,
 ) -> Experiment:
     """Table 2 at each point of an optics sweep (:func:`optics_trial`): ``points`` are mappings
-    of some of ``f_number``, ``focus_distance_mm``, ``dot_diameter_mm`` (missing: the
-    scenario's value, with ``f_number`` if given)."""
+    of some of :data:`OPTICS_KEYS` (missing: the scenario's value, with ``f_number`` and the
+    defocus ``mechanism`` if given)."""
     if n_trials < 1 or not points:
         raise CalibrationError(f"an optics sweep needs points and n_trials >= 1 ({n_trials})")
-    setup = Setup(_scenario(scenario_dir, f_number), (), ())
-    full = [{k: float(p.get(k, 0.0)) for k in OPTICS_KEYS} for p in points]
+    unknown = sorted({k for p in points for k in p} - set(OPTICS_KEYS))
+    if unknown:
+        raise CalibrationError(f"unknown optics inputs {unknown}; known: {list(OPTICS_KEYS)}")
+    setup = Setup(_scenario(scenario_dir, f_number, mechanism), (), ())
+    keys = [k for k in OPTICS_KEYS if any(k in p for p in points) or k in OPTICS_DEFAULT_KEYS]
+    full = [{k: float(p.get(k, 0.0)) for k in keys} for p in points]
     return Experiment(
         name, optics_trial, setup, int(n_trials), points=full, scenario_key=scenario_key(setup)
     )
@@ -541,9 +594,11 @@ def defocus_shift(
     ``tilts_deg`` about the image's x axis, is rendered at each depth with its blur spot (the CoC
     radius of Eq. 4 and the lens rim's cut, :func:`calstudy.papers.binocular.simulate.
     blur_spots`), exposed twice without noise (saturation and 8-bit quantisation kept) and fused
-    (Eq. 3); its centre is detected without and with the rectification. The shift is the
-    detected minus the true image of the dot centre, px: its size, and its component along the
-    field direction (``radial``, > 0 away from the image centre). The row at the focused
+    (Eq. 3); its centre is detected without and with the rectification, and on the blurred
+    float image itself (``float_shift_px``: no exposure, saturation or quantisation). The shift
+    is the detected minus the true image of the dot centre, px: its size, and its component
+    along the field direction (``radial``, > 0 away from the image centre). The blur spot is the
+    scenario's mechanism (``mechanism`` column). The row at the focused
     distance gives the in-focus shift (perspective and pixel sampling alone).
     """
     camera = scenario.rig.left
@@ -560,14 +615,17 @@ def defocus_shift(
             delta = float(scenario.coc_radius_px(z))
             fused = expose_and_fuse(scenario, blurred, rng, 0.0, math.inf)
             raw = detect_centre(fused, origin, **scenario.detection) - uv
+            exact = detect_centre(blurred, origin, **scenario.detection) - uv
             rect = rectified_centre(scenario, fused, origin, delta) - uv
             rows.append(
                 {
+                    "mechanism": scenario.sensor.optics.mechanism,
                     "tilt_deg": float(tilt),
                     "depth_mm": float(z),
                     "coc_radius_px": delta,
                     "shift_px": float(np.hypot(*raw)),
                     "radial_shift_px": float(raw @ direction),
+                    "float_shift_px": float(np.hypot(*exact)),
                     "rectified_shift_px": float(np.hypot(*rect)),
                     "rectified_radial_shift_px": float(rect @ direction),
                 }

@@ -23,7 +23,7 @@ all three files and the robot's table: :func:`calstudy.papers.binocular.scenario
 from __future__ import annotations
 
 from functools import cached_property
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
@@ -183,11 +183,18 @@ class Extrinsic(Inputs):
         return geo.make_transform(rotation, np.array(self.translation_mm, dtype=float))
 
 
+#: The defocus mechanisms a scenario may select (``[optics] mechanism``): the paper's symmetric
+#: Gaussian blur spot (Eq. 7) and the study's lens-rim vignetting (the spot cut off axis).
+MECHANISMS = ("gaussian", "rim")
+
+
 class Optics(Inputs):
-    """The ``[optics]`` table of data/binocular/sensor.toml (Eq. 4)."""
+    """The ``[optics]`` table of data/binocular/sensor.toml (Eq. 4, 7)."""
 
     NOT_INPUTS = frozenset({"calibrate_f_number_to"})
 
+    #: the blur spot of a defocused point: ``gaussian`` (Eq. 7) or ``rim`` (Eq. 7 cut by the rim)
+    mechanism: Literal[MECHANISMS]
     f_number: Annotated[float, Field(ge=0.5, le=128, allow_inf_nan=False)]
     focus_distance_mm: PositiveFinite
     #: which published baseline the notebook calibrates the f-number to (text, for the reader)

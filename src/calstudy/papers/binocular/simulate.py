@@ -3,8 +3,9 @@
 The simulated world moves a "true" robot that differs from the nominal model by the robot file's
 tolerances, and images through "true" cameras that differ from Table 1 by the calibration
 uncertainty of ``sensor.toml``. Each dot is rendered in a region of interest (ROI) of both
-cameras: exact perspective and distortion, circle of confusion (Eq. 4, 7) with the blur spot cut
-off axis by a lens rim (:func:`blur_spots`), two exposures fused (Eq. 3), sensor noise; its centre
+cameras: exact perspective and distortion, circle of confusion (Eq. 4) with the blur spot of the
+scenario's mechanism (Eq. 7's symmetric Gaussian, or Eq. 7 cut off axis by a lens rim:
+:func:`blur_spots`, :func:`blur`), two exposures fused (Eq. 3), sensor noise; its centre
 is detected (Eq. 12), with and without the rectification (Eq. 8-11), and triangulated with the
 calibrated sensor (Eq. 1).
 """
@@ -124,10 +125,12 @@ def viewpoints(scenario: Scenario, target2base, n: int, rng: np.random.Generator
 class Imaging:
     """Switches of the imaging model: ``noise`` (image noise, camera-calibration errors, SBR dot
     offsets, CMM and tracker errors, robot repeatability) and ``defocus`` (Eq. 4, 7); both on in
-    the notebook, off in the noise-free tests."""
+    the notebook, off in the noise-free tests. ``rectify``: run the rectification (Eq. 8-11)
+    even on in-focus images (a null control: the method where its error source is absent)."""
 
     noise: bool = True
     defocus: bool = True
+    rectify: bool = False
 
 
 def blur_spots(scenario: Scenario, centres_cam) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -155,8 +158,12 @@ def _rim_inputs(scenario: Scenario) -> tuple[float, float, float, float]:
 
 def blur(scenario: Scenario, sharp, deltas, sides, rims) -> list:
     """Defocus ``m`` sharp ROIs (a list of 2-D arrays, or a stack), each by its own blur spot
-    (Eq. 7 with the rim's cut, :func:`calstudy.models.optics.defocus_vignetted`; ``rims`` as
-    :func:`blur_spots` returns them): the list of blurred ROIs."""
+    of the scenario's mechanism (``sensor.toml [optics] mechanism``): the symmetric Gaussian of
+    Eq. 7 (``gaussian``, :func:`calstudy.models.optics.defocus`) or Eq. 7 with the rim's cut
+    (``rim``, :func:`calstudy.models.optics.defocus_vignetted`; ``rims`` as :func:`blur_spots`
+    returns them): the list of blurred ROIs."""
+    if scenario.sensor.optics.mechanism == "gaussian":
+        return [optics.defocus(img, d) for img, d in zip(sharp, deltas, strict=True)]
     return [
         optics.defocus_vignetted(img, d, s, rim[:2], float(rim[2]))
         for img, d, s, rim in zip(sharp, deltas, sides, rims, strict=True)
@@ -254,7 +261,8 @@ def image_dots(
 ):
     """Fused ROIs of ``m`` dots in one camera: render (:func:`render_rois`, or the given
     ``rendered`` result of it), defocus (Eq. 4, 7), two exposures, fuse (Eq. 3), dot by dot.
-    Without defocus the ROIs are those an in-focus dot needs (:func:`_in_focus_rois`).
+    Without defocus the ROIs are those an in-focus dot needs (:func:`_in_focus_rois`), unless
+    they are to be rectified (``imaging.rectify``).
 
     Returns ``(fused, origins, deltas, rendered)``: the list of ROIs, their top-left pixels
     ``(m, 2)``, the CoC radii ``(m,)`` applied (zeros without defocus) and the
@@ -267,7 +275,8 @@ def image_dots(
         deltas = true_deltas
     else:
         deltas = np.zeros(len(true_deltas))
-        sharp, origins = _in_focus_rois(sharp, origins, radii)
+        if not imaging.rectify:  # the rectification needs the room of the blurred ROI
+            sharp, origins = _in_focus_rois(sharp, origins, radii)
     blurred = blur(scenario, sharp, deltas, sides, rims)
     if not imaging.noise:
         return blurred, origins, deltas, rendered
@@ -335,7 +344,7 @@ def observe(
             for (f, org, _, _), g in zip(rois, grads, strict=True)
         ]
     )
-    if not imaging.defocus:
+    if not (imaging.defocus or imaging.rectify):
         return Observation(uv_raw, uv_raw, kept)
     tol = scenario.sensor.detection.ray_tolerance_mm
     raw = bino.triangulate(model, uv_raw[0], uv_raw[1], tol)
@@ -519,6 +528,14 @@ def view_calibrator(scenario, world, n, rng, imaging, model) -> Views:
     return view_target(
         scenario, world, scenario.calibrator2base, dots, normal, n, rng, imaging, model
     )
+
+
+def exact_points(scenario: Scenario, views: Views) -> np.ndarray:
+    """The true SBR sphere centres of the calibrator in the sensor frame of each view
+    ``(n, 6, 3)``, mm: the points free of any observed error (Eq. 16's ``X_c + dX_c``; the dots'
+    offsets from the sphere centres are observed error too)."""
+    centres = geo.apply(scenario.calibrator2base, scenario.layout[:6])
+    return np.array([geo.apply(geo.invert(s2b), centres) for s2b in views.sensor2base])
 
 
 def reimage(scenario, views: Views, rng, imaging, model) -> Views:
