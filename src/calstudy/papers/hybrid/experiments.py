@@ -649,6 +649,7 @@ def part_variation_run(setup: dict, rng: np.random.Generator) -> list[dict]:
                 "part_sigma_mm": float(value),
                 "r_distance": correlation_distance(counts),
                 "r_above_0p7": 100.0 * counts[:3].sum() / counts.sum(),
+                "n_defined": int(free.sum()),
             }
         )
     return rows
