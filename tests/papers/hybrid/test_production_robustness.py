@@ -31,7 +31,8 @@ def test_overrides_reach_the_factory_and_key_the_trial_cache():
     assert a.scenario["scenario"].production.variation.part_sigma_mm != 0.1
     keys = [TrialCache(Path("/nonexistent"), e, 1, ["{}"]).dirs[0] for e in (a, b)]
     assert keys[0] != keys[1]
-    with pytest.raises(CalibrationError, match=r"part_sigma_mm = 2.0: outside its plausible range \[0.05, 0.67\]"):
+    outside = r"part_sigma_mm = 2.0: outside its plausible range \[0.05, 0.67\]"
+    with pytest.raises(CalibrationError, match=outside):
         experiments.robustness_experiment(overrides={PART: 2.0})
     # a station input reaches the stations of the trial
     c = experiments.robustness_experiment(overrides={"station.sensor.sigma_point_mm": 0.05})
