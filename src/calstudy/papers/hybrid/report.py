@@ -26,7 +26,7 @@ from calstudy.claims import (
     verdict_or_none,
 )
 from calstudy.core.errors import CalibrationError
-from calstudy.core.stats import median_and_spread, median_interval, rms_ratio_interval
+from calstudy.core.stats import median_and_spread, rms_ratio_interval
 from calstudy.core.verdicts import not_testable
 from calstudy.handeye import OPENCV_METHODS
 from calstudy.papers.hybrid.compensation import analyse_run, shortfall_bound
@@ -807,7 +807,7 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
             published=f"{lo_pub:g}-{hi_pub:g}",
             unit="mm",
             notebook=notebook,
-            note=("" if gated is v.claim else f"{gated.note}; ")
+            note=("" if gated == v.claim else f"{gated.note}; ")
             + f"per-coordinate reading, size minus the calibration-noise floor (an "
             f"independent station with the robot's error off): {v.claim.note}; robot-off "
             f"control (the null): {robot_off}; "
@@ -869,7 +869,7 @@ def summarise_part_variation(trials: pd.DataFrame) -> pd.DataFrame:
     """Per part variation of the part-variation experiment
     (:func:`calstudy.papers.hybrid.experiments.part_variation_experiment`): the stations, the
     median Kolmogorov distance of the correlation bins to the published ones with its 95 %
-    interval, its 95th percentile, the median share above 0.7 and the verdict of
+    spread over stations, its 95th percentile, the median share above 0.7 and the verdict of
     ``hybrid.correlation`` by its rule (the bound, 30 trials a point)."""
     rows = []
     for value, sub in trials.groupby("part_sigma_mm", sort=True):
@@ -883,7 +883,7 @@ def summarise_part_variation(trials: pd.DataFrame) -> pd.DataFrame:
                 min_trials=30,
             )
         )
-        med, lo, hi = median_interval(sub["r_distance"].to_numpy(float))
+        med, lo, hi = median_and_spread(sub["r_distance"].to_numpy(float))
         rows.append(
             {
                 "part_sigma_mm": float(value),
