@@ -242,3 +242,21 @@ def test_deviation_oracle_removes_exactly_the_drift():
     assert a["within_0p3"] < 60.0  # a drift of 1 mm defeats the offset
     assert a["within_0p3_oracle"] == b["within_0p3"] == 100.0
     assert np.isnan(compensation.analyse_run(still, 10)["within_0p3_oracle"])
+
+
+def test_the_chapter_sentences_state_the_claims_numbers():
+    trials = _claim_inputs(3.0, 0.06, EXACT_DEV, np.array([168, 0, 0, 0, 0]))
+    rows, controls = report.production_claims(trials, 10, "nb")
+    text = report.deviation_sentence(rows, controls, trials)
+    assert text.startswith("after compensation the station falls short of the published")
+    assert "by a median 0 [0, 0] against the 5 % critical 0.0928: reproduced" in text
+    # the raw bins miss most at 0.3 mm: 96.55 % published, 60 of 174 within
+    assert f"without an offset (the null) by {0.9655 - 60 / 174:.3g} (not reproduced)" in text
+    assert "narrower (100 % within ±0.1 mm against 21.26 %)" in text and "+-" not in text
+    text = report.correlation_sentence(rows, trials)
+    assert "is 0.839 [0.839, 0.839] against the 5 % critical 0.105: not reproduced" in text
+    assert "100 % of the coefficients exceed 0.9 (published 16.09 %)" in text
+    assert "the assumed part variation is large" in text
+    low_r = _claim_inputs(3.0, 0.06, EXACT_DEV, np.array([0, 0, 0, 0, 168]))
+    rows, _ = report.production_claims(low_r, 10, "nb")
+    assert "the assumed part variation is small" in report.correlation_sentence(rows, low_r)

@@ -26,6 +26,7 @@ from calstudy.claims import (
     verdict_or_none,
 )
 from calstudy.core.errors import CalibrationError
+from calstudy.core.labels import plain
 from calstudy.core.stats import median_and_spread, rms_ratio_interval
 from calstudy.core.verdicts import not_testable
 from calstudy.handeye import OPENCV_METHODS
@@ -919,7 +920,7 @@ def part_variation_sentence(summary: pd.DataFrame, scenario: Scenario, scatter_m
         + ")"
     )
     span = f"{summary['part_sigma_mm'].min():g}-{summary['part_sigma_mm'].max():g} mm"
-    return (
+    return plain(
         f"over part variations of {span} ({int(summary['stations'].min())} stations each), the "
         f"median Kolmogorov distance of the correlation bins to the published ones is smallest "
         f"at {best.part_sigma_mm:g} mm ({best.r_distance:.3g}, 5 % critical {best.bound:.3g}), "
@@ -946,23 +947,23 @@ def deviation_sentence(claims, controls, sub: pd.DataFrame) -> str:
     share0 = float(np.median(100.0 * counts[:, 0] / counts.sum(axis=1)))
     two_sided = float(np.median(bin_distance(counts, pub.deviation_percent)))
     narrower = share0 > pub.deviation_percent[0]
-    return (
+    return plain(
         f"after compensation the station falls short of the published cumulative shares by a "
         f"median {row.reproduced:.3g} [{row.ci_low:.3g}, {row.ci_high:.3g}] against the 5 % "
         f"critical {shortfall_bound(_n_vectors(sub)):.3g}: {row.verdict}; without an offset "
         f"(the null) by {ctl['null']['reproduced']:.3g} ({ctl['null']['verdict']}), with the "
         f"drift removed (the oracle) by {ctl['oracle']['reproduced']:.3g} "
-        f"({ctl['oracle']['verdict']}); the share within +-0.3 mm is "
+        f"({ctl['oracle']['verdict']}); the share within ±0.3 mm is "
         f"{np.median(sub['within_0p3']):.3g} % (published {pub.within_0p3_percent:g} %), "
         f"{np.median(sub['within_0p3_uncompensated']):.3g} % uncompensated; read in both "
         f"directions the bins differ from the published ones by a Kolmogorov distance of "
         f"{two_sided:.3g} (5 % critical {kolmogorov_bound(_n_vectors(sub)):.3g}), "
         + (
-            f"the simulated deviations being narrower ({share0:.3g} % within +-0.1 mm against "
+            f"the simulated deviations being narrower ({share0:.3g} % within ±0.1 mm against "
             f"{pub.deviation_percent[0]:g} %): the offset leaves less than the paper's station "
             "did, by the assumed drift"
             if narrower
-            else f"with {share0:.3g} % within +-0.1 mm against {pub.deviation_percent[0]:g} %"
+            else f"with {share0:.3g} % within ±0.1 mm against {pub.deviation_percent[0]:g} %"
         )
     )
 
@@ -977,7 +978,7 @@ def correlation_sentence(claims, sub: pd.DataFrame) -> str:
     pub = load_published().table1
     n_defined = _n_vectors(sub) - int(np.median(sub["n_fixed"]))
     side = "large" if top > pub.correlation_percent[0] else "small"
-    return (
+    return plain(
         f"the median Kolmogorov distance of the correlation bins to the published ones is "
         f"{row.reproduced:.3g} [{row.ci_low:.3g}, {row.ci_high:.3g}] against the 5 % critical "
         f"{kolmogorov_bound(n_defined):.3g}: {row.verdict}; {top:.3g} % of the coefficients "
