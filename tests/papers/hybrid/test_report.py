@@ -260,3 +260,18 @@ def test_the_chapter_sentences_state_the_claims_numbers():
     low_r = _claim_inputs(3.0, 0.06, EXACT_DEV, np.array([0, 0, 0, 0, 168]))
     rows, _ = report.production_claims(low_r, 10, "nb")
     assert "the assumed part variation is small" in report.correlation_sentence(rows, low_r)
+
+
+def test_the_systematic_scale_sentence_interpolates_the_factor():
+    sweep = pd.DataFrame(
+        {"robot_error_scale": [0.0, 1.0, 3.0], "systematic_coord_median_mm": [0.1, 1.0, 4.0]}
+    )
+    text = report.systematic_scale_sentence(sweep)
+    # 2 mm (3 / 1.5) between factors 1 and 3: 1 + 2 * (2 - 1) / (4 - 1); 3 mm: 1 + 2 * 2 / 3
+    assert "magnitude band (2 mm) at a factor of about 1.7" in text
+    assert "middle of the published 2-4 mm at a factor of about 2.3" in text
+    assert "beyond the largest factor swept (3)" in report.systematic_scale_sentence(
+        sweep.assign(systematic_coord_median_mm=[0.1, 0.5, 1.5])
+    )
+    with pytest.raises(CalibrationError, match="1 factor"):
+        report.systematic_scale_sentence(sweep.iloc[:1])
