@@ -8,7 +8,8 @@ The paper
    it to later measurements (Eq. 25, :func:`compensate`);
 3. bins the compensated deviations and the hybrid-CMM correlation coefficients (Eq. 26,
    :func:`correlations`) of the 174 coordinates ("vectors", 58 points x 3 axes) over 30 later
-   products (Table 1, :func:`analyse_run`).
+   products (Table 1, :func:`analyse_run`); the deviation bins are judged as a whole by how far
+   they fall short of the published cumulative shares (:func:`shortfall_distance`).
 
 The functions take measurement arrays ``(products, points, 3)``, or the long tables of
 :data:`MEASUREMENT_COLUMNS` through :func:`measurements_from_frames`, so measured CSVs can be fed

@@ -15,7 +15,10 @@ sensors by the homography chain with its null and oracle controls and the 3-2-1 
 Notebook 02 (the station in production): stations drawn and calibrated as in notebook 01
 (:func:`calibrated_station`), run through the paper's compensation protocol
 (:func:`production_experiment`), and the sweeps of its assumptions
-(:func:`sensitivity_experiment`, :func:`robot_error_experiment`).
+(:func:`sensitivity_experiment`, :func:`robot_error_experiment`); the part variation the published
+correlation bins need (:func:`part_variation_experiment`) and one point of the robustness map of
+the three claims (:func:`robustness_experiment`, driven by
+:mod:`calstudy.papers.hybrid.production_robustness`).
 """
 
 from __future__ import annotations
