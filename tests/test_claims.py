@@ -47,7 +47,8 @@ def corrections(n: int = 200, ratio: float = 0.84, oracle: float = 0.5, seed: in
 
 def test_the_rule_comes_from_the_register():
     assert claim_rule("binocular.coc") == ("ratio", "lower")
-    assert claim_rule("hybrid.deviation") == ("percent", "higher")
+    assert claim_rule("hybrid.deviation") == ("bound", "lower")
+    assert claim_rule("hybrid.systematic") == ("value", "higher")
     assert claim_rule("selfcal.residual") == ("bound", "lower")
     with pytest.raises(CalibrationError, match="'binocular.nope' is not in the claims register"):
         claim_rule("binocular.nope")
@@ -62,7 +63,7 @@ def test_judge_claim_is_the_rule_with_its_controls_on_the_declared_columns():
     assert got.oracle == judge(t["oracle"], **rule)
     assert (got.claim.verdict, got.null.verdict) == ("reproduced", "not reproduced")
     # the same trials under a claim whose register says "higher": significant on the wrong side
-    wrong = judge_claim("hybrid.deviation", t, ClaimColumns("after", baseline="before"))
+    wrong = judge_claim("hybrid.systematic", t, ClaimColumns("after", baseline="before"))
     assert wrong.claim.verdict == "not reproduced" and "the wrong side" in wrong.claim.note
 
 

@@ -102,6 +102,12 @@ class Notebook02(NotebookParameters):
     featured_point: Annotated[str, Field(min_length=1)]
     hybrid_csv: str
     cmm_csv: str
+    n_part_trials: Count
+    part_sigmas_mm: Positives
+    n_screen_trials: Replications
+    n_robust_trials: Replications
+    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
+    robustness_inputs: list[str]
 
     @model_validator(mode="after")
     def _both_files(self) -> Notebook02:

@@ -65,9 +65,11 @@ FACTORIES = frozenset(
         *(
             f"calstudy.papers.hybrid.experiments:{name}_experiment"
             for name in (
+                "part_variation",
                 "production",
                 "robot_accuracy",
                 "robot_error",
+                "robustness",
                 "rps_penalty",
                 "sensitivity",
                 "stationary",

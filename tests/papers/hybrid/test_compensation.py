@@ -186,3 +186,58 @@ def test_offsets_of_mismatched_runs_raise():
 def test_station_data_needs_both_tables():
     with pytest.raises(CalibrationError, match="give both hybrid_csv and cmm_csv"):
         compensation.station_data("h.csv", "", [], {})
+
+
+PUBLISHED_DEV = np.array([37, 82, 49, 6, 0])  # Table 1, deviation half
+
+
+def test_shortfall_is_the_published_share_missing_at_the_worst_bin_edge():
+    pub = PUBLISHED_DEV / PUBLISHED_DEV.sum() * 100
+    got = compensation.shortfall_distance(
+        [PUBLISHED_DEV, [174, 0, 0, 0, 0], [0, 0, 0, 0, 174], [0, 174, 0, 0, 0]], pub
+    )
+    # the paper's own bins and a station more accurate than them fall short by nothing; all
+    # beyond 0.5 mm misses the whole published share within 0.5 mm; all in 0.1-0.2 mm misses
+    # the 21.26 % within 0.1 mm
+    np.testing.assert_allclose(got, [0.0, 0.0, 1.0, 37 / 174], atol=1e-12)
+    with pytest.raises(CalibrationError, match=r"counts \(N, 5\) with counts in every row"):
+        compensation.shortfall_distance([[0, 0, 0, 0, 0]], pub)
+
+
+def test_shortfall_bound_agrees_with_scipys_one_sided_kolmogorov_distribution():
+    from scipy.stats import ksone
+
+    for n in (50, 174, 500):
+        assert compensation.shortfall_bound(n) == pytest.approx(ksone.ppf(0.95, n), rel=0.03)
+    with pytest.raises(CalibrationError, match="n_vectors is 0"):
+        compensation.shortfall_bound(0)
+
+
+def test_stations_drawn_from_the_published_bins_meet_the_shortfall_bound():
+    """The bound is a test a faithful station passes: binned draws from the published shares
+    fall short by more in at most 5 % of cases."""
+    rng = np.random.default_rng(5)
+    counts = rng.multinomial(174, PUBLISHED_DEV / PUBLISHED_DEV.sum(), size=2000)
+    d = compensation.shortfall_distance(counts, PUBLISHED_DEV / PUBLISHED_DEV.sum() * 100)
+    assert np.mean(d <= compensation.shortfall_bound(174)) >= 0.95
+
+
+def _follow_up_run(panels: np.ndarray, rng) -> dict:
+    """Hybrid and CMM readings of the same panels (30, 4, 3) with their own small noise."""
+    hybrid = panels + 1.0 + rng.normal(0.0, 0.05, panels.shape)
+    cmm = panels + rng.normal(0.0, 0.02, panels.shape)
+    return {"compensation": (hybrid[:10], cmm[:10]), "follow-up": (hybrid, cmm)}
+
+
+def test_the_correlation_null_fails_on_independent_panels_and_passes_on_fixture_nests():
+    """Each reading against the CMM reading of the panel 15 products later: no correlation
+    when panels vary independently, a high one when the weld line builds them in three nests
+    used in turn, each with its own deviation (the null can come out either way)."""
+    rng = np.random.default_rng(8)
+    independent = rng.normal(0.0, 0.5, (30, 4, 3))
+    a = compensation.analyse_run(_follow_up_run(independent, rng), 10)
+    assert a["correlation_counts"][0] == 12  # every r above 0.9
+    assert a["correlation_counts_mispaired"][4] >= 10  # most r of the null at most 0.6
+    nests = rng.normal(0.0, 0.5, (3, 4, 3))[np.arange(30) % 3]
+    b = compensation.analyse_run(_follow_up_run(nests, rng), 10)
+    assert b["correlation_counts_mispaired"][4] <= 2  # the null correlates as well

@@ -8,7 +8,8 @@ The paper
    it to later measurements (Eq. 25, :func:`compensate`);
 3. bins the compensated deviations and the hybrid-CMM correlation coefficients (Eq. 26,
    :func:`correlations`) of the 174 coordinates ("vectors", 58 points x 3 axes) over 30 later
-   products (Table 1, :func:`analyse_run`).
+   products (Table 1, :func:`analyse_run`); the deviation bins are judged as a whole by how far
+   they fall short of the published cumulative shares (:func:`shortfall_distance`).
 
 The functions take measurement arrays ``(products, points, 3)``, or the long tables of
 :data:`MEASUREMENT_COLUMNS` through :func:`measurements_from_frames`, so measured CSVs can be fed
@@ -372,6 +373,58 @@ def correlation_bins(r) -> np.ndarray:
     return (idx[..., None] == np.arange(5)).sum(axis=-2)
 
 
+def shortfall_distance(counts, published_percent) -> np.ndarray:
+    """How far a station's deviations fall short of the published accuracy over all bins: per
+    row of ``counts (N, 5)`` (Table 1's deviation bins, smallest |deviation| first) the largest
+    amount by which the published cumulative share exceeds the station's at a bin edge (0 when
+    the station has at least the published share within every edge).
+
+    The one-sided Kolmogorov distance of the whole bin distribution: "96.55 % within 0.3 mm,
+    none beyond 0.5 mm" read at every edge (21.26 % within 0.1 mm, 68.39 % within 0.2 mm, ...).
+
+    Parameters
+    ----------
+    counts : (N, 5) or (5,) array_like
+        Bin counts per station.
+    published_percent : (5,) array_like
+        The published shares of the same bins, %.
+
+    Returns
+    -------
+    (N,) ndarray
+        The shortfall, a share (0-1).
+
+    Raises
+    ------
+    CalibrationError
+        If a row has no counts or the shapes differ.
+    """
+    c = np.atleast_2d(np.asarray(counts, dtype=float))
+    pub = np.asarray(published_percent, dtype=float)
+    if c.ndim != 2 or c.shape[1] != pub.size or np.any(c.sum(axis=1) <= 0):
+        raise CalibrationError(
+            f"a shortfall needs counts (N, {pub.size}) with counts in every row; got shape "
+            f"{c.shape}, smallest row total {c.sum(axis=1).min():g}"
+        )
+    share = np.cumsum(c, axis=1) / c.sum(axis=1, keepdims=True)
+    return np.maximum(0.0, (np.cumsum(pub) / pub.sum() - share)[:, :-1].max(axis=1))
+
+
+def shortfall_bound(n_vectors: int, level: float = 0.05) -> float:
+    """Critical one-sided Kolmogorov distance for ``n_vectors`` values against a fixed
+    distribution, ``sqrt(-ln(level) / 2) / sqrt(n)`` (asymptotic): a station drawn from the
+    published distribution falls short by more in a share ``level`` of cases.
+
+    Raises
+    ------
+    CalibrationError
+        If ``n_vectors`` is below 1 or ``level`` outside (0, 1).
+    """
+    if n_vectors < 1 or not 0.0 < level < 1.0:
+        raise CalibrationError(f"n_vectors is {n_vectors} (>= 1) and level {level} (in (0, 1))")
+    return float(np.sqrt(-np.log(level) / 2.0) / np.sqrt(n_vectors))
+
+
 def analyse_run(run: dict, n_compensation: int) -> dict:
     """Table 1 of one run ``{phase: (hybrid, cmm)}`` with the offset from the first
     ``n_compensation`` products.
@@ -379,6 +432,10 @@ def analyse_run(run: dict, n_compensation: int) -> dict:
     Returns a dict: ``deviation`` (F, 3) mean compensated deviation over the follow-up,
     ``deviation_uncompensated`` (F, 3), ``r`` (F, 3) with NaN at the coordinates fixed by the
     frame, ``fixed`` (F, 3), ``deviation_counts`` (5,), ``correlation_counts`` (5,),
+    the controls' bins ``deviation_counts_uncompensated`` (no offset),
+    ``deviation_counts_oracle`` (the drift of a simulated run removed; None without
+    ``run["drift"]``) and ``correlation_counts_mispaired`` (each hybrid reading against the CMM
+    reading of the product half the follow-up later: a station that reports another panel),
     ``n_vectors``, ``n_fixed``, and the shares (%) ``within_0p3``, ``beyond_0p5``,
     ``within_0p3_uncompensated``, ``within_0p3_oracle`` (the drift of a simulated run removed;
     NaN without ``run["drift"]``),
@@ -402,13 +459,21 @@ def analyse_run(run: dict, n_compensation: int) -> dict:
     r[~fixed] = correlations(fu_h[:, ~fixed], fu_c[:, ~fixed])
     n_vec = dev.size
     counts_r = correlation_bins(r[~fixed])
+    # null control of the correlation: each hybrid reading paired with the CMM reading of the
+    # product half the follow-up later (a station that reports another panel's coordinates)
+    later = np.roll(fu_c, fu_c.shape[0] // 2, axis=0)
+    mispaired = correlations(fu_h[:, ~fixed], later[:, ~fixed])
+    drift = run.get("drift")
     return {
         "deviation": dev,
         "deviation_uncompensated": dev_raw,
         "r": r,
         "fixed": fixed,
         "deviation_counts": deviation_bins(dev.ravel()),
+        "deviation_counts_uncompensated": deviation_bins(dev_raw.ravel()),
+        "deviation_counts_oracle": None if drift is None else deviation_bins((dev - drift).ravel()),
         "correlation_counts": counts_r,
+        "correlation_counts_mispaired": correlation_bins(mispaired),
         "n_vectors": n_vec,
         "n_fixed": int(fixed.sum()),
         "within_0p3": 100.0 * np.mean(np.abs(dev) <= 0.3),
@@ -418,8 +483,8 @@ def analyse_run(run: dict, n_compensation: int) -> dict:
         # oracle control: the drift removed, i.e. the follow-up's systematic error held at the
         # one the offset was learned on (simulated runs only; a measured station has no truth)
         "within_0p3_oracle": np.nan
-        if run.get("drift") is None
-        else 100.0 * np.mean(np.abs(dev - run["drift"]) <= 0.3),
+        if drift is None
+        else 100.0 * np.mean(np.abs(dev - drift) <= 0.3),
         "r_above_0p7": 100.0 * counts_r[:3].sum() / max(1, counts_r.sum()),
     }
 

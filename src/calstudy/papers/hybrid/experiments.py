@@ -15,7 +15,10 @@ sensors by the homography chain with its null and oracle controls and the 3-2-1 
 Notebook 02 (the station in production): stations drawn and calibrated as in notebook 01
 (:func:`calibrated_station`), run through the paper's compensation protocol
 (:func:`production_experiment`), and the sweeps of its assumptions
-(:func:`sensitivity_experiment`, :func:`robot_error_experiment`).
+(:func:`sensitivity_experiment`, :func:`robot_error_experiment`); the part variation the published
+correlation bins need (:func:`part_variation_experiment`) and one point of the robustness map of
+the three claims (:func:`robustness_experiment`, driven by
+:mod:`calstudy.papers.hybrid.production_robustness`).
 """
 
 from __future__ import annotations
@@ -32,7 +35,13 @@ from calstudy.estimators.fitting import fit_homography, homography_to_pose, solv
 from calstudy.estimators.workpiece import orthogonality, rps_frame_penalty, rps_frame_so3
 from calstudy.handeye import sphere_handeye
 from calstudy.models.robots import load_robot, perturb_robot, pose_errors
-from calstudy.papers.hybrid.compensation import analyse_run, before_compensation
+from calstudy.papers.hybrid.compensation import (
+    analyse_run,
+    before_compensation,
+    correlation_bins,
+    correlations,
+    frame_fixed,
+)
 from calstudy.papers.hybrid.handeye_experiments import (
     SCENARIOS,
     check_scenario,
@@ -47,6 +56,7 @@ from calstudy.papers.hybrid.scenario import (
     load_station,
     panel_features,
 )
+from calstudy.papers.hybrid.schema import StationFile
 from calstudy.papers.hybrid.simulate import (
     HybridStation,
     make_station,
@@ -54,6 +64,7 @@ from calstudy.papers.hybrid.simulate import (
 )
 from calstudy.papers.hybrid.simulate_production import (
     ProductionStation,
+    simulate_products,
     simulate_run,
     teach_program,
 )
@@ -398,14 +409,20 @@ def robot_accuracy_experiment(n_robots: int = 20, n_configs: int = 200) -> Exper
 
 
 def calibrated_station(
-    rng: np.random.Generator, robot_errors: bool = True, robot_error_scale: float = 1.0
+    rng: np.random.Generator,
+    robot_errors: bool = True,
+    robot_error_scale: float = 1.0,
+    config: StationFile | None = None,
 ) -> ProductionStation:
     """Draw a station and calibrate it as notebook 01 does (sphere hand-eye, homography chain).
 
-    ``robot_error_scale`` multiplies the robot's kinematic tolerances (see
+    ``robot_error_scale`` multiplies the robot's kinematic tolerances and ``config`` is the
+    station description, default ``station.toml`` (see
     :func:`calstudy.papers.hybrid.simulate.make_station`).
     """
-    station = make_station(rng, robot_errors=robot_errors, robot_error_scale=robot_error_scale)
+    station = make_station(
+        rng, robot_errors=robot_errors, robot_error_scale=robot_error_scale, config=config
+    )
     return calibrate(station, rng)
 
 
@@ -464,8 +481,10 @@ def _production_setup(n_values, scenario_toml: str) -> dict:
             f"n values up to {max(n_values)} exceed n_compensation_max "
             f"{protocol.n_compensation_max}"
         )
-    # version 2: each trial also runs the station with the robot's error off (two stations)
-    return {"scenario": scenario, "n_values": n_values, "version": 2}
+    # version 2: each trial also runs the station with the robot's error off (two stations);
+    # version 3: the stations are those of the scenario's station file, and each row carries
+    # the bins of the controls (:func:`control_columns`)
+    return {"scenario": scenario, "n_values": n_values, "version": 3}
 
 
 def _coordinate_size(run: dict, scenario: Scenario) -> tuple[float, float]:
@@ -486,14 +505,18 @@ def production_run(setup: dict, rng: np.random.Generator) -> list[dict]:
     (``systematic_coord_floor_mm``): the systematic size that the calibration's noise alone
     leaves, the floor the systematic error is judged against."""
     scenario = setup["scenario"]
-    ps = calibrated_station(child_rng(rng, "station"))
+    config = scenario.station
+    ps = calibrated_station(child_rng(rng, "station"), config=config)
     run = simulate_run(ps, scenario, child_rng(rng, "production"))
     system, rows = trial_summary(run, scenario, setup["n_values"])
-    off = calibrated_station(child_rng(rng, "station"), robot_error_scale=0.0)
+    rows = [r | control_columns(analyse_run(run, r["n_compensation"])) for r in rows]
+    off = calibrated_station(child_rng(rng, "station"), robot_error_scale=0.0, config=config)
     size_off, scatter_off = _coordinate_size(
         simulate_run(off, scenario, child_rng(rng, "production")), scenario
     )
-    floor = calibrated_station(child_rng(rng, "calibration-noise floor"), robot_error_scale=0.0)
+    floor = calibrated_station(
+        child_rng(rng, "calibration-noise floor"), robot_error_scale=0.0, config=config
+    )
     size_floor, _ = _coordinate_size(
         simulate_run(floor, scenario, child_rng(rng, "floor production")), scenario
     )
@@ -503,6 +526,20 @@ def production_run(setup: dict, rng: np.random.Generator) -> list[dict]:
         "systematic_coord_floor_mm": size_floor,
     }
     return [system | r for r in rows]
+
+
+def control_columns(analysis: dict) -> dict:
+    """The bins of the controls of one :func:`~calstudy.papers.hybrid.compensation.analyse_run`
+    as row columns: ``deviation_null_bin<k>`` (no offset), ``deviation_oracle_bin<k>`` (the
+    drift removed) and ``correlation_null_bin<k>`` (each reading against another panel)."""
+    out = {}
+    for prefix, key in (
+        ("deviation_null", "deviation_counts_uncompensated"),
+        ("deviation_oracle", "deviation_counts_oracle"),
+        ("correlation_null", "correlation_counts_mispaired"),
+    ):
+        out |= {f"{prefix}_bin{k}": int(v) for k, v in enumerate(analysis[key])}
+    return out
 
 
 def production_experiment(n_trials: int = 200, n_values=(3, 5, 10, 15, 20), scenario_toml=""):
@@ -593,3 +630,56 @@ def robot_error_experiment(
         raise CalibrationError("scales is empty; give at least one factor on the tolerances")
     setup = {"scenario": load_scenario(scenario_toml or None), "scales": scales}
     return Experiment("robot_error", robot_error_run, setup, n_trials)
+
+
+def robustness_experiment(
+    scenario_toml: str = "", n_trials: int = 10, overrides: dict | None = None
+) -> Experiment:
+    """One point of notebook 02's robustness map: :func:`production_run` at the scenario's own
+    ``n_compensation`` on the scenario with ``overrides`` (dotted keys beginning with
+    ``station.`` or ``production.``, set before it is validated and checked against their
+    ledger ranges). The name is the same at every point, so every point runs the same trials
+    (paired seeds); the cache key holds the overrides (through the scenario)."""
+    scenario = load_scenario(scenario_toml or None, overrides)
+    n = scenario.production.protocol.n_compensation
+    setup = {"scenario": scenario, "n_values": [n], "version": 3}
+    return Experiment("production_robustness", production_run, setup, n_trials)
+
+
+def part_variation_run(setup: dict, rng: np.random.Generator) -> list[dict]:
+    """One calibrated station measuring the follow-up products at every part variation of
+    ``setup["values"]`` (the same panels' standard-normal draws scaled, the same readings'
+    noise): one row per value with the Kolmogorov distance of the correlation bins to the
+    published ones and the share above 0.7."""
+    ps = calibrated_station(child_rng(rng, "station"), config=setup["scenario"].station)
+    n_follow = setup["scenario"].production.protocol.n_follow_up
+    rows = []
+    for value, sc in zip(setup["values"], setup["scenarios"], strict=True):
+        hybrid, cmm = simulate_products(ps, sc, n_follow, child_rng(rng, "follow-up products"))
+        free = ~frame_fixed(hybrid, cmm)
+        counts = correlation_bins(correlations(hybrid[:, free], cmm[:, free]))
+        rows.append(
+            {
+                "part_sigma_mm": float(value),
+                "r_distance": correlation_distance(counts),
+                "r_above_0p7": 100.0 * counts[:3].sum() / counts.sum(),
+                "n_defined": int(free.sum()),
+            }
+        )
+    return rows
+
+
+def part_variation_experiment(
+    n_trials: int = 30, values=(0.03, 0.05, 0.07, 0.1, 0.15, 0.25, 0.5), scenario_toml: str = ""
+) -> Experiment:
+    """The correlation bins against the part variation, every value inside each station: what
+    part variation the published correlation bins need (a finding; the scenario keeps its
+    own)."""
+    scenario = load_scenario(scenario_toml or None)
+    values = sorted({float(v) for v in values})
+    if not values or values[0] <= 0:
+        raise CalibrationError(f"part variations {values} must be a non-empty list of values > 0")
+    key = "production.variation.part_sigma_mm"
+    scenarios = [with_inputs(scenario, {key: v}) for v in values]
+    setup = {"scenario": scenario, "values": values, "scenarios": scenarios}
+    return Experiment("part_variation", part_variation_run, setup, n_trials)
