@@ -50,5 +50,8 @@ def test_every_claim_of_the_register_has_words():
 def test_plain_writes_scenario_inputs_by_their_dotted_keys_as_words():
     assert plain("scanner.sigma_point_mm: holds") == "scanner sigma point (mm): holds"
     assert plain("sensor.design_zyx_deg[1]") == "sensor design zyx [1] (deg)"
+    assert plain("station.workpiece.datum_A_slot_mm[0] matters") == (
+        "station workpiece datum A slot [0] (mm) matters"
+    )
     kept = "see robustness.csv, data/dualarm/scenario.toml, e.g. this, calstudy.io.tolerance"
     assert plain(kept) == kept

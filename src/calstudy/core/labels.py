@@ -122,21 +122,24 @@ def label(name: object, unit: str | None = None) -> str:
 #: a scenario input by its dotted key (``scanner.sigma_point_mm``, ``sensor.design_zyx_deg[1]``);
 #: single letters (``e.g.``), longer dotted names and file names are left alone
 _DOTTED = re.compile(
-    r"(?<![\w./-])([a-z][a-z0-9_]+)\.([a-z][a-z0-9_]+)(\[\d+\])?(?![\w/]|\.\w)"
+    r"(?<![\w./-])([a-z][a-z0-9_]+(?:\.[a-z][a-z0-9_]+)?)\.([a-z][A-Za-z0-9_]+)(\[\d+\])?"
+    r"(?![\w/]|\.\w)"
 )
+#: first parts of dotted names that are modules, not inputs
+_MODULES = {"calstudy"}
 #: endings of file names, not inputs
 _FILE_ENDINGS = {"csv", "toml", "png", "json", "py", "ipynb", "md", "html", "yml", "yaml", "txt"}
 
 
 def _input_words(m: re.Match) -> str:
     table, name, index = m.group(1), m.group(2), m.group(3) or ""
-    if name in _FILE_ENDINGS:
+    if name in _FILE_ENDINGS or table.split(".")[0] in _MODULES:
         return m.group(0)
     words = label(name)
     if index:
         stem, paren, unit = words.partition(" (")
         words = f"{stem} {index}{' (' + unit if paren else ''}"
-    return f"{table.replace('_', ' ')} {words}"
+    return f"{table.replace('_', ' ').replace('.', ' ')} {words}"
 
 
 def plain(text: object) -> str:
