@@ -137,6 +137,10 @@ class Notebook04(NotebookParameters):
     defocus_depths_mm: Positives
     defocus_tilts_deg: Tilts
     scenario_dir: str
+    n_screen_trials: Replications
+    n_robust_trials: Replications
+    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
+    robustness_inputs: list[str]
 
 
 class Notebook05(NotebookParameters):
