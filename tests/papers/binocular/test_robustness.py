@@ -88,7 +88,7 @@ def test_the_adapter_gives_the_reports_verdicts():
     }
     for cid, v in verdicts.items():
         # the report adds to some notes what the map does not need; every figure is the same
-        assert dataclasses.replace(v, note="") == dataclasses.replace(whole[cid].claim, note="")
+        assert dataclasses.replace(v, note=".") == dataclasses.replace(whole[cid].claim, note=".")
         if np.isfinite(v.median):
             assert np.median(stats[cid]) == pytest.approx(v.median, rel=1e-12)
 
@@ -114,7 +114,7 @@ def test_a_calibrated_input_is_screened_over_its_uncertainty_within_its_ledger_r
     f = next(i for i in robustness.map_inputs("", {F_NUMBER: (3.0, 0.25)})[0] if i.key == F_NUMBER)
     assert (f.low, f.high) == (2.8, 3.5)  # the ledger's lower end
     f = next(i for i in robustness.map_inputs("")[0] if i.key == F_NUMBER)
-    assert (f.low, f.high) == (2.8, 16.0) and "no uncertainty" in f.paper_note
+    assert (f.low, f.high, f.paper) == (2.8, 16.0, None) and "not calibrated" in f.paper_note
     assert any(s.startswith("station.field.centres_mm") for s in skipped)
     with pytest.raises(CalibrationError, match=r"focus_distance_mm'\] are not calibrated"):
         robustness.map_inputs("", {"sensor.optics.focus_distance_mm": (850.0, 10.0)})

@@ -168,7 +168,8 @@ def map_inputs(
     """The inputs of the map: the ledger's assumed and calibrated inputs with a range, each with
     the claims whose computation reads it; a calibrated input over its value +-
     :data:`CALIBRATION_SIGMAS` standard uncertainties (within its ledger range) when
-    ``calibrated`` gives them, over its ledger range otherwise.
+    ``calibrated`` gives them (the value is then where the paper's baseline figures put it,
+    :attr:`~calstudy.core.robustness.Input.paper`), over its ledger range otherwise.
 
     Parameters
     ----------
@@ -212,13 +213,14 @@ def map_inputs(
                     f"{item.key} calibrated to {value!r}: outside its ledger range "
                     f"[{item.low:g}, {item.high:g}]"
                 )
-            changes.update(base=float(value), paper=float(value))
+            changes["base"] = float(value)
             if u is None:
-                changes["paper_note"] = "calibrated; no uncertainty given: its ledger range"
+                changes["paper_note"] = "calibrated, but not calibrated here: its ledger range"
             else:
                 s = CALIBRATION_SIGMAS
                 # the ends to 4 digits, as a sweep's inside values (they are stored in the map)
                 changes.update(
+                    paper=float(value),
                     low=max(float(f"{value - s * u:.4g}"), item.low),
                     high=min(float(f"{value + s * u:.4g}"), item.high),
                     paper_note=f"calibrated; value +- {s:g} standard uncertainties ({u:.2g})",
