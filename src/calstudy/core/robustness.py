@@ -198,6 +198,10 @@ def ledger_inputs(
                         isinstance(value, int),
                     )
                 )
+            elif any(isinstance(v, list) for v in value):
+                skipped.append(
+                    f"{key}: {len(value)} points under one range per coordinate; not screened"
+                )
             elif isinstance(rng[0], list) and len(rng) == len(value):
                 for i, ((lo, hi), v) in enumerate(zip(rng, value, strict=True)):
                     if lo < hi:

@@ -159,6 +159,10 @@ class Notebook04(NotebookParameters):
         list[Annotated[list[PositiveFinite], Field(min_length=2, max_length=2)]],
         Field(min_length=1, max_length=MAX_COUNT),
     ]
+    n_screen_trials: Replications
+    n_robust_trials: Replications
+    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
+    robustness_inputs: list[str]
 
 
 class Notebook05(NotebookParameters):

@@ -54,6 +54,7 @@ def factory_name(factory: Callable) -> str:
 FACTORIES = frozenset(
     {
         "calstudy.io.handeye_report:tool_point_experiment",
+        "calstudy.papers.binocular.robustness:robustness_experiment",
         *(
             f"calstudy.papers.binocular.experiments:{name}_experiment"
             for name in ("binocular", "field", "optics")

@@ -280,7 +280,7 @@ def rmse_summary(trials: pd.DataFrame, field: pd.DataFrame) -> pd.DataFrame:
 # verdicts
 
 
-def _judged(trials: pd.DataFrame, claim: str):
+def judge_correction(trials: pd.DataFrame, claim: str):
     """Claim, null and oracle control of one correction on the same trials (v2 rule 8), the
     claim's verdict after the oracle gate; a claim whose null control passes is ``not
     testable`` (the test cannot tell the method from one that improves anything)."""
@@ -311,7 +311,7 @@ def _with_note(v, extra: str):
 def alternative_text(claim: str, label: str, trials: pd.DataFrame) -> str:
     """The verdict of ``claim`` on the default rows of ``trials`` (another mechanism,
     ``label``), in words for a note."""
-    v, null, oracle = _judged(default(trials), claim)
+    v, null, oracle = judge_correction(default(trials), claim)
     figure = (
         f"ratio {v.effect_median:.3g} [{v.effect_low:.3g}, {v.effect_high:.3g}]"
         if np.isfinite(v.effect_median)
@@ -336,8 +336,8 @@ def verdicts(trials: pd.DataFrame, field: pd.DataFrame, alternatives: dict | Non
 
 def _verdicts(d: pd.DataFrame, field: pd.DataFrame) -> dict:
     out = {}
-    out["binocular.coc"] = _judged(d, "binocular.coc")
-    claim, null, oracle = _judged(d, "binocular.observed_error")
+    out["binocular.coc"] = judge_correction(d, "binocular.coc")
+    claim, null, oracle = judge_correction(d, "binocular.observed_error")
     circ, lo, hi = median_interval(d["t3_with"] / d["t3_without"])
     out["binocular.observed_error"] = Judged(
         _with_note(
@@ -348,7 +348,7 @@ def _verdicts(d: pd.DataFrame, field: pd.DataFrame) -> dict:
         null,
         oracle,
     )
-    claim, null, oracle = _judged(d, "binocular.transformation")
+    claim, null, oracle = judge_correction(d, "binocular.transformation")
     he = {c: float(d[c].median()) for c in d if c.startswith(("rot_err", "trans_err"))}
     below = float((d["fig13_updated"] < d["fig13_true"]).mean())
     out["binocular.transformation"] = Judged(
@@ -417,7 +417,7 @@ def _published_text(claim: str) -> str:
 
 def _control_rows(claim: str, judged) -> list[dict]:
     """:func:`calstudy.claims.control_rows`, also for a claim whose null control passed (judged
-    ``not testable`` by :func:`_judged`): its rows are written as they came out."""
+    ``not testable`` by :func:`judge_correction`): its rows are written as they came out."""
     if judged.null is None or judged.null.verdict == "not reproduced":
         return control_rows(claim, judged)
     register = claim_register(columns=("null_control", "oracle_control")).set_index("id")
@@ -480,7 +480,7 @@ def sweep_table(trials: pd.DataFrame, sweep: str) -> pd.DataFrame:
             else ["binocular.coc", "binocular.observed_error"]
         )
         for claim in specs:
-            v, _, oracle = _judged(d, claim)
+            v, _, oracle = judge_correction(d, claim)
             name = claim.split(".")[1]
             cols = CLAIMS[claim]
             row[f"{name}_ratio"] = float((d[cols.figure] / d[cols.baseline]).median())
@@ -614,7 +614,7 @@ def optics_sweep_table(sweep: pd.DataFrame, key: str) -> pd.DataFrame:
         if key != "f_number" and value == 0.0:
             continue
         d = d.sort_values("trial")
-        v, _, oracle = _judged(d, "binocular.coc")
+        v, _, oracle = judge_correction(d, "binocular.coc")
         rows.append(
             {
                 key: float(value),

@@ -16,7 +16,7 @@ import pandas as pd
 
 from calstudy.core.jointcal import Baseline, JointFit, joint_calibration, rmse_spread
 from calstudy.core.labels import claim_label
-from calstudy.papers.binocular.report import _judged, default
+from calstudy.papers.binocular.report import default, judge_correction
 from calstudy.papers.binocular.scenario import published
 
 #: The mechanisms' names in prose.
@@ -138,7 +138,7 @@ def mechanism_table(runs: dict) -> pd.DataFrame:
     for mechanism, (f_number, trials) in runs.items():
         d = default(trials)
         for claim in ("binocular.coc", "binocular.observed_error", "binocular.transformation"):
-            v, null, oracle = _judged(d, claim)
+            v, null, oracle = judge_correction(d, claim)
             rows.append(
                 {
                     "mechanism": mechanism,

@@ -246,8 +246,8 @@ def check_reach(scenario: Scenario, source: str | Path = "station.toml") -> None
     aim1, aim2 = scenario.rig.aim_point(1.0), scenario.rig.aim_point(2.0)
     mid = 2.0 * aim1 - aim2
     wrist = geo.invert(scenario.sensor2flange) @ np.append(bound.wrist, 1.0)
-    slack = float(np.linalg.norm(mid)) + spread + 2.0 * d * math.sin(
-        math.radians(poses.cone_deg) / 2.0
+    slack = (
+        float(np.linalg.norm(mid)) + spread + 2.0 * d * math.sin(math.radians(poses.cone_deg) / 2.0)
     )
     slack += float(np.linalg.norm(wrist[:3]))
     targets = [("the calibrator", scenario.calibrator2base)]
