@@ -7,7 +7,6 @@ import pandas as pd
 import pytest
 
 from calstudy.core.errors import CalibrationError
-
 from calstudy.papers.dualarm import report_design as rd
 from calstudy.papers.dualarm.scenario import load_published
 
