@@ -91,12 +91,12 @@ def test_user_accepted_in_a_user_file_refused_in_the_study_file(tmp_path, monkey
 
 
 def test_value_outside_its_range_is_refused_zero_noise_is_not(tmp_path):
-    text = DUALARM.replace("sigma_px = 0.1", "sigma_px = 0.5", 1)
+    text = DUALARM.replace("sigma_px = 0.0328", "sigma_px = 0.5", 1)
     with pytest.raises(
         CalibrationError, match=r"detection\.sigma_px = 0\.5: outside its plausible range"
     ):
         load_dualarm(_own(tmp_path, text))
-    text = DUALARM.replace("sigma_px = 0.1", "sigma_px = 0.0", 1)  # an oracle
+    text = DUALARM.replace("sigma_px = 0.0328", "sigma_px = 0.0", 1)  # an oracle
     assert load_dualarm(_own(tmp_path, text, "oracle.toml")).detection.sigma_px == 0.0
     text = DUALARM.replace("baseline_mm = 200.0", "baseline_mm = 0.0", 1)  # not a noise level
     with pytest.raises(CalibrationError, match=r"stereo\.baseline_mm = 0\.0: must be > 0"):

@@ -136,7 +136,10 @@ def test_ledger_inputs_take_assumed_scalars_and_vector_components():
 
     inputs, skipped = ledger_inputs(load_scenario())
     labels = [i.label for i in inputs]
-    assert "detection.sigma_px" in labels and "sensor.points_per_scan" in labels
+    assert "detection.sigma_px" not in labels  # derived
+    assert "sensor.points_per_scan" in labels
+    derived = [i.label for i in ledger_inputs(load_scenario(), ("derived",))[0]]
+    assert "detection.sigma_px" in derived and "sensor.points_per_scan" not in derived
     assert "layout.world2base1_mm[0]" in labels
     assert "layout.world2base1_rotvec[0]" not in labels  # a range of one value: fixed
     assert "global_test.n_groups" not in labels  # paper

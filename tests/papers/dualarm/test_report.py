@@ -21,6 +21,7 @@ def fake_trials(n=30, after=0.15, ours=0.100, circ=0.556):
             "trial": t,
             "before_mm": b,
             "after_mm": b * after,
+            "null_mm": 10.0 * b,
             "oracle_mm": 0.01 * b,
         }
         for t in range(n)
@@ -46,7 +47,8 @@ def fake_trials(n=30, after=0.15, ours=0.100, circ=0.556):
         for m, base in (
             ("coded markers", ours),
             ("circular plate", circ),
-            ("no calibration", 1000.0),
+            ("design drawing", 1.5),
+            ("plate retake", circ),
             ("true calibration", 0.005),
         )
         for g in (1, 2, 3)

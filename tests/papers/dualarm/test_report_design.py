@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 
+from calstudy.core.errors import CalibrationError
 from calstudy.papers.dualarm import report_design as rd
 from calstudy.papers.dualarm.scenario import load_published
 
@@ -47,6 +49,19 @@ def test_sweep_sentences_say_where_the_verdict_changes(scenario):
     # nowhere better than the reference: no change anywhere
     flat = rd.sweep_sentences(rd.sweep_table(_sweep(scenario, {}), published), scenario)
     assert "changes" not in flat and flat.count("stays 'not reproduced'") == 3
+
+
+def test_the_paper_point_sentence_names_the_points_with_the_papers_poses(scenario):
+    published = load_published()
+    table = rd.sweep_table(_sweep(scenario, {16: 0.1}), published)
+    text = rd.paper_point_sentence(table, scenario)
+    assert "resembles the 5 sweep points with 3 poses (4, 8, 16 linking images" in text
+    assert "dualarm.global is 'not reproduced'" in text
+    assert "over them it takes 'not reproduced' and 'reproduced'" in text
+    flat = rd.paper_point_sentence(rd.sweep_table(_sweep(scenario, {}), published), scenario)
+    assert "it is 'not reproduced' at every one of them" in flat
+    with pytest.raises(CalibrationError, match="no point with the paper's 3"):
+        rd.paper_point_sentence(table[table["calibration_poses"] != 3], scenario)
 
 
 def test_budget_table_orders_sources_and_shares_in_quadrature():

@@ -34,7 +34,9 @@ def test_apply_overrides_returns_a_new_table_and_refuses_an_unknown_key():
 
 def test_an_override_is_validated_against_its_ledger_range():
     assert load_scenario(overrides={"detection.sigma_px": 0.05}).detection.sigma_px == 0.05
-    with pytest.raises(CalibrationError, match=r"detection.sigma_px = 0.5: outside .*0.02, 0.2"):
+    with pytest.raises(
+        CalibrationError, match=r"detection.sigma_px = 0.5: outside .*0.0204, 0.0532"
+    ):
         load_scenario(overrides={"detection.sigma_px": 0.5})
     with pytest.raises(CalibrationError, match="'sensor.points'"):
         load_scenario(overrides={"sensor.points": 300})
@@ -63,7 +65,8 @@ def _rows(part: str, setting: dict):
 @pytest.mark.parametrize(
     ("part", "unread", "read"),
     [
-        ("icp", ("survey.bridge_views", 16), ("detection.sigma_px", 0.2)),
+        ("icp", ("survey.bridge_views", 16), ("detection.sigma_px", 0.05)),
+        ("icp", ("design.base_sigma_mm", 3.0), ("sensor.sphere_fit_sigma_mm", 0.0295)),
         ("icp", ("detection.loss_rate", 0.3), ("handeye.n_poses", 6)),
         ("icp", ("circular_plate.tilt_deg", 50.0), ("icp.n_views", 3)),
         ("global", ("icp.n_views", 3), ("survey.bridge_views", 16)),
@@ -101,7 +104,10 @@ def test_the_map_inputs_carry_where_the_paper_puts_them():
     by_key = {item.key: item for item in spec.inputs}
     sigma = by_key["detection.sigma_px"]
     # 0.029 mm depth error at 500 mm with f = 2000 px, B = 200 mm: 0.029 * 4e5 / (sqrt 2 * 2.5e5)
-    assert sigma.paper == pytest.approx(0.029 * 2000 * 200 / (np.sqrt(2) * 500**2))
+    assert sigma.paper == pytest.approx(0.029 * 2000 * 200 / (np.sqrt(2) * 500**2), rel=2e-3)
+    assert sigma.kind == "derived" and (sigma.low, sigma.high) == (0.0204, 0.0532)
+    # the count of points screened up to what the cameras give on sphere B
+    assert by_key["sensor.points_per_scan"].high == by_key["sensor.points_per_scan"].paper
     assert by_key["drift_scale"].kind == "calibrated"
     assert by_key["drift_scale"].low == pytest.approx(1.9)
     assert by_key["drift_scale"].claims == ("dualarm.icp",)

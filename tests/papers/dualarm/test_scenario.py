@@ -51,9 +51,9 @@ def test_published_numbers():
 
 def test_overrides_are_validated_as_the_file_would_be(scenario):
     own = load_scenario(overrides={"detection.sigma_px": 0.05, "camera.fx_px": 2400.0})
-    assert own.detection.sigma_px == 0.05 and scenario.detection.sigma_px == 0.1
+    assert own.detection.sigma_px == 0.05 and scenario.detection.sigma_px == 0.0328
     assert own.rig.left.fx == 2400.0 and scenario.rig.left.fx == 2000.0  # derived from it
-    assert own.detection.provenance["sigma_px"].kind == "assumed"  # the ledger stays beside it
+    assert own.detection.provenance["sigma_px"].kind == "derived"  # the ledger stays beside it
     with pytest.raises(
         CalibrationError,
         match=r"scenario\.toml: detection\.sigma_px = 0\.5: outside its plausible range",

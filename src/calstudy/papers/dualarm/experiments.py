@@ -252,6 +252,30 @@ def plate_base_to_base(
     )
 
 
+def design_base_to_base(scn: Scenario, rng: np.random.Generator) -> np.ndarray:
+    """The null control of ``dualarm.global``: ``base2_to_base1`` read off the station's design
+    drawing, each robot standing where the drawing puts it to ``design.base_sigma_mm`` and
+    ``design.base_sigma_deg`` (one draw of ``rng``). A method that only reads the drawing passes
+    the claim's test when the robots are placed well enough; it fails when they are not."""
+    return geo.perturb(
+        scn.calibration.base2_to_base1, scn.design.base_sigma_rad, scn.design.base_sigma_mm, rng
+    )
+
+
+def null_b2b1(scn: Scenario, cam2flange_est, rng: np.random.Generator, plate_sigma_px) -> dict:
+    """The null controls of the two global claims on one trial, each from its own child stream
+    of ``rng``: ``design drawing`` (:func:`design_base_to_base`) and ``plate retake`` (the
+    circular plate taken again: new images of the same plate from new poses, the same
+    calibration; judged against the plate, it shows what the comparison makes of a method no
+    better than the plate)."""
+    return {
+        "design drawing": design_base_to_base(scn, child_rng(rng, "design drawing")),
+        "plate retake": plate_base_to_base(
+            scn, cam2flange_est, child_rng(rng, "plate retake"), plate_sigma_px
+        ),
+    }
+
+
 # ----------------------------------------------------------------------------------------------
 # 4. sphere scans and M3DHE-ICP (Eq. 3-4)
 
@@ -291,6 +315,15 @@ def icp_correct(scn: Scenario, clouds: list[np.ndarray]) -> list[np.ndarray]:
     return out
 
 
+def centroid_correct(clouds: list[np.ndarray]) -> list[np.ndarray]:
+    """The null control of ``dualarm.icp``: every cloud after the first moved so that its mean
+    point meets the first cloud's, a correction that ignores the shape of the surface. It
+    passes when the views see the same part of the sphere and fails when they see different
+    caps, whose mean points lie apart by the geometry of the caps."""
+    c0 = clouds[0].mean(axis=0)
+    return [clouds[0], *(p + (c0 - p.mean(axis=0)) for p in clouds[1:])]
+
+
 def centre_errors(clouds: list[np.ndarray]) -> np.ndarray:
     """Distances ``(n - 1,)`` of the sphere centres fitted to clouds 1.. from that of cloud 0."""
     c = np.array([fit_sphere(p)[0] for p in clouds])
@@ -299,9 +332,10 @@ def centre_errors(clouds: list[np.ndarray]) -> np.ndarray:
 
 def icp_rows(scn: Scenario, cam2flange_est, rng: np.random.Generator, icp: bool = True):
     """Figs. 5-6: per arm, sphere and view 1.., the centre-distance error before ICP, after it
-    (``icp``), and with the errors between views removed from the simulation (``oracle_mm``:
-    the clouds mapped with the true flange poses and hand-eye, what a perfect correction
-    reaches). Each arm's scan of each sphere draws from its own stream of ``rng``."""
+    (``icp``), after the null correction (``null_mm``, :func:`centroid_correct`), and with the
+    errors between views removed from the simulation (``oracle_mm``: the clouds mapped with the
+    true flange poses and hand-eye, what a perfect correction reaches). Each arm's scan of each
+    sphere draws from its own stream of ``rng``."""
     rows = []
     names = [f"multi-view scans arm {arm} sphere {s}" for arm in ARMS for s in SPHERES]
     scan_rngs = iter(streams(rng, *names))
@@ -316,6 +350,7 @@ def icp_rows(scn: Scenario, cam2flange_est, rng: np.random.Generator, icp: bool 
             before = centre_errors(clouds)
             after = centre_errors(icp_correct(scn, clouds)) if icp else before * np.nan
             oracle = centre_errors(exact)
+            null = centre_errors(centroid_correct(clouds))
             for k in range(len(before)):
                 rows.append(
                     {
@@ -325,6 +360,7 @@ def icp_rows(scn: Scenario, cam2flange_est, rng: np.random.Generator, icp: bool 
                         "view": k + 1,
                         "before_mm": float(before[k]),
                         "after_mm": float(after[k]),
+                        "null_mm": float(null[k]),
                         "oracle_mm": float(oracle[k]),
                     }
                 )
@@ -455,16 +491,16 @@ def budget_b2b1(scn: Scenario, cam2flange_est, points, noisy, exact) -> dict:
 
 def station_trial(scn: Scenario, rng: np.random.Generator, plate_sigma_px: float) -> list:
     """One simulated replication of the paper's experiments (steps 1-5), with the controls on
-    the same draws: rows of parts ``calibration``, ``bundle``, ``icp`` (before, after, oracle)
-    and ``global`` (methods: coded markers, circular plate, and the controls ``true
-    calibration`` (no calibration error: the test's floor) and ``no calibration`` (Eq. 11
-    replaced by the identity))."""
+    the same draws: rows of parts ``calibration``, ``bundle``, ``icp`` (before, after, null,
+    oracle) and ``global`` (methods: coded markers, circular plate, and the controls ``true
+    calibration`` (no calibration error: the test's floor), ``design drawing`` and ``plate
+    retake`` (the nulls, :func:`null_b2b1`))."""
     cam2flange, recon, ours = coded_marker_chain(scn, rng)
     circ = plate_base_to_base(scn, cam2flange, rng, plate_sigma_px)
     b2b1 = {
         "coded markers": ours,
         "circular plate": circ,
-        "no calibration": np.eye(4),
+        **null_b2b1(scn, cam2flange, rng, plate_sigma_px),
     }
     rows = [
         _transform_error(f"hand-eye arm {a}", cam2flange[a - 1], scn.calibration.cam2flange[a - 1])
@@ -526,7 +562,11 @@ def robustness_trial(
         return icp_rows(scn, cam2flange, child_rng(rng, "multi-view scans"))
     cam2flange, _, ours = coded_marker_chain(scn, child_rng(rng, "chain"))
     circ = plate_base_to_base(scn, cam2flange, child_rng(rng, "plate"), plate_sigma_px)
-    b2b1 = {"coded markers": ours, "circular plate": circ, "no calibration": np.eye(4)}
+    b2b1 = {
+        "coded markers": ours,
+        "circular plate": circ,
+        **null_b2b1(scn, cam2flange, rng, plate_sigma_px),
+    }
     return global_rows(scn, cam2flange, b2b1, child_rng(rng, "global scans"))
 
 

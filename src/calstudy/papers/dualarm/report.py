@@ -105,7 +105,7 @@ def calibration_table(pilot: pd.DataFrame, x: str, y: str, target: float) -> pd.
 
 def icp_per_trial(icp: pd.DataFrame) -> pd.DataFrame:
     """Mean before/after/oracle errors per trial, arm and sphere."""
-    cols = ["before_mm", "after_mm", "oracle_mm"]
+    cols = [c for c in ("before_mm", "after_mm", "null_mm", "oracle_mm") if c in icp]
     return icp.groupby(["arm", "sphere", "trial"], as_index=False)[cols].mean()
 
 
@@ -295,17 +295,19 @@ def sweep_figure(
 
 def claim_samples(trials: pd.DataFrame) -> dict[str, np.ndarray]:
     """Per-trial figures of the three claims and their controls, in trial order:
-    ``icp_before/after/oracle`` (mean over the 4 arm-sphere pairs of the mean over views), and the
-    mean Euclidean sphere-centre error of Tables 1-2 per method (``coded``, ``plate``, ``none``
-    (no calibration), ``true`` (true calibration)). Trials without the ICP part, or without the
-    Tables 1-2 part, give only the figures of the other."""
+    ``icp_before/after/null/oracle`` (mean over the 4 arm-sphere pairs of the mean over views;
+    ``null``: the centroid correction), and the mean Euclidean sphere-centre error of Tables 1-2
+    per method (``coded``, ``plate``, ``design`` (the design drawing's base-to-base),
+    ``plate_retake`` (the plate taken again), ``true`` (true calibration)). Trials without the
+    ICP part, or without the Tables 1-2 part, give only the figures of the other."""
     out = {}
     if (trials["part"] == "icp").any():
         per = icp_per_trial(part(trials, "icp")).groupby("trial")
-        icp = per[["before_mm", "after_mm", "oracle_mm"]].mean().sort_index()
+        icp = per[["before_mm", "after_mm", "null_mm", "oracle_mm"]].mean().sort_index()
         out.update(
             icp_before=icp["before_mm"].to_numpy(),
             icp_after=icp["after_mm"].to_numpy(),
+            icp_null=icp["null_mm"].to_numpy(),
             icp_oracle=icp["oracle_mm"].to_numpy(),
         )
     if (trials["part"] == "global").any():
@@ -314,7 +316,8 @@ def claim_samples(trials: pd.DataFrame) -> dict[str, np.ndarray]:
         out.update(
             coded=g["coded markers"].to_numpy(),
             plate=g["circular plate"].to_numpy(),
-            none=g["no calibration"].to_numpy(),
+            design=g["design drawing"].to_numpy(),
+            plate_retake=g["plate retake"].to_numpy(),
             true=g["true calibration"].to_numpy(),
         )
     return out
@@ -356,20 +359,20 @@ CLAIMS = {
     "dualarm.icp": ClaimColumns(
         "icp_after",
         baseline="icp_before",
-        null="icp_before",
+        null="icp_null",
         oracle="icp_oracle",
         mechanism="pose errors between the views of a multi-view scan (drift)",
     ),
     "dualarm.global": ClaimColumns(
         "coded",
-        null="none",
+        null="design",
         oracle="true",
         mechanism="calibration error of the hand-eye and base-to-base transforms",
     ),
     "dualarm.vs_circular": ClaimColumns(
         "coded",
         baseline="plate",
-        null="plate",
+        null="plate_retake",
         oracle="true",
         mechanism="calibration error of the two routes",
     ),

@@ -112,6 +112,62 @@ def sweep_sentences(table: pd.DataFrame, scn: Scenario) -> str:
     return " ".join(out)
 
 
+def paper_point_sentence(table: pd.DataFrame, scn: Scenario) -> str:
+    """Which points of the survey sweeps the paper's setup resembles, in one generated sentence.
+
+    The paper fixes the calibration poses per arm (``global_test.calibration_poses``, provenance
+    ``paper``) and leaves the linking images and their tilt open: the points it resembles are
+    those with its number of poses, each linking design it does not rule out. The sentence names
+    them, the verdict of ``dualarm.global`` at the scenario's design and the verdicts over them.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        :func:`sweep_table`.
+    scn : Scenario
+        The station (its design and the ledger of the swept inputs).
+
+    Returns
+    -------
+    str
+        One sentence.
+
+    Raises
+    ------
+    CalibrationError
+        If the sweep holds no point with the paper's number of poses.
+    """
+    base = _base_point(scn)
+    poses = base["calibration_poses"]
+    kind = scn.global_test.provenance["calibration_poses"].kind
+    same = table[table["calibration_poses"] == poses]
+    if same.empty:
+        raise CalibrationError(
+            f"the survey sweep has no point with the paper's {poses} calibration poses per arm"
+        )
+    at = np.ones(len(table), dtype=bool)
+    for col in SWEEPS:
+        at &= np.isclose(table[col].to_numpy(float), base[col])
+    design = table[at].iloc[0]
+    verdicts = list(dict.fromkeys(same["verdict"]))
+    lo, hi = same["median_mm"].min(), same["median_mm"].max()
+    views = ", ".join(map(_fmt, sorted(set(same["bridge_views"]))))
+    tilts = ", ".join(map(_fmt, sorted(set(same["bridge_tilt_deg"]))))
+    over = (
+        f"it is '{verdicts[0]}' at every one of them"
+        if len(verdicts) == 1
+        else f"over them it takes {' and '.join(repr(v) for v in verdicts)}"
+    )
+    return (
+        f"The paper's setup ({poses} calibration poses per arm, {kind}; no count or tilt of the "
+        f"linking images) resembles the {len(same)} sweep points with {poses} poses ({views} "
+        f"linking images, tilts {tilts} deg); at the scenario's design among them "
+        f"({_fmt(base['bridge_views'])} linking images, {_fmt(base['bridge_tilt_deg'])} deg) "
+        f"dualarm.global is '{design['verdict']}' (median {design['median_mm']:.3f} mm), and "
+        f"{over} (medians {lo:.3f}-{hi:.3f} mm)."
+    )
+
+
 def sweep_figure(table: pd.DataFrame, scn: Scenario, published: PublishedFile):
     """Three panels, one per sweep: median sphere-centre error of the coded-marker route with its
     95 % interval, the paper's 0.100 mm and the best other method of Table 3."""

@@ -1,18 +1,18 @@
 """The robustness map of the three ``dualarm`` claims (:mod:`calstudy.core.robustness`).
 
-Every ``assumed`` input of ``data/dualarm/scenario.toml`` with a range is screened for the
-claims whose computation reads it, and the two calibrated inputs (the drift scale and the
-plate's circle noise) over their calibration's uncertainty. A point of the map is a
-:func:`~calstudy.papers.dualarm.experiments.robustness_experiment` with the input set by its
-dotted key (``overrides``, validated against the ledger) or, for a calibrated input, by the
-factory's keyword; the claims are judged by :func:`judge_claims`, the one place that turns
+Every ``assumed`` and ``derived`` input of ``data/dualarm/scenario.toml`` with a range is
+screened for the claims whose computation reads it (a derived input over the readings of the
+paper's statements, :mod:`calstudy.papers.dualarm.derived`), and the two calibrated inputs (the
+drift scale and the plate's circle noise) over their calibration's uncertainty. A point of the
+map is a :func:`~calstudy.papers.dualarm.experiments.robustness_experiment` with the input set
+by its dotted key (``overrides``, validated against the ledger) or, for a calibrated input, by
+the factory's keyword; the claims are judged by :func:`judge_claims`, the one place that turns
 trial rows into verdicts here.
 
-Where the paper's own numbers put an input (:func:`paper_values`): the marker-centre noise and
-the triangulated markers' accuracy follow from the sensors' stated accuracy (0.029 mm, sec.
-4.1) through the triangulation formula the scenario uses, ``sigma_z = Z^2 sigma_d / (f B)``
-with ``sigma_d = sqrt(2) sigma_px``; the points a scan has follow from the stated cameras
-(1280 x 1024 px) over the visible cap of each sphere at the working distance.
+Where the paper's own numbers put an input (:func:`paper_values`): each derived input at its
+derivation from the stated accuracy; the per-point noise at the stated accuracy; the points a
+scan has at the stated cameras' pixels over the visible cap of each sphere at the working
+distance (:func:`calstudy.papers.dualarm.derived.cap_points`).
 """
 
 from __future__ import annotations
@@ -20,12 +20,11 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 
-import numpy as np
 import pandas as pd
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.robustness import Input, MapSpec, ledger_inputs
-from calstudy.papers.dualarm import experiments, report
+from calstudy.papers.dualarm import derived, experiments, report
 from calstudy.papers.dualarm.scenario import load_scenario
 from calstudy.papers.dualarm.schema import PublishedFile, Scenario
 
@@ -42,12 +41,13 @@ NOT_READ = {
         "detection.marker_sigma_mm",
         "detection.loss_rate",
         "detection.max_view_angle_deg",
+        "design.",
         "plate_sigma_px",
     ),
     "global": ("icp.", "drift_scale"),
 }
-#: the sensors' accuracy the paper states (sec. 4.1), mm
-SENSOR_ACCURACY_MM = 0.029
+#: the provenance kinds whose ranged inputs the map screens
+SCREENED_KINDS = ("assumed", "derived")
 #: calibrated inputs are screened over their value +- this many standard uncertainties
 CALIBRATION_SIGMAS = 2.0
 
@@ -62,35 +62,48 @@ def paper_values(scn: Scenario) -> dict[str, tuple[float, str]]:
     Parameters
     ----------
     scn : Scenario
-        The station (its focal length, baseline, working distance, spheres and cap angle).
+        The station (its statements, focal length, baseline, working distance, spheres and cap
+        angle).
 
     Returns
     -------
     dict of str to (float, str)
-        ``detection.sigma_px`` (px), ``detection.marker_sigma_mm`` and
-        ``sensor.point_sigma_mm`` (mm), ``sensor.points_per_scan`` (sphere B; sphere A in the
-        text).
+        The derived inputs of :func:`calstudy.papers.dualarm.derived.derived_inputs`,
+        ``sensor.point_sigma_mm`` (the stated accuracy) and ``sensor.points_per_scan`` (sphere
+        B's cap; sphere A's in the text).
     """
-    f, z = float(scn.rig.left.K[0, 0]), scn.sensor.working_distance_mm
-    baseline = float(np.linalg.norm(scn.rig.right2left[:3, 3]))
-    sigma_px = SENSOR_ACCURACY_MM * f * baseline / (np.sqrt(2.0) * z**2)
-    cap = {
-        s: np.pi * (r * np.sin(scn.sensor.max_incidence) * f / z) ** 2
-        for s, r in scn.spheres.radius.items()
+    z = scn.sensor.working_distance_mm
+    acc = scn.sensor.stated_accuracy_mm
+    cap = {s: derived.cap_points(scn, r) for s, r in scn.spheres.radius.items()}
+    out = {
+        key: (entry["value"], f"derived: {entry['how']}")
+        for key, entry in derived.derived_inputs(scn).items()
     }
-    accuracy = f"the sensors' stated accuracy {SENSOR_ACCURACY_MM} mm (sec. 4.1)"
-    return {
-        "detection.sigma_px": (
-            float(sigma_px),
-            f"{accuracy} as the depth error Z^2 sqrt(2) sigma_px / (f B) at Z = {z:g} mm",
-        ),
-        "detection.marker_sigma_mm": (SENSOR_ACCURACY_MM, accuracy),
-        "sensor.point_sigma_mm": (SENSOR_ACCURACY_MM, accuracy),
-        "sensor.points_per_scan": (
-            float(cap["B"]),
-            f"pixels over the visible cap of sphere B at {z:g} mm ({cap['A']:.0f} for sphere A)",
-        ),
-    }
+    out["sensor.point_sigma_mm"] = (acc, f"the sensors' stated accuracy {acc:g} mm (sec. 4.1)")
+    out["sensor.points_per_scan"] = (
+        float(round(cap["B"])),
+        f"pixels over the visible cap of sphere B at {z:g} mm ({cap['A']:.0f} for sphere A)",
+    )
+    return out
+
+
+def default_caps(scn: Scenario) -> dict[str, float]:
+    """The highest values screened by default: ``sensor.points_per_scan`` up to the count the
+    stated cameras give on sphere B (one point per pixel of its visible cap); sphere A's, some
+    six times more, costs minutes per ICP trial and is not screened.
+
+    Parameters
+    ----------
+    scn : Scenario
+        The station.
+
+    Returns
+    -------
+    dict of str to float
+        Dotted key -> cap.
+    """
+    cap = derived.cap_points(scn, scn.spheres.radius["B"])
+    return {"sensor.points_per_scan": float(round(cap))}
 
 
 def map_inputs(
@@ -120,7 +133,7 @@ def map_inputs(
     (list of Input, list of str)
         The inputs and the ranged inputs not screened (with the reason).
     """
-    found, skipped = ledger_inputs(load_scenario(scenario_toml or None))
+    found, skipped = ledger_inputs(load_scenario(scenario_toml or None), SCREENED_KINDS)
     for key, (value, u) in calibrated.items():
         low = max(value - CALIBRATION_SIGMAS * u, value / 2)
         note = f"calibrated; value +- {CALIBRATION_SIGMAS:g} standard uncertainties ({u:.2g})"
@@ -183,7 +196,7 @@ def map_spec(
         The calibrated drift scale and plate circle noise (px), each with its standard
         uncertainty.
     caps : mapping of str to float, optional
-        As for :func:`map_inputs`.
+        As for :func:`map_inputs`, over :func:`default_caps`.
     only : sequence of str, optional
         Screen only these inputs (dotted keys or keywords, a vector's components all); empty:
         every input of :func:`map_inputs`.
@@ -195,6 +208,7 @@ def map_spec(
     """
     base = {"drift_scale": drift[0], "plate_sigma_px": plate[0]}
     scn = load_scenario(scenario_toml or None)
+    caps = {**default_caps(scn), **(caps or {})}
     inputs, skipped = map_inputs(
         scenario_toml, scn, {"drift_scale": drift, "plate_sigma_px": plate}, caps
     )

@@ -69,6 +69,8 @@ NOISE_BOUNDS = {
     # a structured-light point scattering by 1 mm is 35 times the paper's 0.029 mm accuracy and
     # a tenth of sphere B's radius: no sphere fit the paper reports would be possible
     "point_mm": 1.0,
+    # a view whose fitted sphere radius is off by 1 mm is 35 times the paper's diameter errors
+    "sphere_fit_mm": 1.0,
     # sub-pixel centre detection: beyond 2 px a centre is no longer sub-pixel
     "px": 2.0,
     # a marker triangulated worse than 1 mm cannot give the 0.1 mm calibration of Table 3
@@ -79,6 +81,9 @@ NOISE_BOUNDS = {
     # a drift step of 1 mm (0.1 deg) per move is beyond the absolute accuracy of such arms
     "drift_mm": 1.0,
     "drift_deg": 0.1,
+    # a robot base placed from a drawing to worse than 20 mm (1 deg) is not placed at all
+    "design_mm": 20.0,
+    "design_deg": 1.0,
 }
 
 
@@ -127,7 +132,14 @@ class Stereo(Inputs):
 class Sensor(Inputs):
     """The ``[sensor]`` table of data/dualarm/scenario.toml."""
 
+    #: the sensors' accuracy as the paper states it (mm)
+    stated_accuracy_mm: PositiveFinite
+    #: the paper's diameter errors of the sphere fits (mm): sensor 1 A, B; sensor 2 A, B
+    diameter_errors_mm: Annotated[list[NonNegativeFinite], Field(min_length=1)]
     point_sigma_mm: noise_level(NOISE_BOUNDS, "point_mm")
+    #: the systematic error of one view: every point of the view moved along the sphere's
+    #: normal by one draw of N(0, sphere_fit_sigma_mm), so the view's fitted radius is off
+    sphere_fit_sigma_mm: noise_level(NOISE_BOUNDS, "sphere_fit_mm")
     #: a sphere fit needs at least 4 points
     points_per_scan: Annotated[int, Field(ge=4, le=MAX_POINTS)]
     max_incidence_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]
@@ -245,6 +257,16 @@ class Robot(Inputs):
         copied = self.model_copy()
         copied._drift = (self.drift_step_mm * scale, self.drift_step_rad * scale)
         return copied
+
+
+class Design(Inputs):
+    """The ``[design]`` table of data/dualarm/scenario.toml: how far the base-to-base transform
+    of the station's design drawing is from the true one (each robot placed to the drawing)."""
+
+    base_sigma_mm: noise_level(NOISE_BOUNDS, "design_mm")
+    base_sigma_deg: noise_level(NOISE_BOUNDS, "design_deg")
+
+    base_sigma_rad = Radians("base_sigma_deg")
 
 
 class Spheres(Inputs):
@@ -375,6 +397,7 @@ class Scenario(Ledgered, Inputs):
     calibration: Calibration
     layout: Layout
     robot: Robot
+    design: Design
     spheres: Spheres
     handeye: HandEye
     survey: Survey
@@ -406,6 +429,7 @@ class Scenario(Ledgered, Inputs):
         quiet = self.replace(
             {
                 "sensor.point_sigma_mm": 0.0,
+                "sensor.sphere_fit_sigma_mm": 0.0,
                 "detection.sigma_px": 0.0,
                 "detection.marker_radius_mm": 0.0,
                 "detection.loss_rate": 0.0,

@@ -278,7 +278,10 @@ def arm_world_views(scn: Scenario, arm: int, rng: np.random.Generator, exact: bo
 
 def scan_sphere(scn: Scenario, centre_world, radius: float, cam2world, rng) -> np.ndarray:
     """Points ``(points_per_scan, 3)`` of the sphere cap the left camera at ``cam2world`` sees,
-    in the left camera frame, with ``sensor.point_sigma_mm`` noise per coordinate."""
+    in the left camera frame, with ``sensor.point_sigma_mm`` noise per coordinate and the
+    view's systematic error: every point moved along the sphere's normal by one draw of
+    ``N(0, sensor.sphere_fit_sigma_mm)`` (the view's fitted radius is off by it; drawn even at
+    0, so that the draws after it do not depend on it)."""
     c = np.asarray(centre_world, dtype=float)
     eye = np.asarray(cam2world)[:3, 3]
     n_draw = 4 * scn.sensor.points_per_scan
@@ -292,8 +295,11 @@ def scan_sphere(scn: Scenario, centre_world, radius: float, cam2world, rng) -> n
         raise CalibrationError(
             f"the scan sees {vis.size} sphere points; {scn.sensor.points_per_scan} requested"
         )
-    local = geo.apply(geo.invert(cam2world), pts[vis])
-    return local + rng.normal(0.0, scn.sensor.point_sigma_mm, local.shape)
+    world2cam = geo.invert(cam2world)
+    local = geo.apply(world2cam, pts[vis])
+    noisy = local + rng.normal(0.0, scn.sensor.point_sigma_mm, local.shape)
+    radial = rng.normal(0.0, 1.0) * scn.sensor.sphere_fit_sigma_mm
+    return noisy + radial * (normals[vis] @ world2cam[:3, :3].T)
 
 
 def sphere_scans(
