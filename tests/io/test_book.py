@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pandas as pd
 import pytest
 
 from calstudy.claims import CLAIM_COLUMNS, ClaimRow, claim_register
+from calstudy.core.paths import REPO_ROOT
 from calstudy.io.book import (
     COLUMNS,
     FIGURE_NAME,
@@ -388,3 +390,17 @@ def test_verdict_cell_carries_the_robustness_of_the_verdict():
     unmapped = _verdict_cell({}, pd.Series({**base, "robustness": "not mapped"}), {})
     assert "rob-not-mapped" in unmapped and "no robustness map yet" in unmapped
     assert "rob" not in _verdict_cell({}, None, {})
+
+
+def test_every_glued_text_from_a_notebook_names_its_format():
+    """``{glue:text}`path::key``` without a format is read by the book as the key ``path:`` with
+    the format ``key`` (no such key: the build fails late, after every notebook ran); each
+    chapter's reference from a notebook carries its format (``path::key:.3g``)."""
+    pattern = re.compile(r"\{glue:text\}`([^`]*)`")
+    bare = [
+        f"{page.name}: {ref}"
+        for page in sorted((REPO_ROOT / "book").glob("*.md"))
+        for ref in pattern.findall(page.read_text(encoding="utf-8"))
+        if "::" in ref and ":" not in ref.split("::", 1)[1]
+    ]
+    assert not bare, bare
