@@ -2,7 +2,8 @@
 
 A nuisance input ``x`` (one the paper does not state) is calibrated so that the medians over
 trials of every baseline figure the paper reports for the experiment, ``m_k(x)``, meet the
-paper's values ``b_k`` together (rule 14 of the claims register). Each paper figure is one
+paper's values ``b_k`` together (rule 14 of the verdict rule, *How a verdict is
+computed* on the book's claims page). Each paper figure is one
 experiment's value: it carries a relative standard uncertainty ``s_k`` (for an RMSE of ``n``
 independent errors about ``1 / sqrt(2 n)``, :func:`rmse_spread`), and the fit is weighted least
 squares in logarithms::

@@ -3,7 +3,8 @@
 A claim's verdict is computed at one point of its scenario. Each ``assumed`` input of the
 ledger (:mod:`calstudy.core.ledger`) has a plausible range, and a ``calibrated`` one an
 uncertainty from its calibration; :func:`robustness_map` asks, for every claim, which of them
-the verdict depends on (claims register, rule 13):
+the verdict depends on (rule 13 of the verdict rule,
+*How a verdict is computed* on the book's claims page):
 
 1. **Base.** The scenario as it is, ``n_sweep`` trials.
 2. **Screen.** Each input at both ends of its range, ``n_screen`` trials, on paired seeds: the
@@ -53,7 +54,7 @@ from calstudy.core.stats import median_interval
 STAGES = ("base", "screen", "sweep", "grid")
 #: the verdict of a point where a trial cannot run (the chain raises)
 FAILS = "chain fails"
-#: trials per screened end and per judged point the rule asks for (claims register, rules 1, 13)
+#: trials per screened end and per judged point the rule asks for (verdict rule, rules 1, 13)
 MIN_SCREEN, MIN_SWEEP = 10, 30
 #: columns of the map (``robustness.csv``)
 MAP_COLUMNS = (

@@ -1,4 +1,5 @@
-"""Verdicts of the claims register by the v2 rule (``shared/claims.md``, rules 1-9).
+"""Verdicts of the claims register by the v2 rule (rules 1-9 of *How a verdict is computed*,
+the book's claims page, written by :mod:`calstudy.io.book`).
 
 A *trial* is one simulated replication of a paper's experiment; its *figure* is what the paper
 reports; its *effect* compares the figure with no effect (a paired ratio, no effect 1; a paired

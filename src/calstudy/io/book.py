@@ -97,33 +97,74 @@ RESULTS_COPY = "claims-results.csv"
 
 
 
-_RULE = """\
-Each verdict is computed by the notebook from its Monte Carlo trials (rule v2 of the claims
-register), never typed in. The reproduced figure is the **median over N trials** with its 95 %
-confidence interval; the *effect* compares it with "no effect" (a ratio after / before of 1, a
-difference of 0, or a stated reference).
+#: The verdict rule, numbered: chapters, notebooks, data files and docstrings cite its rules as
+#: "rule N" (the page's dropdown *How a verdict is computed*).
+_RULE = f"""\
+Each verdict is computed by the notebook from its Monte Carlo trials, never typed in. A *trial* is
+one independent simulated rerun of the paper's experiment (a new station, new noise); its *figure*
+is what the paper reports for that experiment (an RMSE, a ratio of RMSEs, a percentage, an
+iteration count); the *effect* sets the figure against no effect: the paired ratio after / before
+on the same trial (no effect: 1), a difference (no effect: 0), or the value against a stated
+reference. This is version 2 of the study's verdict rule (the *v2 rule* of the chapters); its rules
+are numbered, and the chapters, notebooks and data files cite them as "rule N".
 
-- **reproduced**: the interval of the effect excludes no effect on the paper's side, and the
-  median is within a factor 1.5 of the published figure (10 percentage points for a percentage);
-  a requirement ("within 0.42 mm") is reproduced when the 95th percentile of the trials meets it;
-- **direction only**: significant on the paper's side, but outside that band (for a requirement:
-  the median meets it, the 95th percentile does not);
-- **not reproduced**: not significant, or significant on the wrong side;
-- **not testable**: the claim needs hardware a simulation cannot stand in for, the simulation
-  lacks the mechanism (its oracle control fails), or both sides are identical by construction.
-
-The *replication rate* is the share of trials whose own effect has the paper's direction: what
-one rerun of the paper's single experiment would see. The *null control* replaces the method by
-doing nothing and must come out not reproduced; the *oracle control* removes the error source
-the method targets and must reach significance. Claims without a published figure ("none in
-the paper") are judged against a reference method on the same trials (the statement and the
-note name it).
-
-**Inputs the paper does not state** (rule 11 of the register, the *nuisance rule*) are either
-calibrated by code in the notebook so that a *baseline* figure the paper reports is matched (the
-uncorrected error, a competing method's error; never the claimed figure), with the target named
-in `data/`, or kept as a documented assumption that the notebook sweeps, showing where the
-verdict changes.
+1. **Trials.** An experiment that decides a claim runs at least 200 trials, each point of a sweep
+   at least 30; the table gives N.
+2. **Reproduced figure.** The **median over the N trials** with its 95 % confidence interval
+   (order statistics of the median, or a percentile bootstrap of at least 2,000 resamples).
+3. **Significance.** The interval of the median effect lies wholly on the paper's side of no
+   effect.
+4. **Size.** The median lies within a factor {FACTOR:g} of the published figure, or within
+   {BAND_PP:g} percentage points of it for a percentage.
+5. **Verdict.** **reproduced** when 3 and 4 hold; **direction only** when 3 holds and 4 does not;
+   **not reproduced** when 3 fails or the effect is significant on the wrong side; **not
+   testable** as rule 9 says.
+6. **Replication rate.** The share of trials whose own effect points the paper's way: what one
+   rerun of the paper's single experiment would see. Shown beside every verdict; it does not
+   decide it.
+7. **Requirements.** A claim that a requirement is met ("within 0.42 mm") is reproduced when the
+   95th percentile of the per-trial figure meets it, direction only when the median meets it and
+   the 95th percentile does not, not reproduced when the median misses it; no size band applies.
+8. **Controls.** A claim about a correction or a comparison of methods runs twice more on the same
+   trials: with the method replaced by doing nothing (the *null control*), which must come out not
+   reproduced, or the test is broken; and with the error source the method targets taken out of the
+   simulation (the *oracle control*), which must reach significance, or the simulation lacks the
+   mechanism the paper corrects and the claim is not testable until it is modelled (the note names
+   it).
+9. **Not testable.** The claim needs hardware a simulation cannot stand in for, the model lacks its
+   mechanism (rule 8), or the two sides are identical by construction (two solvers of an exactly
+   determined system, say); the note says which.
+10. **Baselines.** A claim judged against maximum likelihood uses the likelihood of the
+    simulation's whole noise model (every source it draws, with its correlations), and a test shows
+    that estimator reaching the Cramér-Rao bound. A method "works" only by a criterion that can
+    fail: an error within a stated multiple of the bound, or within the paper's stated accuracy. A
+    rival route is given its best estimator and its natural order. Claims without a published
+    figure ("none in the paper") are judged against such a reference on the same trials (the
+    statement and the note name it).
+11. **Inputs the paper does not state** (the *nuisance rule*). Such an input is either calibrated,
+    by code in the notebook, so that a *baseline* figure the paper reports is met (the uncorrected
+    error, a competing method's error, the scatter before compensation; never the claimed figure),
+    with the target and where the paper gives it named in `data/`, or kept as a documented
+    assumption that the notebook sweeps, showing where the verdict changes.
+12. **Provenance of every input (the ledger).** Each input of a scenario is *paper* (where in the
+    text), *calibrated* (to which baseline figures, by which code) or *assumed* (with a plausible
+    range and the reason for its ends). What the paper's stated instruments determine is derived
+    from them, not assumed.
+13. **Robustness.** Every assumed input that moves a claim's figure is swept over its whole range,
+    at least 30 trials per point, judged by these rules at each point. A verdict that stays the same
+    over the range is *robust*; otherwise it is *conditional*, reported with the verdicts it takes,
+    where it changes and where the paper's own numbers put the input. No verdict is shown without
+    its robustness.
+14. **Joint calibration and mechanisms.** A nuisance input is calibrated to every baseline figure
+    the paper reports for the experiment together. A mechanism the paper does not describe is kept
+    only if it meets all of them; when none or several do, every mechanism the text allows is run,
+    the paper's own model first, and the verdict is given under each.
+15. **Criteria and controls.** The register says whether a claim's criterion is the paper's (and
+    where) or the study's (and why); a study criterion is never presented as published. Where the
+    paper gives no figure, the method is judged against the rivals the register names, on the same
+    data, by a pooled or paired statistic that its oracle can pass. A null control that equals no
+    effect, or fails, by construction checks nothing: the null must be one a broken method could
+    plausibly pass.
 """
 
 def _cell(text: object) -> str:

@@ -180,7 +180,8 @@ def mechanism_text(table: pd.DataFrame, headline: str) -> str:
         )
     return " ".join(parts) + (
         f" The claims table carries the verdict under {MECHANISM_LABELS[headline]}: the paper's "
-        "own model comes first (rule 14 of the claims register), and the other is given in each "
+        "own model comes first (rule 14 of the verdict rule, on the claims page), and the other is "
+        "given in each "
         "note."
     )
 
