@@ -204,8 +204,8 @@ def test_a_calibrated_input_spans_its_uncertainty_by_the_bound_rule():
     f = Input("sensor.optics.f_number", 5.0, 2.0, 16.0, "calibrated")
     c = calibrated_input(f, 4.0, 0.123456)
     assert (c.base, c.low, c.high, c.paper) == (4.0, 3.753, 4.247, 4.0)
-    wide = calibrated_input(f, 4.0, 3.0)
-    assert (wide.low, wide.high) == (2.0, 10.0)
+    assert (calibrated_input(f, 4.0, 3.0).low, calibrated_input(f, 4.0, 3.0).high) == (2.0, 10.0)
+    assert (calibrated_input(f, 10.0, 4.0).low, calibrated_input(f, 10.0, 4.0).high) == (2.0, 16.0)
     none = calibrated_input(f, 4.0, None)
     assert (none.base, none.low, none.high, none.paper) == (4.0, 2.0, 16.0, None)
     with pytest.raises(CalibrationError, match=r"f_number calibrated to 40.0: outside"):
