@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from calstudy.claims import claim_register
-from calstudy.core.labels import CLAIM_LABELS, label, plain
+from calstudy.core.labels import CLAIM_LABELS, label, plain, scenario_tables
 
 
 @pytest.mark.parametrize(
@@ -55,3 +55,14 @@ def test_plain_writes_scenario_inputs_by_their_dotted_keys_as_words():
     )
     kept = "see robustness.csv, data/dualarm/scenario.toml, e.g. this, calstudy.io.tolerance"
     assert plain(kept) == kept
+
+
+def test_plain_rewrites_only_dotted_names_of_a_scenario_table():
+    """A dotted name is an input only when its first part is a table (or file) of a scenario:
+    a module's name stays as it is."""
+    assert {"station", "sensor", "scanner", "poor_start", "production"} <= scenario_tables()
+    assert "scipy" not in scenario_tables()
+    text = "see scipy.stats.ksone and cv2.solvePnP; station.workpiece.datum_A_slot_mm[0] moves"
+    assert plain(text) == (
+        "see scipy.stats.ksone and cv2.solvePnP; station workpiece datum A slot [0] (mm) moves"
+    )

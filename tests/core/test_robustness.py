@@ -11,9 +11,13 @@ from calstudy.core.montecarlo import Experiment
 from calstudy.core.robustness import (
     Input,
     MapSpec,
+    assign_claims,
+    calibrated_input,
     claim_summary,
     ledger_inputs,
+    matches,
     robustness_map,
+    select_inputs,
 )
 from calstudy.core.verdicts import judge
 
@@ -169,3 +173,50 @@ def test_a_sweep_keeps_the_screened_ends_exactly_and_once():
     values = Input("p", 0.72, 0.605677, 0.834323).sweep_values(5)
     assert values == [0.605677, 0.6628, 0.72, 0.7772, 0.834323]
     assert Input("n", 1000, 250, 4000, integer=True).sweep_values(5) == [250, 500, 1000, 2000, 4000]
+
+
+def test_a_key_matches_itself_and_the_prefixes_it_lies_under():
+    assert matches("poor_start.base_mm", ["poor_start."])
+    assert matches("sensor.n_points", ["sensor.n_points"])
+    assert not matches("sensor.n_points_max", ["sensor.n_points"])  # a key is not a prefix
+    assert not matches("poor_start_x.base_mm", ["poor_start."])
+    assert not matches("a.b", [])
+
+
+def test_claims_are_assigned_by_what_they_read_and_an_unread_input_is_skipped():
+    inputs = [Input("a.x", 1.0, 0.0, 2.0), Input("b.y", 1.0, 0.0, 2.0), Input("c", 1.0, 0.0, 2.0)]
+    skipped: list[str] = []
+    not_read = {"p": ("a.", "c"), "q": ("a.x", "b.", "c")}
+    out = assign_claims(inputs, ["p", "q", "r"], not_read, skipped, {"r": ("b.",)})
+    assert [(i.key, i.claims) for i in out] == [("b.y", ("p", "r"))]
+    # a claim with no entry reads every input
+    assert [i.claims for i in assign_claims(inputs[:1], ["s"], {}, [])] == [("s",)]
+    assert skipped == ["a.x: read by no claim's computation", "c: read by no claim's computation"]
+
+
+def test_a_calibrated_input_spans_its_uncertainty_by_the_bound_rule():
+    # a keyword: low end no lower than half the value, ends as computed
+    k = calibrated_input("drift_scale", 2.0, 0.05, 2.0, bounds="half")
+    assert (k.base, k.low, k.high, k.kind, k.paper) == (2.0, 1.9, 2.1, "calibrated", 2.0)
+    assert calibrated_input("drift_scale", 2.0, 0.8, bounds="half").low == 1.0
+    assert "+- 2 standard uncertainties (0.05)" in k.paper_note
+    # a ledger input: the ends to 4 digits, within its ledger range
+    f = Input("sensor.optics.f_number", 5.0, 2.0, 16.0, "calibrated")
+    c = calibrated_input(f, 4.0, 0.123456)
+    assert (c.base, c.low, c.high, c.paper) == (4.0, 3.753, 4.247, 4.0)
+    assert (calibrated_input(f, 4.0, 3.0).low, calibrated_input(f, 4.0, 3.0).high) == (2.0, 10.0)
+    assert (calibrated_input(f, 10.0, 4.0).low, calibrated_input(f, 10.0, 4.0).high) == (2.0, 16.0)
+    none = calibrated_input(f, 4.0, None)
+    assert (none.base, none.low, none.high, none.paper) == (4.0, 2.0, 16.0, None)
+    with pytest.raises(CalibrationError, match=r"f_number calibrated to 40.0: outside"):
+        calibrated_input(f, 40.0, 0.1)
+    with pytest.raises(CalibrationError, match="bounds 'ledger' of calibrated input 'drift_scale'"):
+        calibrated_input("drift_scale", 2.0, 0.05)
+
+
+def test_only_selects_inputs_and_refuses_one_the_map_does_not_screen():
+    inputs = [Input("a.x", 1.0, 0.0, 2.0), Input("b.y", 1.0, 0.0, 2.0)]
+    assert select_inputs(inputs, (), "toy scenario") == inputs
+    assert select_inputs(inputs, ["b.y"], "toy scenario") == inputs[1:]
+    with pytest.raises(CalibrationError, match=r"\['c.z'\] are not screened inputs of the toy"):
+        select_inputs(inputs, ["c.z", "a.x"], "toy scenario")

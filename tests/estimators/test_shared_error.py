@@ -13,7 +13,7 @@ import statsmodels.api as sm
 from scipy import stats
 
 from calstudy import CalibrationError
-from calstudy.estimators.shared_error import _best_ratio, _best_ratios, shared_error_fit
+from calstudy.estimators.shared_error import best_ratio, best_ratios, shared_error_fit
 
 
 def _problem(rng, n_groups=10, per_group=8, p=4, own=0.02, shared=0.03):
@@ -132,8 +132,8 @@ def test_ratios_of_the_draws_match_the_one_fit_search():
     rng = np.random.default_rng(7)
     g = np.concatenate([rng.uniform(0.0, 6.0, 8), np.zeros(30)])
     w2 = (rng.normal(size=(300, 38)) * np.sqrt(1.0 + rng.uniform(0.0, 3.0, (300, 1)) * g)) ** 2
-    many = _best_ratios(w2, g)
-    one = np.array([_best_ratio(row, g) for row in w2])
+    many = best_ratios(w2, g)
+    one = np.array([best_ratio(row, g) for row in w2])
     assert 0 < np.sum(one == 0.0) < len(one)  # both the boundary and interior optima
     np.testing.assert_array_equal(many == 0.0, one == 0.0)
     np.testing.assert_allclose(many, one, rtol=1e-3)

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy.stats import norm
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.stats import median_interval
@@ -35,7 +36,7 @@ DRAWS = 400
 #: values of the input at which the objective is evaluated between the grid's ends
 FINE = 2001
 #: z of the 95 % interval of a median (its standard error is the interval's half width / z)
-Z95 = 1.959964
+Z95 = float(norm.ppf(0.975))
 
 
 @dataclass(frozen=True)

@@ -11,9 +11,21 @@ names not listed: underscores become spaces, ``0p3`` becomes 0.3, ``le``/``ge`` 
 
 from __future__ import annotations
 
+import functools
 import re
+import tomllib
 
-__all__ = ["CLAIM_LABELS", "INPUT_LABELS", "UNIT_SUFFIXES", "claim_label", "label", "plain"]
+from calstudy.core.paths import DATA_DIR
+
+__all__ = [
+    "CLAIM_LABELS",
+    "INPUT_LABELS",
+    "UNIT_SUFFIXES",
+    "claim_label",
+    "label",
+    "plain",
+    "scenario_tables",
+]
 
 #: Claim id -> a short noun phrase naming what the claim is about.
 CLAIM_LABELS = {
@@ -119,21 +131,39 @@ def label(name: object, unit: str | None = None) -> str:
     return f"{words} ({unit})" if unit else words
 
 
-#: a scenario input by its dotted key (``scanner.sigma_point_mm``, ``sensor.design_zyx_deg[1]``);
-#: single letters (``e.g.``), longer dotted names and file names are left alone
+#: a dotted name (``scanner.sigma_point_mm``, ``sensor.design_zyx_deg[1]``): rewritten when it is
+#: a scenario input (:func:`scenario_tables`); single letters (``e.g.``), longer dotted names and
+#: file names are left alone
 _DOTTED = re.compile(
     r"(?<![\w./-])([a-z][a-z0-9_]+(?:\.[a-z][a-z0-9_]+)?)\.([a-z][A-Za-z0-9_]+)(\[\d+\])?"
     r"(?![\w/]|\.\w)"
 )
-#: first parts of dotted names that are modules, not inputs
-_MODULES = {"calstudy"}
 #: endings of file names, not inputs
 _FILE_ENDINGS = {"csv", "toml", "png", "json", "py", "ipynb", "md", "html", "yml", "yaml", "txt"}
 
 
+@functools.cache
+def scenario_tables() -> frozenset[str]:
+    """The first parts of the dotted keys of the scenario files in ``data/``: each file's name
+    (a scenario of several files prefixes its keys with it: ``station.sensor.sigma_point_mm``)
+    and its top-level tables (``scanner.sigma_point_mm``).
+
+    Returns
+    -------
+    frozenset of str
+        The names; a dotted name whose first part is not one of them (``scipy.stats.ksone``) is
+        not a scenario input.
+    """
+    names = set()
+    for path in DATA_DIR.rglob("*.toml"):
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+        names |= {path.stem} | {key for key, value in table.items() if isinstance(value, dict)}
+    return frozenset(names)
+
+
 def _input_words(m: re.Match) -> str:
     table, name, index = m.group(1), m.group(2), m.group(3) or ""
-    if name in _FILE_ENDINGS or table.split(".")[0] in _MODULES:
+    if name in _FILE_ENDINGS or table.split(".")[0] not in scenario_tables():
         return m.group(0)
     words = label(name)
     if index:

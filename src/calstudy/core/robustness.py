@@ -34,8 +34,9 @@ interrupted map goes on where it stopped, and its rows do not depend on the numb
 
 from __future__ import annotations
 
+import dataclasses
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -174,8 +175,9 @@ def ledger_inputs(
     Returns
     -------
     (list of Input, list of str)
-        The inputs, in the file's order, and the ranged inputs not taken, each with the reason
-        (a list of values under one range, a table of values).
+        The inputs, in the file's order, and the ranged inputs not taken, each with the reason:
+        a table of values (a boolean, or a range per entry of a table), a list of points under
+        one range per coordinate, or a list of values under one range.
     """
     found, skipped = [], []
     for prefix, table in tables(model):
@@ -221,6 +223,162 @@ def ledger_inputs(
             else:
                 skipped.append(f"{key}: {len(value)} values under one range; not screened")
     return found, skipped
+
+
+def matches(key: str, keys: Iterable[str]) -> bool:
+    """Whether a dotted key is one of ``keys``: equal to one, or under one ending in ``"."``
+    (a prefix: ``"poor_start."`` holds ``"poor_start.sigma"``).
+
+    Parameters
+    ----------
+    key : str
+        Dotted key of an input (or the keyword of a calibrated value).
+    keys : iterable of str
+        Dotted keys and prefixes.
+
+    Returns
+    -------
+    bool
+    """
+    return any(key == s or (s.endswith(".") and key.startswith(s)) for s in keys)
+
+
+def assign_claims(
+    inputs: Iterable[Input],
+    claims: Iterable[str],
+    not_read: Mapping[str, Sequence[str]],
+    skipped: list[str],
+    only_read: Mapping[str, Sequence[str]] | None = None,
+) -> list[Input]:
+    """Each input with the claims whose computation reads it (:attr:`Input.claims`); an input
+    read by no claim is not screened and goes to ``skipped`` with the reason.
+
+    Parameters
+    ----------
+    inputs : iterable of Input
+        The inputs (from :func:`ledger_inputs`).
+    claims : iterable of str
+        The claims of the map, in its order.
+    not_read : mapping of str to sequence of str
+        Claim -> the keys and prefixes (:func:`matches`) its computation does not read (a claim
+        not in it reads every input).
+    skipped : list of str
+        The inputs not screened; appended to in place.
+    only_read : mapping of str to sequence of str, optional
+        Claim -> the only keys and prefixes it reads (over ``not_read``).
+
+    Returns
+    -------
+    list of Input
+        The inputs read by at least one claim, in their order.
+    """
+    claims, only_read = list(claims), only_read or {}
+
+    def read(claim: str, key: str) -> bool:
+        if claim in only_read:
+            return matches(key, only_read[claim])
+        return not matches(key, not_read.get(claim, ()))
+
+    out = []
+    for item in inputs:
+        readers = tuple(c for c in claims if read(c, item.key))
+        if not readers:
+            skipped.append(f"{item.label}: read by no claim's computation")
+            continue
+        out.append(dataclasses.replace(item, claims=readers))
+    return out
+
+
+def calibrated_input(
+    item: Input | str, value: float, u: float | None, sigmas: float = 2.0, bounds: str = "ledger"
+) -> Input:
+    """A calibrated input screened over its value +- ``sigmas`` standard uncertainties, with the
+    value where the paper's figures put it (:attr:`Input.paper`); with no uncertainty, a ledger
+    input over its ledger range around the value.
+
+    Parameters
+    ----------
+    item : Input or str
+        The ledger's input (``bounds="ledger"``), or the keyword of a calibrated value the
+        experiment takes, which has no ledger range (``bounds="half"``).
+    value : float
+        The calibrated value (units of the input).
+    u : float or None
+        Its standard uncertainty (same units); None: unknown (``"ledger"`` only).
+    sigmas : float, default 2.0
+        Standard uncertainties on either side.
+    bounds : {"ledger", "half"}
+        ``"ledger"``: the ends to 4 digits (as a sweep's inside values), within the ledger
+        range; ``"half"``: the low end no lower than half the value (a positive scale), the
+        ends as computed.
+
+    Returns
+    -------
+    Input
+        Kind ``"calibrated"``, base ``value``.
+
+    Raises
+    ------
+    CalibrationError
+        If ``bounds`` is neither, ``"ledger"`` is asked of a keyword, or the value lies outside
+        the ledger range.
+    """
+    s = sigmas
+    note = f"calibrated; value +- {s:g} standard uncertainties ({u or 0:.2g})"
+    if bounds == "half" and isinstance(item, str) and u is not None:
+        low, high = max(value - s * u, value / 2), value + s * u
+        return Input(item, value, low, high, "calibrated", paper=value, paper_note=note)
+    if bounds != "ledger" or isinstance(item, str):
+        raise CalibrationError(
+            f"bounds {bounds!r} of calibrated input {item!r} (uncertainty {u!r}): use 'ledger' "
+            "with a ledger input or 'half' with a keyword and its uncertainty"
+        )
+    if not item.low <= value <= item.high:
+        raise CalibrationError(
+            f"{item.key} calibrated to {value!r}: outside its ledger range "
+            f"[{item.low:g}, {item.high:g}]"
+        )
+    if u is None:
+        note = "calibrated, but not calibrated here: its ledger range"
+        return dataclasses.replace(item, base=float(value), paper_note=note)
+    return dataclasses.replace(
+        item,
+        base=float(value),
+        paper=float(value),
+        low=max(float(f"{value - s * u:.4g}"), item.low),
+        high=min(float(f"{value + s * u:.4g}"), item.high),
+        paper_note=note,
+    )
+
+
+def select_inputs(inputs: Sequence[Input], only: Sequence[str], scenario: str) -> list[Input]:
+    """The inputs a map screens: those named in ``only`` (dotted keys or keywords, a vector's
+    components all), every one when it is empty.
+
+    Parameters
+    ----------
+    inputs : sequence of Input
+        The map's inputs.
+    only : sequence of str
+        The keys to screen (empty: all).
+    scenario : str
+        What the inputs belong to, for the error (``"selfcal scenario"``).
+
+    Returns
+    -------
+    list of Input
+
+    Raises
+    ------
+    CalibrationError
+        If ``only`` names an input not among ``inputs``.
+    """
+    unknown = sorted(set(only) - {item.key for item in inputs})
+    if unknown:
+        raise CalibrationError(
+            f"robustness inputs {unknown} are not screened inputs of the {scenario}"
+        )
+    return [item for item in inputs if item.key in only] if only else list(inputs)
 
 
 @dataclass(frozen=True)
@@ -575,7 +733,11 @@ def point_setting(spec: MapSpec, labels: Sequence[str], values: Sequence[float])
 
 
 __all__ = [
+    "assign_claims",
+    "calibrated_input",
+    "matches",
     "point_setting",
+    "select_inputs",
     "MAP_COLUMNS",
     "STAGES",
     "SUMMARY_COLUMNS",

@@ -108,7 +108,7 @@ class SharedErrorFit:
         shared = rng.standard_normal((DRAWS, n_groups)) * np.sqrt(ratio)[:, None]
         error = rng.standard_normal((DRAWS, p)) @ sim.c_own.T + shared @ sim.k_shared.T
         w2 = (rng.standard_normal((DRAWS, m)) + shared @ sim.w_shared.T) ** 2
-        ratio_hat = _best_ratios(w2, sim.g)
+        ratio_hat = best_ratios(w2, sim.g)
         own_hat = np.sum(w2 / (1.0 + ratio_hat[:, None] * sim.g), axis=1) / m
         return error, own_hat, own_hat * ratio_hat
 
@@ -186,12 +186,27 @@ def _profile(ratio: float, w2: np.ndarray, g: np.ndarray) -> tuple[float, float]
     return float(np.sum(np.log1p(ratio * g))) + len(w2) * math.log(own), own
 
 
-def _ratio_grid() -> np.ndarray:
-    return np.concatenate([[0.0], np.logspace(*RATIO_LOG10_RANGE, _GRID)])
+def _ratio_grid(size: int = _GRID) -> np.ndarray:
+    """0 and ``size`` log-spaced ratios over :data:`RATIO_LOG10_RANGE`: (size + 1,)."""
+    return np.concatenate([[0.0], np.logspace(*RATIO_LOG10_RANGE, size)])
 
 
-def _best_ratio(w2: np.ndarray, g: np.ndarray) -> float:
-    """The variance ratio of largest restricted likelihood: a log grid (and 0), then Brent."""
+def best_ratio(w2: np.ndarray, g: np.ndarray) -> float:
+    """The variance ratio ``s_shared^2 / s_own^2`` of largest restricted likelihood: a log grid
+    (and 0) over :data:`RATIO_LOG10_RANGE`, then Brent's bounded search around its best point.
+
+    Parameters
+    ----------
+    w2 : (m,) ndarray
+        The squared residual contrasts in the eigenbasis of the shared part (any units).
+    g : (m,) ndarray
+        The eigenvalues of the shared part of the contrasts' covariance (``>= 0``).
+
+    Returns
+    -------
+    float
+        The ratio (0 when the boundary is the best).
+    """
     grid = _ratio_grid()
     scale = 1.0 + grid[:, None] * g  # (grid, n - p)
     own = np.sum(w2 / scale, axis=1) / len(w2)
@@ -211,10 +226,22 @@ def _best_ratio(w2: np.ndarray, g: np.ndarray) -> float:
     return math.exp(res.x) if res.fun < values[k] else float(grid[k])
 
 
-def _best_ratios(w2: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """:func:`_best_ratio` of every row of ``w2`` (draws, m) at once: the same grid, then
-    golden-section steps within the bracket of the best grid point (to about 1e-3 of the
-    ratio)."""
+def best_ratios(w2: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """:func:`best_ratio` of every row of ``w2`` at once: the same grid, then golden-section
+    steps within the bracket of the best grid point (to about 1e-3 of the ratio).
+
+    Parameters
+    ----------
+    w2 : (draws, m) ndarray
+        Squared residual contrasts, one set per row.
+    g : (m,) ndarray
+        The eigenvalues of the shared part (as for :func:`best_ratio`).
+
+    Returns
+    -------
+    (draws,) ndarray
+        The ratio of each row.
+    """
     grid = _ratio_grid()
     m = w2.shape[1]
     scale = 1.0 + grid[:, None] * g
@@ -252,7 +279,7 @@ def _draw_ratios(w2: np.ndarray, g: np.ndarray, rng: np.random.Generator) -> np.
     the own variance integrated out (prior ``1 / s_own^2``), with a uniform prior on the shared
     fraction ``ratio / (1 + ratio)``: on a log grid (and 0) with trapezoid weights."""
     m = len(w2)
-    ratio = np.concatenate([[0.0], np.logspace(*RATIO_LOG10_RANGE, _RATIO_DRAW_GRID)])
+    ratio = _ratio_grid(_RATIO_DRAW_GRID)
     scale = 1.0 + ratio[:, None] * g
     log_like = -0.5 * (np.sum(np.log(scale), axis=1) + m * np.log(np.sum(w2 / scale, axis=1)))
     width = np.zeros_like(ratio)
@@ -325,6 +352,6 @@ def shared_error_fit(jac, residuals, groups) -> SharedErrorFit:
     one = n_groups == n or float(np.ptp(g)) <= 1e-9 * max(float(g.max()), 1.0)
     if not np.any(w2 > 0):  # residuals exactly zero: nothing to estimate
         return SharedErrorFit(np.zeros(2), parts, n - p, True, simulation)
-    ratio = 0.0 if one else _best_ratio(w2, g)
+    ratio = 0.0 if one else best_ratio(w2, g)
     own = _profile(ratio, w2, g)[1]
     return SharedErrorFit(np.array([own, own * ratio]), parts, n - p, one, simulation)

@@ -62,7 +62,18 @@ class NotebookParameters(Schema):
         return self
 
 
-class Notebook01(NotebookParameters):
+class RobustnessParameters(NotebookParameters):
+    """The parameters of a notebook with a robustness map
+    (:func:`calstudy.core.robustness.robustness_map`): trials per screened end and per judged
+    point, values per swept input, and the inputs screened (empty: all)."""
+
+    n_screen_trials: Replications
+    n_robust_trials: Replications
+    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
+    robustness_inputs: list[str]
+
+
+class Notebook01(RobustnessParameters):
     """``01_hybrid_global_calibration``."""
 
     n_trials: Count
@@ -85,13 +96,9 @@ class Notebook01(NotebookParameters):
         PositiveFinite | Annotated[list[PositiveFinite], Field(min_length=3, max_length=3)]
     )
     misfit: Literal["raise", "flag"]
-    n_screen_trials: Replications
-    n_robust_trials: Replications
-    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
-    robustness_inputs: list[str]
 
 
-class Notebook02(NotebookParameters):
+class Notebook02(RobustnessParameters):
     """``02_hybrid_production_compensation``."""
 
     n_trials: Count
@@ -104,10 +111,6 @@ class Notebook02(NotebookParameters):
     cmm_csv: str
     n_part_trials: Count
     part_sigmas_mm: Positives
-    n_screen_trials: Replications
-    n_robust_trials: Replications
-    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
-    robustness_inputs: list[str]
 
     @model_validator(mode="after")
     def _both_files(self) -> Notebook02:
@@ -119,7 +122,7 @@ class Notebook02(NotebookParameters):
         return self
 
 
-class Notebook03(NotebookParameters):
+class Notebook03(RobustnessParameters):
     """``03_selfcal_one_step_identification``."""
 
     n_trials: Count
@@ -132,13 +135,9 @@ class Notebook03(NotebookParameters):
     selection_sizes: Counts
     candidates_per_sphere: Count
     n_pose_replications: Replications
-    n_screen_trials: Replications
-    n_robust_trials: Replications
-    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
-    robustness_inputs: list[str]
 
 
-class Notebook04(NotebookParameters):
+class Notebook04(RobustnessParameters):
     """``04_binocular_correction``."""
 
     n_trials: Count
@@ -159,13 +158,9 @@ class Notebook04(NotebookParameters):
         list[Annotated[list[PositiveFinite], Field(min_length=2, max_length=2)]],
         Field(min_length=1, max_length=MAX_COUNT),
     ]
-    n_screen_trials: Replications
-    n_robust_trials: Replications
-    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
-    robustness_inputs: list[str]
 
 
-class Notebook05(NotebookParameters):
+class Notebook05(RobustnessParameters):
     """``05_dualarm_global_calibration``."""
 
     n_trials: Count
@@ -178,10 +173,6 @@ class Notebook05(NotebookParameters):
     sweep_poses: Annotated[list[Annotated[int, Field(ge=3, le=MAX_COUNT)]], Field(min_length=1)]
     n_budget_trials: Count
     scenario_toml: str
-    n_screen_trials: Replications
-    n_robust_trials: Replications
-    robust_sweep_size: Annotated[int, Field(ge=2, le=MAX_COUNT)]
-    robustness_inputs: list[str]
     robustness_caps: dict[str, PositiveFinite]
 
 

@@ -12,7 +12,7 @@ from calstudy.papers.hybrid import handeye_experiments as he
 
 
 def _rows(parameter=None, value=None):
-    setup = he._handeye_setup(False)
+    setup = he.handeye_setup(False)
     rng = trial_rng(3, "handeye_noise_model", {}, 0)
     if parameter is None:
         return pd.DataFrame(he.handeye_run(setup, rng)).set_index("method")

@@ -18,7 +18,7 @@ N = 10
 
 
 def _handeye_rows(overrides: dict) -> pd.DataFrame:
-    setup = {**handeye_experiments._handeye_setup(False), "overrides": overrides}
+    setup = {**handeye_experiments.handeye_setup(False), "overrides": overrides}
     rows = []
     for t in range(N):
         trial = handeye_experiments.handeye_run(setup, trial_rng(5, "nulls", {}, t))

@@ -13,7 +13,7 @@ import pytest
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import trial_rows
 from calstudy.core.paths import RESULTS_DIR
-from calstudy.core.robustness import point_setting
+from calstudy.core.robustness import matches, point_setting
 from calstudy.core.trialcache import TrialCache
 from calstudy.papers.hybrid import report
 from calstudy.papers.hybrid import station_robustness as robustness
@@ -56,7 +56,7 @@ def test_a_claim_does_not_read_the_inputs_it_is_not_screened_for(group, unread, 
     claims = {item.key: item.claims for item in spec.inputs}
     base = _statistics(group, {})
     moved = _statistics(group, dict([unread]))
-    checked = [c for c in base if not robustness._reads(c, unread[0])]
+    checked = [c for c in base if matches(unread[0], robustness.NOT_READ[c])]
     assert checked and all(c not in claims.get(unread[0], ()) for c in checked)
     for cid in checked:
         if cid == "hybrid.rps":  # reads the calibrated chain, but is 1 by construction
@@ -69,23 +69,28 @@ def test_a_claim_does_not_read_the_inputs_it_is_not_screened_for(group, unread, 
 
 
 def test_the_adapter_gives_the_reports_verdicts():
+    """The map's per-trial statistic is the figure the verdict judges: its median for the
+    hand-eye bound; for the pooled stationary bound, the per-trial RMS of its two chains
+    pooled; the frame ratio of the not-testable ``hybrid.rps`` is 1."""
+    judged = {}
     for group in ("handeye", "stationary"):
         exp = robustness.robustness_experiment(group, n_trials=6)
         rows = pd.concat([pd.DataFrame(trial_rows(exp, 1, 0, t)) for t in range(6)])
         verdicts = robustness.judge_claims(group, rows)
-        stats = robustness.claim_statistics(group, rows)
         assert set(verdicts) == {c for c, g in robustness.CLAIM_PARTS.items() if g == group}
-        if group == "handeye":
-            whole = {"hybrid.handeye": report.handeye_judged(rows, min_trials=6)}
-        else:
-            whole = {
-                "hybrid.stationary": report.stationary_judged(rows, min_trials=6),
-                "hybrid.rps": report.rps_judged(rows),
-            }
-        for cid, v in verdicts.items():
-            assert v == whole[cid].claim
-        np.testing.assert_allclose(stats.get("hybrid.rps", 1.0), 1.0, rtol=1e-6)
-    assert np.median(stats["hybrid.stationary"]) > 0
+        assert all(v.n == 6 for v in verdicts.values())
+        judged[group] = rows, verdicts, robustness.claim_statistics(group, rows)
+    _, verdicts, stats = judged["handeye"]
+    v = verdicts["hybrid.handeye"]
+    assert np.median(stats["hybrid.handeye"]) == pytest.approx(v.median, rel=1e-12)
+    rows, verdicts, stats = judged["stationary"]
+    st = report.stationary_figures(rows)
+    cols = report.CLAIMS["hybrid.stationary"]
+    pooled = np.sqrt(np.mean(st[cols.figure] ** 2) / np.mean(st[cols.baseline] ** 2))
+    assert cols.pooled and pooled == pytest.approx(verdicts["hybrid.stationary"].median, rel=1e-12)
+    np.testing.assert_array_equal(stats["hybrid.stationary"], st["ratio"])
+    assert verdicts["hybrid.rps"].verdict == "not testable"
+    np.testing.assert_allclose(stats["hybrid.rps"], 1.0, rtol=1e-6)
 
 
 def test_only_refuses_an_input_the_map_does_not_screen():

@@ -26,7 +26,6 @@ and its controls by :func:`calstudy.claims.judge_claim` with the report's column
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -34,7 +33,14 @@ import pandas as pd
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment
-from calstudy.core.robustness import Input, MapSpec, ledger_inputs
+from calstudy.core.robustness import (
+    Input,
+    MapSpec,
+    assign_claims,
+    calibrated_input,
+    ledger_inputs,
+    select_inputs,
+)
 from calstudy.core.verdicts import not_testable
 from calstudy.papers.binocular import experiments, report
 from calstudy.papers.binocular.scenario import load_scenario
@@ -64,16 +70,6 @@ ONLY_READ = {"binocular.field": ("station.field.",)}
 MECHANISM_INPUTS = {"rim": ("sensor.optics.rim_radius_mm", "sensor.optics.rim_distance_mm")}
 #: calibrated inputs are screened over their value +- this many standard uncertainties
 CALIBRATION_SIGMAS = 2.0
-
-
-def _matches(key: str, prefixes: Sequence[str]) -> bool:
-    return any(key == s or (s.endswith(".") and key.startswith(s)) for s in prefixes)
-
-
-def _reads(claim: str, key: str) -> bool:
-    if claim in ONLY_READ:
-        return _matches(key, ONLY_READ[claim])
-    return not _matches(key, NOT_READ[claim])
 
 
 def robustness_trial(setup: experiments.Setup, rng, group: str):
@@ -172,40 +168,20 @@ def map_inputs(
             f"calibrated inputs {unknown} are not calibrated inputs with a range in the ledger "
             f"of the binocular scenario (those are {sorted(known)})"
         )
-    out = []
     for item in found:
         if item.key in unused:
             skipped.append(
                 f"{item.label}: read only under the {unused[item.key]} mechanism (the scenario "
                 f"runs {mechanism})"
             )
-            continue
-        claims = tuple(c for c in CLAIM_PARTS if _reads(c, item.key))
-        if not claims:
-            skipped.append(f"{item.label}: read by no claim's computation")
-            continue
-        changes: dict = {"claims": claims}
-        if item.kind == "calibrated":
-            value, u = calibrated.get(item.key, (item.base, None))
-            if not item.low <= value <= item.high:
-                raise CalibrationError(
-                    f"{item.key} calibrated to {value!r}: outside its ledger range "
-                    f"[{item.low:g}, {item.high:g}]"
-                )
-            changes["base"] = float(value)
-            if u is None:
-                changes["paper_note"] = "calibrated, but not calibrated here: its ledger range"
-            else:
-                s = CALIBRATION_SIGMAS
-                # the ends to 4 digits, as a sweep's inside values (they are stored in the map)
-                changes.update(
-                    paper=float(value),
-                    low=max(float(f"{value - s * u:.4g}"), item.low),
-                    high=min(float(f"{value + s * u:.4g}"), item.high),
-                    paper_note=f"calibrated; value +- {s:g} standard uncertainties ({u:.2g})",
-                )
-        out.append(dataclasses.replace(item, **changes))
-    return out, skipped
+    used = [item for item in found if item.key not in unused]
+    out = assign_claims(used, CLAIM_PARTS, NOT_READ, skipped, ONLY_READ)
+    return [
+        calibrated_input(item, *calibrated.get(item.key, (item.base, None)), CALIBRATION_SIGMAS)
+        if item.kind == "calibrated"
+        else item
+        for item in out
+    ], skipped
 
 
 def claim_statistics(group: str, rows: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -291,13 +267,7 @@ def map_spec(
     """
     calibrated = dict(calibrated or {})
     inputs, skipped = map_inputs(scenario_dir, calibrated)
-    unknown = sorted(set(only) - {item.key for item in inputs})
-    if unknown:
-        raise CalibrationError(
-            f"robustness inputs {unknown} are not screened inputs of the binocular scenario"
-        )
-    if only:
-        inputs = [item for item in inputs if item.key in only]
+    inputs = select_inputs(inputs, only, "binocular scenario")
     base = {key: float(value) for key, (value, _) in calibrated.items()}
 
     def experiment(group: str, setting: Mapping, n_trials: int):

@@ -22,8 +22,14 @@ from collections.abc import Mapping, Sequence
 
 import pandas as pd
 
-from calstudy.core.errors import CalibrationError
-from calstudy.core.robustness import Input, MapSpec, ledger_inputs
+from calstudy.core.robustness import (
+    Input,
+    MapSpec,
+    assign_claims,
+    calibrated_input,
+    ledger_inputs,
+    select_inputs,
+)
 from calstudy.papers.dualarm import derived, experiments, report
 from calstudy.papers.dualarm.scenario import load_scenario
 from calstudy.papers.dualarm.schema import PublishedFile, Scenario
@@ -50,10 +56,6 @@ NOT_READ = {
 SCREENED_KINDS = ("assumed", "derived")
 #: calibrated inputs are screened over their value +- this many standard uncertainties
 CALIBRATION_SIGMAS = 2.0
-
-
-def _reads(part: str, key: str) -> bool:
-    return not any(key == s or (s.endswith(".") and key.startswith(s)) for s in NOT_READ[part])
 
 
 def paper_values(scn: Scenario) -> dict[str, tuple[float, str]]:
@@ -134,28 +136,15 @@ def map_inputs(
         The inputs and the ranged inputs not screened (with the reason).
     """
     found, skipped = ledger_inputs(load_scenario(scenario_toml or None), SCREENED_KINDS)
-    for key, (value, u) in calibrated.items():
-        low = max(value - CALIBRATION_SIGMAS * u, value / 2)
-        note = f"calibrated; value +- {CALIBRATION_SIGMAS:g} standard uncertainties ({u:.2g})"
-        found.append(
-            Input(
-                key,
-                value,
-                low,
-                value + CALIBRATION_SIGMAS * u,
-                "calibrated",
-                paper=value,
-                paper_note=note,
-            )
-        )
+    found += [
+        calibrated_input(key, value, u, CALIBRATION_SIGMAS, bounds="half")
+        for key, (value, u) in calibrated.items()
+    ]
     paper = paper_values(scn)
+    not_read = {cid: NOT_READ[part] for cid, part in CLAIM_PARTS.items()}
     out = []
-    for item in found:
-        claims = tuple(c for c, part in CLAIM_PARTS.items() if _reads(part, item.key))
-        if not claims:
-            skipped.append(f"{item.label}: read by no claim's computation")
-            continue
-        changes: dict = {"claims": claims}
+    for item in assign_claims(found, CLAIM_PARTS, not_read, skipped):
+        changes: dict = {}
         if item.key in paper:
             changes.update(paper=paper[item.key][0], paper_note=paper[item.key][1])
         if caps and item.key in caps and caps[item.key] < item.high:
@@ -212,13 +201,7 @@ def map_spec(
     inputs, skipped = map_inputs(
         scenario_toml, scn, {"drift_scale": drift, "plate_sigma_px": plate}, caps
     )
-    unknown = sorted(set(only) - {item.key for item in inputs})
-    if unknown:
-        raise CalibrationError(
-            f"robustness inputs {unknown} are not screened inputs of the dualarm scenario"
-        )
-    if only:
-        inputs = [item for item in inputs if item.key in only]
+    inputs = select_inputs(inputs, only, "dualarm scenario")
 
     def experiment(part: str, setting: Mapping, n_trials: int):
         keywords = {**base, **{k: v for k, v in setting.items() if "." not in k}}

@@ -219,7 +219,20 @@ def station_config(overrides=None):
     return _STATIONS[key]
 
 
-def _handeye_setup(baselines: bool) -> dict:
+def handeye_setup(baselines: bool) -> dict:
+    """The setup of a hand-eye trial (:func:`handeye_run`): the station's calibration moves,
+    whether to run the AX = XB baselines, and the trial's version (the cache's fingerprint).
+
+    Parameters
+    ----------
+    baselines : bool
+        Run the AX = XB baselines too.
+
+    Returns
+    -------
+    dict
+        ``n_trans``, ``n_rot``, ``baselines``, ``version``.
+    """
     n_trans, n_rot = load_station_moves()
     # version 2: the rotation from the pure translations (its bound, a weighted fit) per trial
     return {"n_trans": n_trans, "n_rot": n_rot, "baselines": bool(baselines), "version": 2}
@@ -234,19 +247,19 @@ def load_station_moves() -> tuple[int, int]:
 def handeye_experiment(n_trials: int = 200) -> Experiment:
     """The hand-eye comparison in both scenarios (points ``scenario``), with AX = XB baselines."""
     points = [{"scenario": name} for name in SCENARIOS]
-    return Experiment("handeye", handeye_run, _handeye_setup(True), n_trials, points)
+    return Experiment("handeye", handeye_run, handeye_setup(True), n_trials, points)
 
 
 def handeye_noise_experiment(noise_levels_mm=(0.005, 0.01, 0.02, 0.05), n_trials: int = 30):
     """The hand-eye against the laser's stripe-point noise, sensor noise only."""
     points = [{"sigma_point_mm": float(s)} for s in noise_levels_mm]
-    return Experiment("handeye_noise", handeye_run, _handeye_setup(False), n_trials, points)
+    return Experiment("handeye_noise", handeye_run, handeye_setup(False), n_trials, points)
 
 
 def handeye_moves_experiment(rotation_moves=(3, 4, 6, 10), n_trials: int = 30):
     """The hand-eye against the number of pose changes (4 translations), sensor noise only."""
     points = [{"n_rot": int(m)} for m in rotation_moves]
-    return Experiment("handeye_moves", handeye_run, _handeye_setup(False), n_trials, points)
+    return Experiment("handeye_moves", handeye_run, handeye_setup(False), n_trials, points)
 
 
 #: the noise model's parts beyond the stripe (``[sensor]`` of ``station.toml``) that
@@ -277,7 +290,7 @@ def handeye_noise_model_experiment(
             raise CalibrationError(f"no values of {key} to sweep; give at least one")
         points += [{"parameter": key, "value": float(v)} for v in values]
     return Experiment(
-        "handeye_noise_model", handeye_input_run, _handeye_setup(False), n_trials, points
+        "handeye_noise_model", handeye_input_run, handeye_setup(False), n_trials, points
     )
 
 
@@ -334,7 +347,7 @@ def handeye_ranges_experiment(
         if len(values) == 0:
             raise CalibrationError(f"no values of {key} to sweep; give at least one")
         points += [{"parameter": key, "value": float(v)} for v in values]
-    return Experiment("handeye_ranges", handeye_range_run, _handeye_setup(False), n_trials, points)
+    return Experiment("handeye_ranges", handeye_range_run, handeye_setup(False), n_trials, points)
 
 
 def handeye_pattern_experiment(n_trials: int = 30) -> Experiment:
@@ -344,7 +357,7 @@ def handeye_pattern_experiment(n_trials: int = 30) -> Experiment:
     points = [
         {"scenario": "sensor noise only", "translation_pattern": p} for p in ("random", "designed")
     ]
-    return Experiment("handeye_pattern", handeye_run, _handeye_setup(False), n_trials, points)
+    return Experiment("handeye_pattern", handeye_run, handeye_setup(False), n_trials, points)
 
 
 def _sensor_sigma(sensor_sigma_mm) -> np.ndarray:

@@ -19,14 +19,18 @@ is added to a coordinate's readings, which is all an offset and a drift do, so n
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
-from calstudy.core.errors import CalibrationError
-from calstudy.core.robustness import Input, MapSpec, ledger_inputs
+from calstudy.core.robustness import (
+    Input,
+    MapSpec,
+    assign_claims,
+    ledger_inputs,
+    select_inputs,
+)
 from calstudy.papers.hybrid import experiments, report
 from calstudy.papers.hybrid.report_sweeps import deviation_statistics
 from calstudy.papers.hybrid.scenario import load_scenario
@@ -37,7 +41,8 @@ CLAIMS = ("hybrid.systematic", "hybrid.deviation", "hybrid.correlation")
 GROUP = "production"
 #: claim -> the trial group that computes it
 CLAIM_PARTS = {cid: GROUP for cid in CLAIMS}
-#: inputs (dotted keys) each claim's computation does not read: not screened for that claim
+#: inputs (dotted keys, or a prefix ending in ".") each claim's computation does not read: not
+#: screened for that claim
 AFTER_FIG6 = ("production.protocol.n_compensation", "production.drift.sigma_mm")
 NOT_READ = {
     "hybrid.systematic": AFTER_FIG6,
@@ -61,11 +66,7 @@ def map_inputs(scenario_toml: str) -> tuple[list[Input], list[str]]:
         The inputs and the ranged inputs not screened (with the reason).
     """
     found, skipped = ledger_inputs(load_scenario(scenario_toml or None))
-    out = []
-    for item in found:
-        claims = tuple(c for c in CLAIMS if item.key not in NOT_READ[c])
-        out.append(dataclasses.replace(item, claims=claims))
-    return out, skipped
+    return assign_claims(found, CLAIMS, NOT_READ, skipped), skipped
 
 
 def claim_statistics(rows: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -121,14 +122,7 @@ def map_spec(scenario_toml: str, only: Sequence[str] = ()) -> MapSpec:
         If ``only`` names an input the map does not screen.
     """
     inputs, skipped = map_inputs(scenario_toml)
-    unknown = sorted(set(only) - {item.key for item in inputs})
-    if unknown:
-        raise CalibrationError(
-            f"robustness inputs {unknown} are not screened inputs of the hybrid production "
-            "scenario"
-        )
-    if only:
-        inputs = [item for item in inputs if item.key in only]
+    inputs = select_inputs(inputs, only, "hybrid production scenario")
 
     def experiment(group: str, setting: Mapping, n_trials: int):
         return experiments.robustness_experiment(scenario_toml, n_trials, dict(setting) or None)

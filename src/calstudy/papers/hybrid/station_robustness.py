@@ -23,7 +23,6 @@ datums: a robust *not testable* over their range says that no input there makes 
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from collections.abc import Mapping, Sequence
 
@@ -32,7 +31,13 @@ import pandas as pd
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment
-from calstudy.core.robustness import Input, MapSpec, ledger_inputs
+from calstudy.core.robustness import (
+    Input,
+    MapSpec,
+    assign_claims,
+    ledger_inputs,
+    select_inputs,
+)
 from calstudy.papers.hybrid import experiments, handeye_experiments, report
 from calstudy.papers.hybrid.scenario import load_station
 
@@ -70,10 +75,6 @@ NOT_READ = {
 }
 
 
-def _reads(claim: str, key: str) -> bool:
-    return not any(key == s or (s.endswith(".") and key.startswith(s)) for s in NOT_READ[claim])
-
-
 def robustness_experiment(group: str, n_trials: int = 10, overrides: dict | None = None):
     """One point of the map: the trial of ``group`` (``"handeye"`` or ``"stationary"``) in the
     sensor-noise-only scenario, with ``overrides`` (dotted keys of ``station.toml``, validated
@@ -90,8 +91,8 @@ def robustness_experiment(group: str, n_trials: int = 10, overrides: dict | None
     extra = {"overrides": json.loads(json.dumps(overrides))} if overrides else {}
     point = ({"scenario": report.VERDICT_SCENARIO},)
     if group == "handeye":
-        # version 2 of the hand-eye trial (handeye_experiments._handeye_setup), no baselines
-        setup = {**handeye_experiments._handeye_setup(False), **extra}
+        # the hand-eye trial's setup (handeye_experiments.handeye_setup), no baselines
+        setup = {**handeye_experiments.handeye_setup(False), **extra}
         trial = handeye_experiments.handeye_run
     elif group == "stationary":
         setup, trial = {"version": 4, **extra}, experiments.stationary_run
@@ -115,14 +116,7 @@ def map_inputs(station_toml: str = "") -> tuple[list[Input], list[str]]:
         The inputs and the ranged inputs not screened (with the reason).
     """
     found, skipped = ledger_inputs(load_station(station_toml or None))
-    out = []
-    for item in found:
-        claims = tuple(c for c in CLAIM_PARTS if _reads(c, item.key))
-        if not claims:
-            skipped.append(f"{item.label}: read by no claim's computation")
-            continue
-        out.append(dataclasses.replace(item, claims=claims))
-    return out, skipped
+    return assign_claims(found, CLAIM_PARTS, NOT_READ, skipped), skipped
 
 
 def claim_statistics(group: str, rows: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -191,13 +185,7 @@ def map_spec(station_toml: str = "", only: Sequence[str] = ()) -> MapSpec:
             "its map is drawn on that file"
         )
     inputs, skipped = map_inputs(station_toml)
-    unknown = sorted(set(only) - {item.key for item in inputs})
-    if unknown:
-        raise CalibrationError(
-            f"robustness inputs {unknown} are not screened inputs of the hybrid station"
-        )
-    if only:
-        inputs = [item for item in inputs if item.key in only]
+    inputs = select_inputs(inputs, only, "hybrid station")
 
     def experiment(group: str, setting: Mapping, n_trials: int):
         return robustness_experiment(group, n_trials, dict(setting) or None)

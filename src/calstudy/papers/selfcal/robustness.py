@@ -16,14 +16,18 @@ their figures as they are).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
-from calstudy.core.errors import CalibrationError
-from calstudy.core.robustness import Input, MapSpec, ledger_inputs
+from calstudy.core.robustness import (
+    Input,
+    MapSpec,
+    assign_claims,
+    ledger_inputs,
+    select_inputs,
+)
 from calstudy.papers.selfcal import experiments, report
 from calstudy.papers.selfcal.scenario import Scenario, load_scenario
 
@@ -34,10 +38,6 @@ CLAIM_PARTS = {cid: GROUP for cid in report.CLAIMS}
 #: inputs (dotted keys, or a prefix ending in ".") each claim's computation does not read: not
 #: screened for that claim (a test checks that changing them leaves its statistic as it is)
 NOT_READ = {cid: () if cid == "selfcal.convergence" else ("poor_start.",) for cid in report.CLAIMS}
-
-
-def _reads(claim: str, key: str) -> bool:
-    return not any(key == s or (s.endswith(".") and key.startswith(s)) for s in NOT_READ[claim])
 
 
 def map_inputs(scenario_toml: str) -> tuple[list[Input], list[str]]:
@@ -55,14 +55,7 @@ def map_inputs(scenario_toml: str) -> tuple[list[Input], list[str]]:
         The inputs and the ranged inputs not screened (with the reason).
     """
     found, skipped = ledger_inputs(load_scenario(scenario_toml or None))
-    out = []
-    for item in found:
-        claims = tuple(c for c in CLAIM_PARTS if _reads(c, item.key))
-        if not claims:
-            skipped.append(f"{item.label}: read by no claim's computation")
-            continue
-        out.append(dataclasses.replace(item, claims=claims))
-    return out, skipped
+    return assign_claims(found, CLAIM_PARTS, NOT_READ, skipped), skipped
 
 
 def claim_statistics(calib: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -120,13 +113,7 @@ def map_spec(scenario_toml: str, only: Sequence[str] = ()) -> MapSpec:
     """
     scenario = load_scenario(scenario_toml or None)
     inputs, skipped = map_inputs(scenario_toml)
-    unknown = sorted(set(only) - {item.key for item in inputs})
-    if unknown:
-        raise CalibrationError(
-            f"robustness inputs {unknown} are not screened inputs of the selfcal scenario"
-        )
-    if only:
-        inputs = [item for item in inputs if item.key in only]
+    inputs = select_inputs(inputs, only, "selfcal scenario")
 
     def experiment(group: str, setting: Mapping, n_trials: int):
         return experiments.robustness_experiment(scenario_toml, n_trials, dict(setting) or None)
