@@ -56,7 +56,7 @@ BAD = [
     ("02_hybrid_production_compensation", {"hybrid_csv": "mine.csv"}, "give both files"),
     ("03_selfcal_one_step_identification", {"requirement_mm": float("nan")}, "requirement_mm = nan: must be a finite number"),
     ("03_selfcal_one_step_identification", {"n_trials": 10**9}, r"n_trials = 1000000000: must be >= 1 and <= 100000"),
-    ("04_binocular_correction", {"f_numbers": []}, r"f_numbers = \[\]: must have at least 1 entries"),
+    ("04_binocular_correction", {"f_numbers": [4.0]}, r"f_numbers = \[4.0\]: must have at least 2 entries"),
     ("04_binocular_correction", {"defocus_tilts_deg": [0.0, 95.0]}, r"defocus_tilts_deg #2 = 95.0: must be < 90"),
     ("05_dualarm_global_calibration", {"sweep_poses": [2]}, r"sweep_poses #1 = 2: must be >= 3"),
     ("05_dualarm_global_calibration", {"n_jobs": 0}, r"n_jobs = 0: must be None or -1"),
