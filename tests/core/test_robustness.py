@@ -199,7 +199,7 @@ def test_a_calibrated_input_spans_its_uncertainty_by_the_bound_rule():
     k = calibrated_input("drift_scale", 2.0, 0.05, 2.0, bounds="half")
     assert (k.base, k.low, k.high, k.kind, k.paper) == (2.0, 1.9, 2.1, "calibrated", 2.0)
     assert calibrated_input("drift_scale", 2.0, 0.8, bounds="half").low == 1.0
-    assert "+- 2 standard uncertainties (0.05)" in k.paper_note
+    assert "± 2 standard uncertainties (0.05)" in k.paper_note
     # a ledger input: the ends to 4 digits, within its ledger range
     f = Input("sensor.optics.f_number", 5.0, 2.0, 16.0, "calibrated")
     c = calibrated_input(f, 4.0, 0.123456)

@@ -324,7 +324,7 @@ def calibrated_input(
         the ledger range.
     """
     s = sigmas
-    note = f"calibrated; value +- {s:g} standard uncertainties ({u or 0:.2g})"
+    note = f"calibrated; value ± {s:g} standard uncertainties ({u or 0:.2g})"
     if bounds == "half" and isinstance(item, str) and u is not None:
         low, high = max(value - s * u, value / 2), value + s * u
         return Input(item, value, low, high, "calibrated", paper=value, paper_note=note)

@@ -3,8 +3,9 @@ verdicts the claim takes over that input's range.
 
 :func:`read_maps` collects the notebooks' maps (``results/<notebook>/robustness.csv``, written
 by :func:`calstudy.core.robustness.robustness_map`); :func:`grid_figure` draws them: one column per
-claim with a map, one row per input that matters to at least one claim (screened and found to
-change a verdict or move a statistic), and a last row for all other screened inputs (inputs down,
+claim with a map, one row per input over whose range at least one claim's verdict changes (screened,
+swept, and judged differently at some point), and a last row for all other screened inputs (those
+that move a figure but no verdict, and those that do not matter) (inputs down,
 so that the figure's text keeps its size in the book's column however many inputs matter). A
 cell is split into one stripe per verdict taken over the input's range (the base and the sweep), in
 the verdict colours of the book; an input the claim's computation does not read is left
@@ -13,6 +14,7 @@ blank.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import pandas as pd
@@ -22,8 +24,10 @@ from calstudy.io.results import notebook_files
 
 #: the map of one notebook, beside its other results
 MAP_NAME = "robustness.csv"
-#: the row of the inputs that matter to no claim of a column
+#: the row of the inputs over whose range no claim's verdict changes
 OTHERS = "other inputs"
+#: input names longer than this are wrapped onto lines of at most this many characters
+NAME_WIDTH = 26
 
 
 def read_maps(results_root: str | Path | None = None) -> pd.DataFrame:
@@ -53,18 +57,21 @@ def cell_verdicts(maps: pd.DataFrame) -> tuple[dict, list[str], list[str]]:
     input's sweep (points judged by the rule), the inputs that matter to no claim pooled under
     :data:`OTHERS`."""
     claims = list(dict.fromkeys(maps["claim"]))
-    screen = maps[maps["stage"] == "screen"]
-    matter = list(dict.fromkeys(screen.loc[screen["matters"] == "yes", "input"]))
-    cells: dict = {}
+    taken: dict = {}
     for claim, t in maps.groupby("claim", sort=False):
         base = t.loc[t["stage"] == "base", "verdict"].tolist()
         for label in t.loc[t["stage"] == "screen", "input"].unique():
             # judged points of the input alone (its sweep); a screened end is judged on fewer
             # trials and only tells whether the input is swept
             at = t[(t["input"] == label) & (t["stage"] == "sweep") & (t["error"] == "")]
-            key = (claim, label if label in matter else OTHERS)
-            cells[key] = list(dict.fromkeys([*cells.get(key, base), *at["verdict"]]))
-    return cells, claims, [*matter, OTHERS]
+            taken[(claim, label)] = list(dict.fromkeys([*base, *at["verdict"]]))
+    order = list(dict.fromkeys(maps.loc[maps["stage"] == "screen", "input"]))
+    changing = [lab for lab in order if any(len(taken.get((c, lab), [])) > 1 for c in claims)]
+    cells: dict = {}
+    for (claim, label), verdicts in taken.items():
+        key = (claim, label if label in changing else OTHERS)
+        cells[key] = list(dict.fromkeys([*cells.get(key, []), *verdicts]))
+    return cells, claims, [*changing, OTHERS]
 
 
 def grid_figure(maps: pd.DataFrame, path: str | Path, colours: dict) -> tuple[Path, str]:
@@ -93,17 +100,19 @@ def grid_figure(maps: pd.DataFrame, path: str | Path, colours: dict) -> tuple[Pa
     cells, claims, inputs = cell_verdicts(maps)
     # inputs down, claims across: the figure grows in height with the inputs, so its text
     # keeps its size in the book's column however many inputs matter
-    input_names = [plain(label) for label in inputs]
+    input_names = [textwrap.fill(plain(label), NAME_WIDTH) for label in inputs]
     claim_names = [claim_label(c) if c in CLAIM_LABELS else c for c in claims]
-    left = 0.3 + 0.07 * max(len(name) for name in input_names)  # room for the input names, in
+    longest = max(len(line) for name in input_names for line in name.splitlines())
+    left = 0.3 + 0.07 * longest  # room for the input names, in
     bottom = 0.3 + 0.06 * max(len(name) for name in claim_names)  # the rotated claim names
     cols = max(len(claims), 2)
-    width = left + 0.45 * cols + 0.3
-    height = bottom + 0.7 + 0.3 * len(inputs)
+    cell_w, cell_h = 0.3, 0.36
+    width = left + cell_w * cols + 0.3
+    height = bottom + 0.7 + cell_h * len(inputs)
     fig = Figure(figsize=(max(width, 4.5), height))
     ax = fig.add_axes(
-        (left / max(width, 4.5), bottom / height, 0.45 * cols / max(width, 4.5),
-         0.3 * len(inputs) / height)
+        (left / max(width, 4.5), bottom / height, cell_w * cols / max(width, 4.5),
+         cell_h * len(inputs) / height)
     )
     seen = []
     for j, claim in enumerate(claims):
@@ -132,8 +141,9 @@ def grid_figure(maps: pd.DataFrame, path: str | Path, colours: dict) -> tuple[Pa
         any(len(cells.get((c, lab), [])) > 1 for lab in inputs) for c in claims
     )
     alt = (
-        f"A grid of {len(claims)} claims by {len(inputs) - 1} inputs that matter and the other "
-        f"inputs: a cell in one colour keeps one verdict over the input's range, a cell in "
-        f"stripes takes several; {conditional} of the {len(claims)} claims have such a cell."
+        f"A grid of {len(claims)} claims by the {len(inputs) - 1} inputs over whose range a "
+        f"verdict changes and the other inputs: a cell in one colour keeps one verdict over the "
+        f"input's range, a cell in stripes takes several; {conditional} of the {len(claims)} "
+        f"claims have such a cell."
     )
     return path, alt

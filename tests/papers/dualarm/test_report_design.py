@@ -56,7 +56,7 @@ def test_the_paper_point_sentence_names_the_points_with_the_papers_poses(scenari
     table = rd.sweep_table(_sweep(scenario, {16: 0.1}), published)
     text = rd.paper_point_sentence(table, scenario)
     assert "resembles the 5 sweep points with 3 poses (4, 8, 16 linking images" in text
-    assert "dualarm.global is 'not reproduced'" in text
+    assert "global calibration is 'not reproduced'" in text
     assert "over them it takes 'not reproduced' and 'reproduced'" in text
     flat = rd.paper_point_sentence(rd.sweep_table(_sweep(scenario, {}), published), scenario)
     assert "it is 'not reproduced' at every one of them" in flat

@@ -15,6 +15,7 @@ import pandas as pd
 from calstudy.claims import ClaimColumns, judge_along, verdict_runs
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
+from calstudy.core.labels import claim_label
 from calstudy.core.stats import median_interval
 from calstudy.models.targets import circle_centre_bias
 from calstudy.papers.dualarm import simulate as sim
@@ -163,7 +164,8 @@ def paper_point_sentence(table: pd.DataFrame, scn: Scenario) -> str:
         f"linking images) resembles the {len(same)} sweep points with {poses} poses ({views} "
         f"linking images, tilts {tilts} deg); at the scenario's design among them "
         f"({_fmt(base['bridge_views'])} linking images, {_fmt(base['bridge_tilt_deg'])} deg) "
-        f"dualarm.global is '{design['verdict']}' (median {design['median_mm']:.3f} mm), and "
+        f"{claim_label('dualarm.global')} is '{design['verdict']}' (median "
+        f"{design['median_mm']:.3f} mm), and "
         f"{over} (medians {lo:.3f}-{hi:.3f} mm)."
     )
 
