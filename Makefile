@@ -87,11 +87,11 @@ $(STAMP): environment.txt pyproject.toml
 NOTEBOOK_JOBS ?= 2
 CORES := $(shell getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
 CORES_PER_NOTEBOOK := $(shell echo $$(( $(CORES) / $(NOTEBOOK_JOBS) > 0 ? $(CORES) / $(NOTEBOOK_JOBS) : 1 )))
-# Seconds each took in fresh `make reproduce` runs on 2 cores (one core each): 04 127-132,
-# 05 93-98, 01 44-45, 03 41-42, 02 25-27, 06 10. A notebook not listed runs after these.
+# Seconds each took in a fresh `make reproduce` on 2 cores (one core each, other work on the
+# machine): 05 1,557, 04 1,370, 03 304, 02 222, 01 174, 06 13. A notebook not listed runs last.
 LONGEST_FIRST := 05_dualarm_global_calibration 04_binocular_correction \
-	01_hybrid_global_calibration 03_selfcal_one_step_identification \
-	02_hybrid_production_compensation 06_handeye_your_cell
+	03_selfcal_one_step_identification 02_hybrid_production_compensation \
+	01_hybrid_global_calibration 06_handeye_your_cell
 LISTED := $(foreach s,$(LONGEST_FIRST),$(filter book/notebooks/$(s).ipynb,$(EXECUTED)))
 RUN_ORDER := $(LISTED) $(filter-out $(LISTED),$(EXECUTED))
 
