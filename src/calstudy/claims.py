@@ -428,32 +428,47 @@ def claim_row(
         "oracle_control": "" if oracle is None else oracle.verdict,
     }
     return ClaimRow(
-        claim_id, published, verdict.median, verdict.ci_low, verdict.ci_high, unit,
-        verdict.verdict, notebook, verdict.note if note is None else note, verdict.n,
-        verdict.replication_rate, **controls,
+        claim_id,
+        published,
+        verdict.median,
+        verdict.ci_low,
+        verdict.ci_high,
+        unit,
+        verdict.verdict,
+        notebook,
+        verdict.note if note is None else note,
+        verdict.n,
+        verdict.replication_rate,
+        **controls,
     )
 
 
-def control_rows(claim_id: str, judged: Judged) -> list[dict]:
-    """The two rows of ``controls.csv`` for a claim (none for a claim without controls), with
-    the control definitions of the claims register (columns ``null_control`` and
-    ``oracle_control`` of ``data/claims.csv``).
+def control_rows(claim_id: str, judged: Judged, *, refuse_passing_null: bool = True) -> list[dict]:
+    """The rows of ``controls.csv`` for a claim, one per control it has (none for a claim
+    without a null control), with the control definitions of the claims register (columns
+    ``null_control`` and ``oracle_control`` of ``data/claims.csv``).
+
+    ``refuse_passing_null=False`` is for a paper that already judged such a claim ``not
+    testable`` (its null passed): the rows are then written as they came out.
 
     Raises
     ------
     CalibrationError
-        If the null control is anything but ``not reproduced`` (the test is broken), or the
-        register defines no control for the claim.
+        If the null control is anything but ``not reproduced`` (the test is broken) and
+        ``refuse_passing_null``, or the register defines no control for the claim.
     """
     _, null, oracle = judged
     if null is None:
         return []
-    check_null_control(null)
+    if refuse_passing_null:
+        check_null_control(null)
     register = claim_register(columns=("null_control", "oracle_control")).set_index("id")
     if claim_id not in register.index:
         raise CalibrationError(f"claim id {claim_id!r} is not in the claims register")
     rows = []
     for control, v in (("null", null), ("oracle", oracle)):
+        if v is None:
+            continue
         definition = register.at[claim_id, f"{control}_control"]
         if not definition:
             raise CalibrationError(

@@ -17,7 +17,6 @@ import pandas as pd
 from calstudy.claims import (
     ClaimColumns,
     Judged,
-    claim_register,
     claim_row,
     control_rows,
     judge_claim,
@@ -415,29 +414,6 @@ def _published_text(claim: str) -> str:
     return _ratio(published(*PUBLISHED[claim]))[1]
 
 
-def _control_rows(claim: str, judged) -> list[dict]:
-    """:func:`calstudy.claims.control_rows`, also for a claim whose null control passed (judged
-    ``not testable`` by :func:`judge_correction`): its rows are written as they came out."""
-    if judged.null is None or judged.null.verdict == "not reproduced":
-        return control_rows(claim, judged)
-    register = claim_register(columns=("null_control", "oracle_control")).set_index("id")
-    return [
-        {
-            "id": claim,
-            "control": control,
-            "definition": register.at[claim, f"{control}_control"],
-            "reproduced": v.median,
-            "ci_low": v.ci_low,
-            "ci_high": v.ci_high,
-            "n": v.n,
-            "replication_rate": v.replication_rate,
-            "verdict": v.verdict,
-            "note": v.note,
-        }
-        for control, v in (("null", judged.null), ("oracle", judged.oracle))
-    ]
-
-
 def claim_rows(
     trials: pd.DataFrame,
     field: pd.DataFrame,
@@ -452,7 +428,7 @@ def claim_rows(
         claims.append(
             claim_row(claim, judged, published=published_text, unit="ratio", notebook=notebook)
         )
-        controls += _control_rows(claim, judged)
+        controls += control_rows(claim, judged, refuse_passing_null=False)
     return claims, controls
 
 

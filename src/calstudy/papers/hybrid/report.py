@@ -19,7 +19,6 @@ from calstudy.claims import (
     TOO_FEW,
     ClaimColumns,
     Judged,
-    claim_register,
     claim_row,
     control_rows,
     judge_claim,
@@ -230,15 +229,19 @@ def stationary_numbers(stationary: pd.DataFrame) -> dict:
             else "the oracle would meet a per-trial bound too"
         )
     )
-    return {
-        "stationary_p95": claim_p95,
-        "stationary_oracle_p95": oracle_p95,
-        "stationary_null_ratio": v.null.median,
-        "stationary_oracle_ratio": o.median,
-        "stationary_oracle_low": o.ci_low,
-        "stationary_oracle_high": o.ci_high,
-        "stationary_explanation": explanation,
-    } | station_against_design(stationary) | skip_cmm_numbers(stationary)
+    return (
+        {
+            "stationary_p95": claim_p95,
+            "stationary_oracle_p95": oracle_p95,
+            "stationary_null_ratio": v.null.median,
+            "stationary_oracle_ratio": o.median,
+            "stationary_oracle_low": o.ci_low,
+            "stationary_oracle_high": o.ci_high,
+            "stationary_explanation": explanation,
+        }
+        | station_against_design(stationary)
+        | skip_cmm_numbers(stationary)
+    )
 
 
 def skip_cmm_numbers(stationary: pd.DataFrame) -> dict:
@@ -610,7 +613,9 @@ def summarise_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
         row = {"parameter": name, "value": value, "trials": len(sub)}
         row["correlation_verdict"] = _verdict_text(
             lambda s=sub: judge_claim(
-                "hybrid.correlation", s, CLAIMS["hybrid.correlation"],
+                "hybrid.correlation",
+                s,
+                CLAIMS["hybrid.correlation"],
                 reference=kolmogorov_bound(168),
             )
         )
@@ -811,31 +816,6 @@ def production_verdicts(sub: pd.DataFrame, min_trials: int = 200) -> dict[str, J
     }
 
 
-def _control_rows(claim_id: str, judged: Judged) -> list[dict]:
-    """The ``controls.csv`` rows of a claim's controls (those it has), with the definitions of
-    the claims register (``data/claims.csv``)."""
-    register = claim_register(columns=("null_control", "oracle_control")).set_index("id")
-    rows = []
-    for control, v in (("null", judged.null), ("oracle", judged.oracle)):
-        if v is None:
-            continue
-        rows.append(
-            {
-                "id": claim_id,
-                "control": control,
-                "definition": register.at[claim_id, f"{control}_control"],
-                "reproduced": v.median,
-                "ci_low": v.ci_low,
-                "ci_high": v.ci_high,
-                "n": v.n,
-                "replication_rate": v.replication_rate,
-                "verdict": v.verdict,
-                "note": v.note,
-            }
-        )
-    return rows
-
-
 def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
     """Claim rows ``hybrid.systematic``, ``hybrid.deviation``, ``hybrid.correlation`` and the
     control rows, by the v2 rule (:func:`production_verdicts`), from the trial table of notebook
@@ -892,7 +872,7 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
             f"offset's target holds still",
         )
     )
-    controls = _control_rows("hybrid.deviation", dev)
+    controls = control_rows("hybrid.deviation", dev, refuse_passing_null=False)
     corr = judged["hybrid.correlation"]
     n_defined = _n_vectors(sub) - int(np.median(sub["n_fixed"]))
     rows.append(
@@ -910,9 +890,9 @@ def production_claims(trials: pd.DataFrame, n_compensation: int, notebook: str):
         )
     )
     controls = (
-        _control_rows("hybrid.systematic", judged["hybrid.systematic"])
+        control_rows("hybrid.systematic", judged["hybrid.systematic"], refuse_passing_null=False)
         + controls
-        + _control_rows("hybrid.correlation", corr)
+        + control_rows("hybrid.correlation", corr, refuse_passing_null=False)
     )
     return rows, controls
 
