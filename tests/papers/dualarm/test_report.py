@@ -72,13 +72,6 @@ def test_claims_reproduce_the_published_numbers_when_the_data_do():
     assert [r.verdict for r in near] == ["direction only", "direction only", "direction only"]
 
 
-def test_calibrated_value_interpolates_and_refuses_out_of_range():
-    pilot = pd.DataFrame({"x": [1.0, 1.0, 2.0, 2.0], "y": [0.2, 0.4, 0.6, 0.8]})
-    assert report.calibrated_value(pilot, "x", "y", 0.5) == pytest.approx(1.5)
-    with pytest.raises(ValueError, match="outside the swept range"):
-        report.calibrated_value(pilot, "x", "y", 0.9)
-
-
 def test_table3_marks_the_instruments_not_testable():
     t3 = report.table3(report.part(fake_trials(), "global"), load_published())
     assert t3["testable"].tolist() == ["not testable", "not testable", "yes", "yes"]

@@ -3,14 +3,16 @@ rows with the report functions (no simulation)."""
 
 from __future__ import annotations
 
+import json
+
 import pandas as pd
 import pytest
 from support import assert_same_table
 
 from calstudy.core.paths import RESULTS_DIR
 from calstudy.io.results import claims_table
-from calstudy.papers.dualarm import report
-from calstudy.papers.dualarm.scenario import load_published
+from calstudy.papers.dualarm import report, report_calibration
+from calstudy.papers.dualarm.scenario import load_published, load_scenario
 
 FOLDER = RESULTS_DIR / "05_dualarm_global_calibration"
 
@@ -27,20 +29,35 @@ def _compare(fresh: pd.DataFrame, name: str) -> None:
     assert_same_table(fresh, FOLDER / f"{name}.csv")
 
 
+def _fits():
+    published, scn = load_published(), load_scenario()
+    drift, plate = _trials("drift_pilot"), _trials("plate_pilot")
+    return (
+        (report_calibration.drift_fit(drift, published, scn), drift, "drift_scale"),
+        (report_calibration.plate_fit(plate, published, scn), plate, "plate_sigma_px"),
+    )
+
+
+def test_the_stored_calibrated_values_are_the_ones_the_code_computes():
+    """The calibrated values the station trials ran with (run.json) are the joint fits of the
+    committed pilot rows, rounded as fed; the station rows carry the plate noise too."""
+    stored = json.loads((FOLDER / "run.json").read_text())["parameters"]
+    for fit, _, x in _fits():
+        assert stored[x] == report_calibration.fed_value(fit, x), x
+    station = _trials("station")
+    assert set(station["plate_sigma_px"]) == {stored["plate_sigma_px"]}
+
+
 def test_tables_recompute_from_the_trials():
     published = load_published()
     trials = _trials("station")
-    targets = report.published_figures(published)
+    (drift, drift_pilot, _), (plate, plate_pilot, _) = _fits()
     _compare(
-        report.calibration_table(
-            _trials("drift_pilot"), "drift_scale", "before_mm", targets["icp_before"]
-        ),
+        report_calibration.calibration_table(drift, drift_pilot, "drift_scale"),
         "drift_calibration",
     )
     _compare(
-        report.calibration_table(
-            _trials("plate_pilot"), "plate_sigma_px", "plate_euclid_mm", targets["plate"]
-        ),
+        report_calibration.calibration_table(plate, plate_pilot, "plate_sigma_px"),
         "plate_calibration",
     )
     _compare(report.calibration_summary(trials), "calibration_summary")

@@ -605,8 +605,9 @@ def drift_trial(scn: Scenario, rng: np.random.Generator, drift_scale: float) -> 
 
 
 def drift_experiment(scenario_toml: str = "", n_trials: int = 30, scales=(1.0,)) -> Experiment:
-    """Before-ICP error against the drift scale: the calibration curve of the drift (rule 11,
-    target: the paper's before-ICP errors)."""
+    """Before-ICP error per arm-sphere pair against the drift scale, the same trials at every
+    scale: the pilot of the drift's joint calibration to the paper's four before-ICP errors
+    (:func:`calstudy.papers.dualarm.report_calibration.drift_fit`)."""
     points = tuple({"drift_scale": float(s)} for s in scales)
     return Experiment("drift_pilot", drift_trial, _scenario(scenario_toml), n_trials, points)
 
@@ -621,8 +622,8 @@ def plate_trial(scn: Scenario, rng: np.random.Generator, plate_sigma_px: float) 
 
 
 def plate_experiment(scenario_toml: str = "", n_trials: int = 30, sigmas=(0.1,)) -> Experiment:
-    """Plate error against its circle-centre noise: the calibration curve of the plate's
-    detection noise (rule 11, target: the paper's 0.556 mm for the plate)."""
+    """Plate error against its circle-centre noise: the pilot of the plate noise's calibration
+    to Table 3's plate row (:func:`calstudy.papers.dualarm.report_calibration.plate_fit`)."""
     points = tuple({"plate_sigma_px": float(s)} for s in sigmas)
     return Experiment("plate_pilot", plate_trial, _scenario(scenario_toml), n_trials, points)
 

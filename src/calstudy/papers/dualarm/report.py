@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.claims import ClaimColumns, claim_row, control_rows, judge_claim
-from calstudy.core.stats import median_and_spread, round_to_uncertainty
+from calstudy.core.stats import median_and_spread
 from calstudy.papers.dualarm.experiments import marker_error
 from calstudy.papers.dualarm.scenario import SPHERES
 from calstudy.papers.dualarm.schema import PublishedFile, Scenario
@@ -35,72 +35,6 @@ def part(trials: pd.DataFrame, name: str) -> pd.DataFrame:
     """The rows of one part (``calibration``, ``bundle``, ``icp``, ``global``) of the station
     trials, without the columns that part does not fill."""
     return trials[trials["part"] == name].dropna(axis=1, how="all").reset_index(drop=True)
-
-
-def calibrated_value(pilot: pd.DataFrame, x: str, y: str, target: float) -> float:
-    """Rule 11: the value of the nuisance input ``x`` at which the mean over trials of the
-    baseline figure ``y`` meets ``target``, by linear interpolation between the swept points
-    (the figure must rise with ``x``), rounded to the decade of its standard uncertainty
-    (:func:`calstudy.core.stats.round_to_uncertainty`): the larger standard error of the mean
-    of the two bracketing points, divided by the slope between them. So rounded, the value is
-    the same on every machine, and the experiments it feeds draw the same numbers.
-
-    Raises
-    ------
-    ValueError
-        If the curve does not rise or the target lies outside the swept range.
-    """
-    groups = pilot.groupby(x)[y]
-    means = groups.mean().sort_index()
-    sems = groups.sem().reindex(means.index)
-    xs, ys = means.index.to_numpy(float), means.to_numpy(float)
-    if np.any(np.diff(ys) <= 0):
-        raise ValueError(f"{y} does not rise with {x}: {np.round(ys, 4).tolist()}")
-    if not ys[0] <= target <= ys[-1]:
-        raise ValueError(
-            f"target {target:g} of {y} outside the swept range {ys[0]:.4g}-{ys[-1]:.4g}; widen {x}"
-        )
-    value = float(np.interp(target, ys, xs))
-    return round_to_uncertainty(value, _uncertainty(xs, ys, sems.to_numpy(float), target))
-
-
-def _uncertainty(xs: np.ndarray, ys: np.ndarray, sems: np.ndarray, target: float) -> float:
-    """The standard uncertainty of a value read off a rising curve at ``target``."""
-    i = min(int(np.searchsorted(ys, target, side="right")), len(ys) - 1)
-    i = max(i, 1)
-    slope = (ys[i] - ys[i - 1]) / (xs[i] - xs[i - 1])
-    sem = np.nanmax(sems[i - 1 : i + 1])
-    if not np.isfinite(sem) or sem <= 0:  # one trial per point: no spread to round to
-        sem = abs(ys[i] - ys[i - 1])
-    return float(sem / slope)
-
-
-def calibration_uncertainty(pilot: pd.DataFrame, x: str, y: str, target: float) -> float:
-    """The standard uncertainty of :func:`calibrated_value` (the larger standard error of the
-    mean of the two bracketing points over the slope between them), in the unit of ``x``: what
-    a robustness map carries into the calibrated input's range.
-
-    Raises
-    ------
-    ValueError
-        As :func:`calibrated_value`.
-    """
-    calibrated_value(pilot, x, y, target)  # the same checks
-    groups = pilot.groupby(x)[y]
-    means = groups.mean().sort_index()
-    sems = groups.sem().reindex(means.index).to_numpy(float)
-    return _uncertainty(means.index.to_numpy(float), means.to_numpy(float), sems, target)
-
-
-def calibration_table(pilot: pd.DataFrame, x: str, y: str, target: float) -> pd.DataFrame:
-    """The calibration curve of a nuisance input: mean and spread of ``y`` per value of ``x``,
-    and the calibrated value for ``target`` as the last row."""
-    rows = []
-    for key, g in pilot.groupby(x):
-        _, lo, hi = median_and_spread(g[y])
-        rows.append({x: key, y: g[y].mean(), f"{y}_low": lo, f"{y}_high": hi, "n": len(g)})
-    rows.append({x: calibrated_value(pilot, x, y, target), y: target, "n": 0})
-    return pd.DataFrame(rows)
 
 
 def icp_per_trial(icp: pd.DataFrame) -> pd.DataFrame:

@@ -1,0 +1,325 @@
+"""The two nuisance inputs of notebook 05, each calibrated jointly to the paper's baseline figures
+(:func:`calstudy.core.jointcal.joint_calibration`, rule 14 of the verdict rule).
+
+* The drift scale of the multi-view scans, to the four before-ICP errors of Section 4.1 at once
+  (arm 1 and 2, spheres A and B: one baseline per arm-sphere pair), from the rows of
+  :func:`~calstudy.papers.dualarm.experiments.drift_experiment`.
+* The circle-centre noise of the circular plate, to Table 3's plate error, from the rows of
+  :func:`~calstudy.papers.dualarm.experiments.plate_experiment`.
+
+The value that feeds the experiments is the joint fit rounded to the decade of its standard
+uncertainty (:func:`fed_value`), so that another machine draws the same numbers. Nothing here
+simulates. Millimetres; the plate noise in pixels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from calstudy.core.errors import CalibrationError
+from calstudy.core.jointcal import Baseline, JointFit, joint_calibration, rmse_spread
+from calstudy.core.stats import round_to_uncertainty
+from calstudy.papers.dualarm.schema import PublishedFile, Scenario
+
+#: the column of the plate pilot that Table 3's plate row is calibrated to
+PLATE_COLUMN = "plate_euclid_mm"
+#: a baseline is met within this many of its spreads
+COVERAGE = 2.0
+
+
+def pair_column(arm: int, sphere: str) -> str:
+    """The drift pilot's column of one arm-sphere pair's before-ICP error (mm)."""
+    return f"before_{int(arm)}{sphere}_mm"
+
+
+def drift_baselines(published: PublishedFile, scn: Scenario) -> list[Baseline]:
+    """The four before-ICP errors of Section 4.1 (``published.icp``), one baseline per arm and
+    sphere.
+
+    Each is the mean, over the later views of one multi-view scan, of the distance of that
+    view's fitted sphere centre from the first view's (sec. 4.1: "the fitted spherical center
+    coordinates of the first group ... were used as a reference"). The paper does not say how
+    many views a scan has (Figs. 5-6 plot them, the text gives only the means): the scenario's
+    ``icp.n_views`` (assumed) gives ``n_views - 1`` distances per figure. The relative spread
+    of one experiment's mean of ``n`` distances is taken as that of an RMSE of ``n`` errors,
+    ``1 / sqrt(2 n)`` (:func:`~calstudy.core.jointcal.rmse_spread`): independent 3-D errors
+    would spread less, but the distances of one scan share its drift, a random walk from the
+    first view, which widens it (:func:`calibration_table` shows the pilot's own spread beside
+    it). Tolerance: :data:`COVERAGE` spreads.
+
+    Parameters
+    ----------
+    published : PublishedFile
+        The paper's numbers.
+    scn : Scenario
+        The station (its number of views per scan).
+
+    Returns
+    -------
+    list of Baseline
+        Named by :func:`pair_column`, in the order of ``published.icp.rows``.
+    """
+    spread = rmse_spread(scn.icp.n_views - 1)
+    return [
+        Baseline(pair_column(arm, sphere), float(before), spread, COVERAGE)
+        for arm, sphere, before, _ in published.icp.rows
+    ]
+
+
+def plate_baselines(published: PublishedFile, scn: Scenario) -> list[Baseline]:
+    """Table 3's circular-plate error (sphere A, mean Euclidean centre error) as one baseline.
+
+    The paper fits sphere A's centre "across all motion poses" of the arms (sec. 4.2) without
+    their number; read as Tables 1-2's, ``global_test.n_groups`` groups of
+    ``global_test.n_poses`` poses (the study's test), so the figure is a mean of
+    ``n_groups * n_poses`` Euclidean errors, its spread :func:`~calstudy.core.jointcal.
+    rmse_spread` of that count (as :func:`drift_baselines`). Tolerance: :data:`COVERAGE` spreads.
+
+    Parameters
+    ----------
+    published : PublishedFile
+        The paper's numbers.
+    scn : Scenario
+        The station (groups and poses of the Tables 1-2 test).
+
+    Returns
+    -------
+    list of Baseline
+        One, named :data:`PLATE_COLUMN`.
+    """
+    t3 = dict(zip(published.table3.methods, published.table3.rows, strict=True))
+    n = scn.global_test.n_groups * scn.global_test.n_poses
+    return [Baseline(PLATE_COLUMN, float(t3["circular plate"][3]), rmse_spread(n), COVERAGE)]
+
+
+def _fit(pilot: pd.DataFrame, x: str, baselines: list[Baseline]) -> JointFit:
+    if x not in pilot:
+        raise CalibrationError(f"the pilot rows have no column {x!r} (they have {list(pilot)})")
+
+    def figures(value: float) -> dict:
+        at = pilot[pilot[x] == value].sort_values("trial")
+        return {b.name: at[b.name].to_numpy(float) for b in baselines if b.name in at}
+
+    return joint_calibration(figures, sorted(pilot[x].unique()), baselines)
+
+
+def drift_fit(pilot: pd.DataFrame, published: PublishedFile, scn: Scenario) -> JointFit:
+    """The drift scale calibrated to the four before-ICP errors at once (:func:`drift_baselines`).
+
+    Parameters
+    ----------
+    pilot : pandas.DataFrame
+        Rows of :func:`~calstudy.papers.dualarm.experiments.drift_experiment`: ``drift_scale``,
+        ``trial`` and one :func:`pair_column` per arm-sphere pair (mm), the same trials at every
+        scale.
+    published : PublishedFile
+        The paper's numbers.
+    scn : Scenario
+        The station.
+
+    Returns
+    -------
+    JointFit
+        The fitted scale, its standard uncertainty, and per pair whether it is met.
+
+    Raises
+    ------
+    CalibrationError
+        If a column is missing, the grid has fewer than two scales or fewer than six trials per
+        scale (the median's interval), or an error is not positive.
+    """
+    return _fit(pilot, "drift_scale", drift_baselines(published, scn))
+
+
+def plate_fit(pilot: pd.DataFrame, published: PublishedFile, scn: Scenario) -> JointFit:
+    """The plate's circle-centre noise (px) calibrated to Table 3's plate error
+    (:func:`plate_baselines`).
+
+    Parameters
+    ----------
+    pilot : pandas.DataFrame
+        Rows of :func:`~calstudy.papers.dualarm.experiments.plate_experiment`:
+        ``plate_sigma_px``, ``trial`` and :data:`PLATE_COLUMN` (mm).
+    published : PublishedFile
+        The paper's numbers.
+    scn : Scenario
+        The station.
+
+    Returns
+    -------
+    JointFit
+
+    Raises
+    ------
+    CalibrationError
+        As :func:`drift_fit`.
+    """
+    return _fit(pilot, "plate_sigma_px", plate_baselines(published, scn))
+
+
+def fed_value(fit: JointFit, name: str) -> float:
+    """The calibrated value that feeds the experiments: the joint fit rounded to the decade of
+    its standard uncertainty (:func:`calstudy.core.stats.round_to_uncertainty`), the same on
+    every machine.
+
+    Parameters
+    ----------
+    fit : JointFit
+        A joint calibration.
+    name : str
+        The input's name, for the message.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    CalibrationError
+        If the fit lies at an end of its grid (the figures pull beyond the swept range) or has
+        no positive uncertainty.
+    """
+    grid = sorted(fit.grid["value"].unique())
+    if fit.at_edge:
+        raise CalibrationError(
+            f"{name}: the joint fit {fit.value:.4g} lies at an end of the swept "
+            f"{grid[0]:g}-{grid[-1]:g}; widen the sweep"
+        )
+    if not fit.uncertainty > 0:
+        raise CalibrationError(f"{name}: the joint fit has uncertainty {fit.uncertainty}")
+    return round_to_uncertainty(fit.value, fit.uncertainty)
+
+
+def calibration_table(fit: JointFit, pilot: pd.DataFrame, x: str) -> pd.DataFrame:
+    """The calibration of one input from its :class:`JointFit`, long.
+
+    Parameters
+    ----------
+    fit : JointFit
+        The joint calibration of the input.
+    pilot : pandas.DataFrame
+        The pilot rows it was fitted on (``x``, ``trial`` and one column per baseline).
+    x : str
+        The input's column.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Rows ``point`` ``grid``: per value of ``x`` and baseline, the median over trials with
+        its 95 % interval, ``n`` trials, the paper's value and ``trial_spread`` (the standard
+        deviation over trials of the log figure: the simulation's own spread of one
+        experiment's figure, beside the baseline's assumed ``spread``). Rows ``joint fit``: per
+        baseline, ``x`` the value fed to the experiments (:func:`fed_value`), ``fit`` and
+        ``fit_u`` the unrounded fit and its standard uncertainty, the median there, its
+        ``ratio`` to the paper's value, the relative ``tolerance``, whether it is ``met``
+        jointly, the value that meets it best ``alone`` and whether any value of the range
+        does (``met_alone``), and whether the input is ``identified`` (every baseline met).
+
+    Raises
+    ------
+    CalibrationError
+        As :func:`fed_value`.
+    """
+    g = fit.grid.rename(columns={"value": x}).assign(point="grid")
+    g["paper"] = g["baseline"].map(fit.agreement.set_index("baseline")["target"])
+    g["trial_spread"] = [
+        float(np.std(np.log(pilot.loc[pilot[x] == v, b].to_numpy(float)), ddof=1))
+        for v, b in g[[x, "baseline"]].itertuples(index=False)
+    ]
+    a = fit.agreement.assign(
+        point="joint fit",
+        fit=fit.value,
+        fit_u=fit.uncertainty,
+        identified=fit.identified,
+        **{x: fed_value(fit, x)},
+    ).rename(columns={"target": "paper"})
+    a["spread"] = np.log1p(a["tolerance"]) / COVERAGE
+    out = pd.concat([g, a], ignore_index=True)
+    columns = ["point", x, "baseline", "paper", "median", "ci_low", "ci_high", "n"]
+    columns += ["trial_spread", "spread", "ratio", "tolerance", "met", "alone", "met_alone"]
+    return out[[*columns, "fit", "fit_u", "identified"]]
+
+
+def _pair_label(name: str) -> str:
+    key = name.removeprefix("before_").removesuffix("_mm")
+    return f"arm {key[0]} sphere {key[1:]}"
+
+
+def _spreads(table: pd.DataFrame) -> str:
+    grid, fit = table[table["point"] == "grid"], table[table["point"] == "joint fit"]
+    lo, hi = grid["trial_spread"].min(), grid["trial_spread"].max()
+    assumed = fit["spread"].iloc[0]
+    return (
+        f"a figure is met within a factor {1 + fit['tolerance'].iloc[0]:.2f} of the paper's "
+        f"({COVERAGE:g} standard deviations, {assumed:.2f} each, of the log of one experiment's "
+        f"figure; "
+        f"in the simulation one trial's figure spreads by {lo:.2f}-{hi:.2f})"
+    )
+
+
+def drift_text(table: pd.DataFrame) -> str:
+    """The drift's joint calibration in sentences from :func:`calibration_table`: the fed scale
+    and its uncertainty, each pair's median against the paper's and whether it is met, the
+    scale that meets each pair best alone, the tolerance, and the judgement (rule 14)."""
+    fit = table[table["point"] == "joint fit"]
+    first = fit.iloc[0]
+    pairs = "; ".join(
+        f"{_pair_label(r.baseline)} {r.median:.3f} mm against {r.paper:.3f} mm"
+        + ("" if r.met else " (not met)")
+        for r in fit.itertuples()
+    )
+    alone = ", ".join(f"{r.alone:.2g}" for r in fit.itertuples())
+    text = (
+        f"One drift scale fitted to the four before-ICP errors at once, "
+        f"{first['drift_scale']:g} (fit {first['fit']:.3g}, standard uncertainty "
+        f"{first['fit_u']:.2g}), gives {pairs}; {_spreads(table)}. Each pair alone would take "
+        f"{alone} in that order. "
+    )
+    if first["identified"]:
+        return (
+            text + "All four are met at once: one drift scale is consistent with the four figures."
+        )
+    missed = [_pair_label(b) for b in fit.loc[~fit["met"].astype(bool), "baseline"]]
+    return text + (
+        f"The joint scale does not meet {', '.join(missed)}: the paper's four figures do not "
+        "identify one drift of the study's model. The joint fit is kept, and the robustness map "
+        "carries its uncertainty."
+    )
+
+
+def plate_text(table: pd.DataFrame) -> str:
+    """The plate's calibration in one sentence from :func:`calibration_table`."""
+    r = table[table["point"] == "joint fit"].iloc[0]
+    met = "met" if r["met"] else "not met"
+    return (
+        f"The plate's circle centres get {r['plate_sigma_px']:g} px of noise (fit "
+        f"{r['fit']:.3g}, standard uncertainty {r['fit_u']:.2g} px): its route's median error "
+        f"at the fit is {r['median']:.3f} mm against Table 3's {r['paper']:.3f} mm, {met}; "
+        f"{_spreads(table)}."
+    )
+
+
+def drift_figure(table: pd.DataFrame):
+    """The four pairs' median before-ICP errors (95 % intervals) against the drift scale, each
+    with the paper's value as a dashed line of its colour, and the joint fit with its standard
+    uncertainty as a band."""
+    import matplotlib.pyplot as plt
+
+    grid = table[table["point"] == "grid"]
+    fit = table[table["point"] == "joint fit"].iloc[0]
+    fig, ax = plt.subplots(figsize=(5.8, 3.8))
+    for k, (name, rows) in enumerate(grid.groupby("baseline", sort=False)):
+        colour = f"C{k}"
+        x = rows["drift_scale"].to_numpy(float)
+        ax.plot(x, rows["median"], marker="o", color=colour, label=_pair_label(name))
+        ax.fill_between(x, rows["ci_low"], rows["ci_high"], color=colour, alpha=0.15)
+        ax.axhline(float(rows["paper"].iloc[0]), color=colour, ls="--", lw=1)
+    ax.axvspan(fit["fit"] - fit["fit_u"], fit["fit"] + fit["fit_u"], color="0.85", zorder=0)
+    ax.axvline(fit["drift_scale"], color="0.3", lw=1, label="joint fit (fed value)")
+    ax.set_xlabel("drift scale (x the step of scenario.toml)")
+    ax.set_ylabel("before-ICP centre-distance error (mm)")
+    ax.set_title("Drift: four pairs (lines), the paper's values (dashed)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
