@@ -417,6 +417,87 @@ class MapSpec:
         return list(dict.fromkeys(self.claims[c] for c in claims))
 
 
+def screened_inputs(
+    model: BaseModel,
+    claims: Iterable[str],
+    not_read: Mapping[str, Sequence[str]],
+    *,
+    kinds: Sequence[str] = ("assumed",),
+    only_read: Mapping[str, Sequence[str]] | None = None,
+    extra: Sequence[Input] = (),
+    unused: Mapping[str, str] | None = None,
+) -> tuple[list[Input], list[str]]:
+    """The inputs a paper's map screens: the ranged inputs of its validated scenario file
+    (:func:`ledger_inputs`) and ``extra``, each with the claims whose computation reads it
+    (:func:`assign_claims`).
+
+    Parameters
+    ----------
+    model : pydantic.BaseModel
+        The paper's validated scenario file.
+    claims : iterable of str
+        The claims of the map, in its order.
+    not_read, only_read : mapping of str to sequence of str
+        As for :func:`assign_claims`.
+    kinds : sequence of str, default ("assumed",)
+        The provenance kinds screened.
+    extra : sequence of Input
+        Inputs the file does not hold (the keyword of a calibrated value), after its own.
+    unused : mapping of str to str, optional
+        Dotted key -> why no claim reads it in this scenario: not screened, named with the
+        reason.
+
+    Returns
+    -------
+    (list of Input, list of str)
+        The inputs, in the file's order, and the ranged inputs not screened, with the reason.
+    """
+    found, skipped = ledger_inputs(model, kinds)
+    unused = unused or {}
+    skipped += [f"{item.label}: {unused[item.key]}" for item in found if item.key in unused]
+    found = [item for item in [*found, *extra] if item.key not in unused]
+    return assign_claims(found, claims, not_read, skipped, only_read), skipped
+
+
+def paper_spec(
+    claims: Mapping[str, str],
+    inputs: tuple[Sequence[Input], Sequence[str]],
+    experiment: Callable[[str, Mapping[str, Any], int], montecarlo.Experiment],
+    statistics: Callable[[str, pd.DataFrame], Mapping[str, np.ndarray]],
+    judge: Callable[[str, pd.DataFrame], Mapping[str, Any]],
+    *,
+    only: Sequence[str],
+    scenario: str,
+) -> MapSpec:
+    """A paper's :class:`MapSpec`: its claims and trial functions, over the inputs ``only``
+    names (:func:`select_inputs`; every input when it is empty).
+
+    Parameters
+    ----------
+    claims : mapping of str to str
+        Claim id -> the trial group that computes it.
+    inputs : (sequence of Input, sequence of str)
+        The inputs and the ranged inputs not screened (:func:`screened_inputs`).
+    experiment, statistics, judge : callable
+        As :class:`MapSpec` takes them.
+    only : sequence of str
+        The keys to screen (empty: all).
+    scenario : str
+        What the inputs belong to, for the error (``"selfcal scenario"``).
+
+    Returns
+    -------
+    MapSpec
+
+    Raises
+    ------
+    CalibrationError
+        If ``only`` names an input not among ``inputs``.
+    """
+    chosen = select_inputs(inputs[0], only, scenario)
+    return MapSpec(claims, tuple(chosen), experiment, statistics, judge, tuple(inputs[1]))
+
+
 class _Runner:
     """Runs and remembers the points of one map: (group, setting) -> (statistics, verdicts)."""
 
@@ -736,7 +817,9 @@ __all__ = [
     "assign_claims",
     "calibrated_input",
     "matches",
+    "paper_spec",
     "point_setting",
+    "screened_inputs",
     "select_inputs",
     "MAP_COLUMNS",
     "STAGES",
