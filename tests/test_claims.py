@@ -3,7 +3,8 @@
 :func:`calstudy.claims.judge_claim` takes the kind and direction from ``data/claims.csv``, the
 figures from the columns of :class:`calstudy.claims.ClaimColumns`, and applies the controls and
 the oracle gate; :func:`judge_along` does the same at each point of a sweep, and
-:func:`verdict_runs` says where a verdict changes along one.
+:func:`calstudy.core.robustness.verdict_runs` and ``verdict_changes`` say where a verdict changes
+along one.
 """
 
 from __future__ import annotations
@@ -23,10 +24,10 @@ from calstudy.claims import (
     control_rows,
     judge_along,
     judge_claim,
-    verdict_runs,
 )
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import REPO_ROOT
+from calstudy.core.robustness import verdict_changes, verdict_runs
 from calstudy.core.verdicts import judge
 
 COC = ClaimColumns(
@@ -127,6 +128,19 @@ def test_verdict_runs_say_where_the_verdict_changes():
         verdict_runs([1, 2], ["a"])
     with pytest.raises(CalibrationError, match="0 values but 0 verdicts"):
         verdict_runs([], [])
+
+
+def test_verdict_changes_name_the_values_on_either_side_of_each_change():
+    verdicts = ["a", "a", "b", "a", "a"]
+    changes = ["from a at 2 to b at 3", "from b at 3 to a at 4"]
+    assert verdict_changes([1, 2, 3, 4, 5], verdicts) == changes
+    text = "{a} -> {b} between {x} and {y}"
+    assert verdict_changes([0.5, 1.25], ["a", "b"], text, "{:.2f}".format) == [
+        "a -> b between 0.50 and 1.25"
+    ]
+    assert verdict_changes([1, 2], ["a", "a"]) == [] and verdict_changes([], []) == []
+    with pytest.raises(CalibrationError, match="2 values but 1 verdicts"):
+        verdict_changes([1, 2], ["a"])
 
 
 def rule_imports(source: str) -> set[str]:

@@ -4,15 +4,15 @@ A claim is judged from its register row (``data/claims.csv``: kind and direction
 columns of a table of trials that carry its figure, its paired baseline and its two controls
 (:class:`ClaimColumns`, one declaration per claim in its paper's report module):
 :func:`judge_claim` applies the v2 rule (:func:`calstudy.core.verdicts.judge`, the controls and
-the oracle gate), :func:`judge_along` the same rule at each point of a sweep, and
-:func:`verdict_runs` says where a verdict changes along one. :func:`claim_row` and
+the oracle gate), :func:`judge_along` the same rule at each point of a sweep (where its
+verdict changes: :func:`calstudy.core.robustness.verdict_changes`). :func:`claim_row` and
 :func:`control_rows` turn a verdict into the rows of ``claims.csv`` and ``controls.csv``.
 Notebooks never type a verdict in. Writing the rows to files is :mod:`calstudy.io.results`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -357,39 +357,6 @@ def verdict_or_none(make):
         return make()
     except TooFewTrials:
         return None
-
-
-def verdict_runs(values: Sequence, verdicts: Sequence[str]) -> list[tuple[str, list]]:
-    """Where a verdict changes along a sweep: the runs of equal verdicts in the order given.
-
-    Parameters
-    ----------
-    values : sequence, length M
-        The swept values, one per point.
-    verdicts : sequence of str, length M
-        The verdict at each point.
-
-    Returns
-    -------
-    list of (str, list)
-        ``(verdict, values of the run)`` per run of consecutive equal verdicts; one run when
-        the verdict does not change.
-
-    Raises
-    ------
-    CalibrationError
-        If there are no points or the lengths differ.
-    """
-    values, verdicts = list(values), [str(v) for v in verdicts]
-    if len(values) != len(verdicts) or not values:
-        raise CalibrationError(f"{len(values)} values but {len(verdicts)} verdicts")
-    runs: list[tuple[str, list]] = []
-    for value, verdict in zip(values, verdicts, strict=True):
-        if runs and runs[-1][0] == verdict:
-            runs[-1][1].append(value)
-        else:
-            runs.append((verdict, [value]))
-    return runs
 
 
 def claim_row(

@@ -701,6 +701,80 @@ def _judged(spec, run, setting, claims, n, base, where) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------------------------
+# where a verdict changes along a sweep
+
+
+def verdict_runs(values: Sequence, verdicts: Sequence[str]) -> list[tuple[str, list]]:
+    """Where a verdict changes along a sweep: the runs of equal verdicts in the order given.
+
+    Parameters
+    ----------
+    values : sequence, length M
+        The swept values, one per point.
+    verdicts : sequence of str, length M
+        The verdict at each point.
+
+    Returns
+    -------
+    list of (str, list)
+        ``(verdict, values of the run)`` per run of consecutive equal verdicts; one run when
+        the verdict does not change.
+
+    Raises
+    ------
+    CalibrationError
+        If there are no points or the lengths differ.
+    """
+    values, verdicts = list(values), [str(v) for v in verdicts]
+    if len(values) != len(verdicts) or not values:
+        raise CalibrationError(f"{len(values)} values but {len(verdicts)} verdicts")
+    runs: list[tuple[str, list]] = []
+    for value, verdict in zip(values, verdicts, strict=True):
+        if runs and runs[-1][0] == verdict:
+            runs[-1][1].append(value)
+        else:
+            runs.append((verdict, [value]))
+    return runs
+
+
+def verdict_changes(
+    values: Sequence,
+    verdicts: Sequence[str],
+    text: str = "from {a} at {x} to {b} at {y}",
+    fmt: Callable[[Any], str] = "{:g}".format,
+) -> list[str]:
+    """Where a verdict changes along a sweep, one text per change (none when it holds).
+
+    Parameters
+    ----------
+    values : sequence, length M
+        The swept values, in the order of the sweep (ascending).
+    verdicts : sequence of str, length M
+        The verdict at each point.
+    text : str, default "from {a} at {x} to {b} at {y}"
+        The words of one change: ``{a}`` and ``{b}`` the verdicts before and after, ``{x}``
+        the last value with ``{a}`` and ``{y}`` the first with ``{b}``, written by ``fmt``.
+    fmt : callable, default ``"{:g}".format``
+        Writes a value.
+
+    Returns
+    -------
+    list of str
+        One text per change; empty when the verdict holds or there are no points.
+
+    Raises
+    ------
+    CalibrationError
+        If the lengths differ (:func:`verdict_runs`).
+    """
+    if not len(values) and not len(verdicts):
+        return []
+    runs = verdict_runs(values, verdicts)
+    pairs = zip(runs, runs[1:], strict=False)
+    return [text.format(a=a, x=fmt(xa[-1]), b=b, y=fmt(xb[0])) for (a, xa), (b, xb) in pairs]
+
+
+# ----------------------------------------------------------------------------------------------
 # reading a map
 
 
@@ -714,14 +788,8 @@ def thresholds(table: pd.DataFrame, claim: str, label: str) -> list[str]:
     sweep = table[
         (table["claim"] == claim) & (table["stage"] == "sweep") & (table["input"] == label)
     ].sort_values("value")
-    out = []
-    pairs = zip(sweep.iloc[:-1].itertuples(), sweep.iloc[1:].itertuples(), strict=True)
-    for a, b in pairs:
-        if a.verdict != b.verdict:
-            out.append(
-                f"{a.verdict} -> {b.verdict} between {_number(a.value)} and {_number(b.value)}"
-            )
-    return out
+    text = "{a} -> {b} between {x} and {y}"
+    return verdict_changes(sweep["value"].tolist(), sweep["verdict"].tolist(), text, _number)
 
 
 def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> pd.DataFrame:
@@ -830,4 +898,6 @@ __all__ = [
     "ledger_inputs",
     "robustness_map",
     "thresholds",
+    "verdict_changes",
+    "verdict_runs",
 ]

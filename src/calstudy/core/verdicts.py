@@ -552,3 +552,4 @@ def oracle_gate(claim: Verdict, oracle: Verdict, mechanism: str) -> Verdict:
         kind=claim.kind,
         n=claim.n,
     )
+

@@ -20,9 +20,9 @@ from calstudy.claims import (
     claim_row,
     control_rows,
     judge_claim,
-    verdict_runs,
 )
 from calstudy.core.labels import claim_label
+from calstudy.core.robustness import verdict_runs
 from calstudy.core.stats import median_interval
 from calstudy.core.verdicts import not_testable
 from calstudy.estimators import binocular as bino

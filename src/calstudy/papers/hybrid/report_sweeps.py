@@ -20,10 +20,10 @@ from calstudy.claims import (
     judge_along,
     judge_claim,
     verdict_or_none,
-    verdict_runs,
 )
 from calstudy.core.errors import CalibrationError
 from calstudy.core.labels import plain
+from calstudy.core.robustness import verdict_changes
 from calstudy.core.stats import median_and_spread, rms_ratio_interval
 from calstudy.papers.hybrid.compensation import shortfall_bound, shortfall_distance
 from calstudy.papers.hybrid.scenario import load_published
@@ -291,11 +291,7 @@ def where_verdict_changes(values, verdicts, default, what: str, unit: str = "") 
     values = [values[i] for i in order]
     verdicts = [verdicts[i] for i in order]
     unit = f" {unit}" if unit else ""
-    runs = verdict_runs(values, verdicts)
-    changes = [
-        f"from {a} at {xa[-1]:g}{unit} to {b} at {xb[0]:g}{unit}"
-        for (a, xa), (b, xb) in zip(runs, runs[1:], strict=False)
-    ]
+    changes = verdict_changes(values, verdicts, fmt=lambda x: f"{x:g}{unit}")
     span = f"{values[0]:g}-{values[-1]:g}{unit}"
     at = [v for x, v in zip(values, verdicts, strict=True) if np.isclose(x, float(default))]
     at_default = f", {at[0]} at the default {float(default):g}{unit}" if at else ""

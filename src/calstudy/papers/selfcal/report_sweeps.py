@@ -25,8 +25,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from calstudy.claims import Judged, verdict_runs  # noqa: E402
+from calstudy.claims import Judged  # noqa: E402
 from calstudy.core.errors import CalibrationError  # noqa: E402
+from calstudy.core.robustness import verdict_runs  # noqa: E402
 from calstudy.papers.selfcal.experiments import (  # noqa: E402
     NULL,
     NULL_ROBOT_NOISE,
@@ -259,8 +260,8 @@ def condition_sentence(verdicts: pd.DataFrame, key: str, claim: str, own: float,
     Raises
     ------
     CalibrationError
-        If the rows have no point at ``own`` for ``claim`` (:func:`calstudy.claims.verdict_runs`
-        for empty rows).
+        If the rows have no point at ``own`` for ``claim``
+        (:func:`calstudy.core.robustness.verdict_runs` for empty rows).
     """
     points = verdicts[verdicts["claim"] == claim].sort_values(key)
     runs = verdict_runs(points[key].tolist(), points["verdict"].tolist())
