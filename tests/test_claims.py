@@ -180,3 +180,26 @@ def test_too_few_trials_is_its_own_error_and_a_sweep_point_reads_none():
     assert verdict_or_none(lambda: median_interval([1.0, 2.0, 3.0])) is None
     with pytest.raises(CalibrationError, match="non-finite"):
         verdict_or_none(lambda: median_interval([1.0] * 10 + [float("nan")]))
+
+
+def test_a_claim_whose_null_control_passes_is_not_testable():
+    from calstudy.claims import null_gate
+
+    rule = {"kind": "ratio", "direction": "lower", "min_trials": 30}
+    rng = np.random.default_rng(0)
+    claim = judge(rng.uniform(0.5, 0.7, 30), published=0.6, **rule)
+    broken = judge(rng.uniform(0.5, 0.7, 30), **rule)  # the null improves too
+    sound = judge(rng.uniform(0.9, 1.1, 30), **rule)
+    assert (claim.verdict, broken.verdict, sound.verdict) == (
+        "reproduced",
+        "reproduced",
+        "not reproduced",
+    )
+    assert null_gate(Judged(claim, sound)) == Judged(claim, sound)
+    gated = null_gate(Judged(claim, broken, sound))
+    assert gated.claim.verdict == "not testable" and gated[1:] == (broken, sound)
+    assert (gated.claim.kind, gated.claim.n) == ("ratio", 30)
+    assert "null control comes out reproduced" in gated.claim.note
+    assert "the claim alone came out reproduced" in gated.claim.note
+    with pytest.raises(CalibrationError, match="a null gate needs a null control"):
+        null_gate(Judged(claim))

@@ -4,9 +4,10 @@ A claim is judged from its register row (``data/claims.csv``: kind and direction
 columns of a table of trials that carry its figure, its paired baseline and its two controls
 (:class:`ClaimColumns`, one declaration per claim in its paper's report module):
 :func:`judge_claim` applies the v2 rule (:func:`calstudy.core.verdicts.judge`, the controls and
-the oracle gate), :func:`judge_along` the same rule at each point of a sweep (where its
-verdict changes: :func:`calstudy.core.robustness.verdict_changes`). :func:`claim_row` and
-:func:`control_rows` turn a verdict into the rows of ``claims.csv`` and ``controls.csv``.
+the oracle gate), :func:`null_gate` records a claim whose null control passes as not testable,
+:func:`judge_along` applies the rule at each point of a sweep (where its verdict changes:
+:func:`calstudy.core.robustness.verdict_changes`). :func:`claim_row` and :func:`control_rows`
+turn a verdict into the rows of ``claims.csv`` and ``controls.csv``.
 Notebooks never type a verdict in. Writing the rows to files is :mod:`calstudy.io.results`.
 """
 
@@ -29,6 +30,7 @@ from calstudy.core.verdicts import (
     judge,
     judge_controls,
     judge_rms_ratio,
+    not_testable,
     oracle_gate,
 )
 
@@ -261,6 +263,40 @@ def judge_claim(
         **rule,
     )
     return Judged(oracle_gate(claim, oracle, columns.mechanism), null, oracle)
+
+
+def null_gate(judged: Judged) -> Judged:
+    """A claim judged ``not testable`` where its null control does not come out ``not
+    reproduced`` (rule 8 read for a paper that records such a claim rather than refusing it: the
+    test cannot tell the method from its null control there); the controls as they came out.
+
+    Parameters
+    ----------
+    judged : Judged
+        The claim (after its oracle gate) and its controls, with a null control.
+
+    Returns
+    -------
+    Judged
+        ``judged`` itself when the null control comes out ``not reproduced``; else the claim
+        :func:`~calstudy.core.verdicts.not_testable` with its kind and N, the note naming the
+        null control's verdict and the claim's own.
+
+    Raises
+    ------
+    CalibrationError
+        If ``judged`` has no null control.
+    """
+    claim, null, oracle = judged
+    if null is None:
+        raise CalibrationError(f"a null gate needs a null control; {claim.note!r} has none")
+    if null.verdict == "not reproduced":
+        return judged
+    reason = (
+        f"the null control comes out {null.verdict} ({null.note}): the test cannot tell the "
+        f"method from its null control here (the claim alone came out {claim.verdict})"
+    )
+    return Judged(not_testable(reason, kind=claim.kind, n=claim.n), null, oracle)
 
 
 def _judge_pooled(claim_id, trials, columns, kind, direction, bound, min_trials) -> Judged:

@@ -22,6 +22,7 @@ from calstudy.claims import (
     claim_row,
     control_rows,
     judge_claim,
+    null_gate,
     verdict_or_none,
 )
 from calstudy.core.errors import CalibrationError
@@ -769,19 +770,6 @@ def correlation_statistics(sub: pd.DataFrame) -> dict[str, np.ndarray]:
     }
 
 
-def _null_gate(claim, null):
-    """The claim's verdict, or not testable when its null control does not come out
-    ``not reproduced`` (doing nothing passes: the test is broken there)."""
-    if null.verdict == "not reproduced":
-        return claim
-    return not_testable(
-        f"the null control comes out {null.verdict} ({null.note}): the test cannot tell the "
-        f"method from doing nothing here (the claim alone came out {claim.verdict})",
-        kind=claim.kind,
-        n=claim.n,
-    )
-
-
 def production_verdicts(sub: pd.DataFrame, min_trials: int = 200) -> dict[str, Judged]:
     """The three claims of notebook 02 on the trials of ``sub`` (one ``n_compensation``): claim
     id -> :class:`calstudy.claims.Judged` (the verdict after its gates, the null control, the
@@ -811,8 +799,8 @@ def production_verdicts(sub: pd.DataFrame, min_trials: int = 200) -> dict[str, J
     null = judge_claim("hybrid.correlation", stats, ClaimColumns("r_distance_null"), **rule).claim
     return {
         "hybrid.systematic": Judged(_gate_by_robot_off(v.claim, off), off),
-        "hybrid.deviation": Judged(_null_gate(dev.claim, dev.null), dev.null, dev.oracle),
-        "hybrid.correlation": Judged(_null_gate(corr, null), null),
+        "hybrid.deviation": null_gate(dev),
+        "hybrid.correlation": null_gate(Judged(corr, null)),
     }
 
 
