@@ -369,6 +369,13 @@ def judge_along(
 TOO_FEW = "too few trials"
 
 
+def verdict_text(judged: Judged | None) -> str:
+    """The verdict of a sweep point as its table writes it: the claim's verdict, or
+    :data:`TOO_FEW` where the point has too few trials (``judged`` None, as
+    :func:`verdict_or_none` and :func:`judge_along` give it)."""
+    return TOO_FEW if judged is None else judged.claim.verdict
+
+
 def verdict_or_none(make):
     """``make()``, or None when there are too few trials for an interval of the median (or of
     a pooled RMS ratio).

@@ -480,19 +480,13 @@ def paper_spec(
         The inputs and the ranged inputs not screened (:func:`screened_inputs`).
     experiment, statistics, judge : callable
         As :class:`MapSpec` takes them.
-    only : sequence of str
-        The keys to screen (empty: all).
-    scenario : str
-        What the inputs belong to, for the error (``"selfcal scenario"``).
+    only, scenario
+        As for :func:`select_inputs`, which raises when ``only`` names an input not among
+        ``inputs``.
 
     Returns
     -------
     MapSpec
-
-    Raises
-    ------
-    CalibrationError
-        If ``only`` names an input not among ``inputs``.
     """
     chosen = select_inputs(inputs[0], only, scenario)
     return MapSpec(claims, tuple(chosen), experiment, statistics, judge, tuple(inputs[1]))

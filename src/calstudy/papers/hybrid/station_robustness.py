@@ -145,12 +145,8 @@ def map_spec(only: Sequence[str] = ()) -> MapSpec:
     Parameters
     ----------
     only : sequence of str, optional
-        Screen only these inputs (dotted keys, a vector's components all); empty: every input.
-
-    Raises
-    ------
-    CalibrationError
-        If ``only`` names an input the map does not screen.
+        The inputs to screen (:func:`calstudy.core.robustness.paper_spec`, which refuses one the
+        map does not screen); empty: every input.
     """
     return paper_spec(
         CLAIM_PARTS,
