@@ -171,7 +171,7 @@ def test_paper_modules_judge_claims_through_the_register_only():
 
 
 def test_too_few_trials_is_its_own_error_and_a_sweep_point_reads_none():
-    from calstudy.claims import verdict_or_none
+    from calstudy.claims import verdict_or_none, verdict_text
     from calstudy.core.errors import TooFewTrials
     from calstudy.core.stats import median_interval
 
@@ -180,6 +180,9 @@ def test_too_few_trials_is_its_own_error_and_a_sweep_point_reads_none():
     assert verdict_or_none(lambda: median_interval([1.0, 2.0, 3.0])) is None
     with pytest.raises(CalibrationError, match="non-finite"):
         verdict_or_none(lambda: median_interval([1.0] * 10 + [float("nan")]))
+    # a sweep table writes the point's verdict, or that it has too few trials
+    judged = Judged(judge(np.linspace(0.5, 0.7, 30), kind="ratio", direction="lower"))
+    assert verdict_text(judged) == "reproduced" and verdict_text(None) == TOO_FEW
 
 
 def test_a_claim_whose_null_control_passes_is_not_testable():
