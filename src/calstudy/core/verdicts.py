@@ -552,4 +552,3 @@ def oracle_gate(claim: Verdict, oracle: Verdict, mechanism: str) -> Verdict:
         kind=claim.kind,
         n=claim.n,
     )
-
