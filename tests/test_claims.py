@@ -3,7 +3,8 @@
 :func:`calstudy.claims.judge_claim` takes the kind and direction from ``data/claims.csv``, the
 figures from the columns of :class:`calstudy.claims.ClaimColumns`, and applies the controls and
 the oracle gate; :func:`judge_along` does the same at each point of a sweep, and
-:func:`verdict_runs` says where a verdict changes along one.
+:func:`calstudy.core.robustness.verdict_runs` and ``verdict_changes`` say where a verdict changes
+along one.
 """
 
 from __future__ import annotations
@@ -23,10 +24,10 @@ from calstudy.claims import (
     control_rows,
     judge_along,
     judge_claim,
-    verdict_runs,
 )
 from calstudy.core.errors import CalibrationError
 from calstudy.core.paths import REPO_ROOT
+from calstudy.core.robustness import verdict_changes, verdict_runs
 from calstudy.core.verdicts import judge
 
 COC = ClaimColumns(
@@ -129,6 +130,19 @@ def test_verdict_runs_say_where_the_verdict_changes():
         verdict_runs([], [])
 
 
+def test_verdict_changes_name_the_values_on_either_side_of_each_change():
+    verdicts = ["a", "a", "b", "a", "a"]
+    changes = ["from a at 2 to b at 3", "from b at 3 to a at 4"]
+    assert verdict_changes([1, 2, 3, 4, 5], verdicts) == changes
+    text = "{a} -> {b} between {x} and {y}"
+    assert verdict_changes([0.5, 1.25], ["a", "b"], text, "{:.2f}".format) == [
+        "a -> b between 0.50 and 1.25"
+    ]
+    assert verdict_changes([1, 2], ["a", "a"]) == [] and verdict_changes([], []) == []
+    with pytest.raises(CalibrationError, match="2 values but 1 verdicts"):
+        verdict_changes([1, 2], ["a"])
+
+
 def rule_imports(source: str) -> set[str]:
     """Names a module imports from the verdict rule (``calstudy.core.verdicts``)."""
     names = set()
@@ -157,7 +171,7 @@ def test_paper_modules_judge_claims_through_the_register_only():
 
 
 def test_too_few_trials_is_its_own_error_and_a_sweep_point_reads_none():
-    from calstudy.claims import verdict_or_none
+    from calstudy.claims import verdict_or_none, verdict_text
     from calstudy.core.errors import TooFewTrials
     from calstudy.core.stats import median_interval
 
@@ -166,3 +180,29 @@ def test_too_few_trials_is_its_own_error_and_a_sweep_point_reads_none():
     assert verdict_or_none(lambda: median_interval([1.0, 2.0, 3.0])) is None
     with pytest.raises(CalibrationError, match="non-finite"):
         verdict_or_none(lambda: median_interval([1.0] * 10 + [float("nan")]))
+    # a sweep table writes the point's verdict, or that it has too few trials
+    judged = Judged(judge(np.linspace(0.5, 0.7, 30), kind="ratio", direction="lower"))
+    assert verdict_text(judged) == "reproduced" and verdict_text(None) == TOO_FEW
+
+
+def test_a_claim_whose_null_control_passes_is_not_testable():
+    from calstudy.claims import null_gate
+
+    rule = {"kind": "ratio", "direction": "lower", "min_trials": 30}
+    rng = np.random.default_rng(0)
+    claim = judge(rng.uniform(0.5, 0.7, 30), published=0.6, **rule)
+    broken = judge(rng.uniform(0.5, 0.7, 30), **rule)  # the null improves too
+    sound = judge(rng.uniform(0.9, 1.1, 30), **rule)
+    assert (claim.verdict, broken.verdict, sound.verdict) == (
+        "reproduced",
+        "reproduced",
+        "not reproduced",
+    )
+    assert null_gate(Judged(claim, sound)) == Judged(claim, sound)
+    gated = null_gate(Judged(claim, broken, sound))
+    assert gated.claim.verdict == "not testable" and gated[1:] == (broken, sound)
+    assert (gated.claim.kind, gated.claim.n) == ("ratio", 30)
+    assert "null control comes out reproduced" in gated.claim.note
+    assert "the claim alone came out reproduced" in gated.claim.note
+    with pytest.raises(CalibrationError, match="a null gate needs a null control"):
+        null_gate(Judged(claim))

@@ -4,15 +4,16 @@ A claim is judged from its register row (``data/claims.csv``: kind and direction
 columns of a table of trials that carry its figure, its paired baseline and its two controls
 (:class:`ClaimColumns`, one declaration per claim in its paper's report module):
 :func:`judge_claim` applies the v2 rule (:func:`calstudy.core.verdicts.judge`, the controls and
-the oracle gate), :func:`judge_along` the same rule at each point of a sweep, and
-:func:`verdict_runs` says where a verdict changes along one. :func:`claim_row` and
-:func:`control_rows` turn a verdict into the rows of ``claims.csv`` and ``controls.csv``.
+the oracle gate), :func:`null_gate` records a claim whose null control passes as not testable,
+:func:`judge_along` applies the rule at each point of a sweep (where its verdict changes:
+:func:`calstudy.core.robustness.verdict_changes`). :func:`claim_row` and :func:`control_rows`
+turn a verdict into the rows of ``claims.csv`` and ``controls.csv``.
 Notebooks never type a verdict in. Writing the rows to files is :mod:`calstudy.io.results`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -29,6 +30,7 @@ from calstudy.core.verdicts import (
     judge,
     judge_controls,
     judge_rms_ratio,
+    not_testable,
     oracle_gate,
 )
 
@@ -263,6 +265,40 @@ def judge_claim(
     return Judged(oracle_gate(claim, oracle, columns.mechanism), null, oracle)
 
 
+def null_gate(judged: Judged) -> Judged:
+    """A claim judged ``not testable`` where its null control does not come out ``not
+    reproduced`` (rule 8 read for a paper that records such a claim rather than refusing it: the
+    test cannot tell the method from its null control there); the controls as they came out.
+
+    Parameters
+    ----------
+    judged : Judged
+        The claim (after its oracle gate) and its controls, with a null control.
+
+    Returns
+    -------
+    Judged
+        ``judged`` itself when the null control comes out ``not reproduced``; else the claim
+        :func:`~calstudy.core.verdicts.not_testable` with its kind and N, the note naming the
+        null control's verdict and the claim's own.
+
+    Raises
+    ------
+    CalibrationError
+        If ``judged`` has no null control.
+    """
+    claim, null, oracle = judged
+    if null is None:
+        raise CalibrationError(f"a null gate needs a null control; {claim.note!r} has none")
+    if null.verdict == "not reproduced":
+        return judged
+    reason = (
+        f"the null control comes out {null.verdict} ({null.note}): the test cannot tell the "
+        f"method from its null control here (the claim alone came out {claim.verdict})"
+    )
+    return Judged(not_testable(reason, kind=claim.kind, n=claim.n), null, oracle)
+
+
 def _judge_pooled(claim_id, trials, columns, kind, direction, bound, min_trials) -> Judged:
     """:func:`judge_claim` for ``columns.pooled``: the RMS ratios of the claim and its controls
     (:func:`calstudy.core.verdicts.judge_rms_ratio`), the claim gated by its oracle."""
@@ -333,6 +369,13 @@ def judge_along(
 TOO_FEW = "too few trials"
 
 
+def verdict_text(judged: Judged | None) -> str:
+    """The verdict of a sweep point as its table writes it: the claim's verdict, or
+    :data:`TOO_FEW` where the point has too few trials (``judged`` None, as
+    :func:`verdict_or_none` and :func:`judge_along` give it)."""
+    return TOO_FEW if judged is None else judged.claim.verdict
+
+
 def verdict_or_none(make):
     """``make()``, or None when there are too few trials for an interval of the median (or of
     a pooled RMS ratio).
@@ -357,39 +400,6 @@ def verdict_or_none(make):
         return make()
     except TooFewTrials:
         return None
-
-
-def verdict_runs(values: Sequence, verdicts: Sequence[str]) -> list[tuple[str, list]]:
-    """Where a verdict changes along a sweep: the runs of equal verdicts in the order given.
-
-    Parameters
-    ----------
-    values : sequence, length M
-        The swept values, one per point.
-    verdicts : sequence of str, length M
-        The verdict at each point.
-
-    Returns
-    -------
-    list of (str, list)
-        ``(verdict, values of the run)`` per run of consecutive equal verdicts; one run when
-        the verdict does not change.
-
-    Raises
-    ------
-    CalibrationError
-        If there are no points or the lengths differ.
-    """
-    values, verdicts = list(values), [str(v) for v in verdicts]
-    if len(values) != len(verdicts) or not values:
-        raise CalibrationError(f"{len(values)} values but {len(verdicts)} verdicts")
-    runs: list[tuple[str, list]] = []
-    for value, verdict in zip(values, verdicts, strict=True):
-        if runs and runs[-1][0] == verdict:
-            runs[-1][1].append(value)
-        else:
-            runs.append((verdict, [value]))
-    return runs
 
 
 def claim_row(

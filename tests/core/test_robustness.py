@@ -16,7 +16,9 @@ from calstudy.core.robustness import (
     claim_summary,
     ledger_inputs,
     matches,
+    paper_spec,
     robustness_map,
+    screened_inputs,
     select_inputs,
 )
 from calstudy.core.verdicts import judge
@@ -220,3 +222,28 @@ def test_only_selects_inputs_and_refuses_one_the_map_does_not_screen():
     assert select_inputs(inputs, ["b.y"], "toy scenario") == inputs[1:]
     with pytest.raises(CalibrationError, match=r"\['c.z'\] are not screened inputs of the toy"):
         select_inputs(inputs, ["c.z", "a.x"], "toy scenario")
+
+
+def test_a_papers_spec_screens_its_ledger_and_extra_inputs_for_their_readers():
+    from calstudy.papers.dualarm.scenario import load_scenario
+
+    scn = load_scenario()
+    extra = [Input("drift_scale", 2.0, 1.0, 3.0, "calibrated")]
+    unused = {"sensor.points_per_scan": "read only by another route"}
+    claims = {"p": "g", "q": "g"}
+    not_read = {"p": ("sensor.", "drift_scale"), "q": ("layout.",)}
+    inputs, skipped = screened_inputs(scn, claims, not_read, extra=extra, unused=unused)
+    by_key = {i.label: i.claims for i in inputs}
+    assert by_key["drift_scale"] == ("q",) and list(by_key)[-1] == "drift_scale"
+    assert by_key["layout.world2base1_mm[0]"] == ("p",)
+    assert "sensor.points_per_scan" not in by_key
+    assert "sensor.points_per_scan: read only by another route" in skipped
+    assert [i.label for i in inputs] == [
+        i.label for i in assign_claims(ledger_inputs(scn)[0] + extra, claims, not_read, [])
+        if i.key not in unused
+    ]
+    spec = paper_spec(claims, (inputs, skipped), None, None, None, only=["drift_scale"],
+                      scenario="toy scenario")
+    assert [i.key for i in spec.inputs] == ["drift_scale"] and spec.skipped == tuple(skipped)
+    with pytest.raises(CalibrationError, match=r"\['c.z'\] are not screened inputs of the toy"):
+        paper_spec(claims, (inputs, skipped), None, None, None, only=["c.z"], scenario="toy")

@@ -417,6 +417,81 @@ class MapSpec:
         return list(dict.fromkeys(self.claims[c] for c in claims))
 
 
+def screened_inputs(
+    model: BaseModel,
+    claims: Iterable[str],
+    not_read: Mapping[str, Sequence[str]],
+    *,
+    kinds: Sequence[str] = ("assumed",),
+    only_read: Mapping[str, Sequence[str]] | None = None,
+    extra: Sequence[Input] = (),
+    unused: Mapping[str, str] | None = None,
+) -> tuple[list[Input], list[str]]:
+    """The inputs a paper's map screens: the ranged inputs of its validated scenario file
+    (:func:`ledger_inputs`) and ``extra``, each with the claims whose computation reads it
+    (:func:`assign_claims`).
+
+    Parameters
+    ----------
+    model : pydantic.BaseModel
+        The paper's validated scenario file.
+    claims : iterable of str
+        The claims of the map, in its order.
+    not_read, only_read : mapping of str to sequence of str
+        As for :func:`assign_claims`.
+    kinds : sequence of str, default ("assumed",)
+        The provenance kinds screened.
+    extra : sequence of Input
+        Inputs the file does not hold (the keyword of a calibrated value), after its own.
+    unused : mapping of str to str, optional
+        Dotted key -> why no claim reads it in this scenario: not screened, named with the
+        reason.
+
+    Returns
+    -------
+    (list of Input, list of str)
+        The inputs, in the file's order, and the ranged inputs not screened, with the reason.
+    """
+    found, skipped = ledger_inputs(model, kinds)
+    unused = unused or {}
+    skipped += [f"{item.label}: {unused[item.key]}" for item in found if item.key in unused]
+    found = [item for item in [*found, *extra] if item.key not in unused]
+    return assign_claims(found, claims, not_read, skipped, only_read), skipped
+
+
+def paper_spec(
+    claims: Mapping[str, str],
+    inputs: tuple[Sequence[Input], Sequence[str]],
+    experiment: Callable[[str, Mapping[str, Any], int], montecarlo.Experiment],
+    statistics: Callable[[str, pd.DataFrame], Mapping[str, np.ndarray]],
+    judge: Callable[[str, pd.DataFrame], Mapping[str, Any]],
+    *,
+    only: Sequence[str],
+    scenario: str,
+) -> MapSpec:
+    """A paper's :class:`MapSpec`: its claims and trial functions, over the inputs ``only``
+    names (:func:`select_inputs`; every input when it is empty).
+
+    Parameters
+    ----------
+    claims : mapping of str to str
+        Claim id -> the trial group that computes it.
+    inputs : (sequence of Input, sequence of str)
+        The inputs and the ranged inputs not screened (:func:`screened_inputs`).
+    experiment, statistics, judge : callable
+        As :class:`MapSpec` takes them.
+    only, scenario
+        As for :func:`select_inputs`, which raises when ``only`` names an input not among
+        ``inputs``.
+
+    Returns
+    -------
+    MapSpec
+    """
+    chosen = select_inputs(inputs[0], only, scenario)
+    return MapSpec(claims, tuple(chosen), experiment, statistics, judge, tuple(inputs[1]))
+
+
 class _Runner:
     """Runs and remembers the points of one map: (group, setting) -> (statistics, verdicts)."""
 
@@ -620,6 +695,80 @@ def _judged(spec, run, setting, claims, n, base, where) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------------------------
+# where a verdict changes along a sweep
+
+
+def verdict_runs(values: Sequence, verdicts: Sequence[str]) -> list[tuple[str, list]]:
+    """Where a verdict changes along a sweep: the runs of equal verdicts in the order given.
+
+    Parameters
+    ----------
+    values : sequence, length M
+        The swept values, one per point.
+    verdicts : sequence of str, length M
+        The verdict at each point.
+
+    Returns
+    -------
+    list of (str, list)
+        ``(verdict, values of the run)`` per run of consecutive equal verdicts; one run when
+        the verdict does not change.
+
+    Raises
+    ------
+    CalibrationError
+        If there are no points or the lengths differ.
+    """
+    values, verdicts = list(values), [str(v) for v in verdicts]
+    if len(values) != len(verdicts) or not values:
+        raise CalibrationError(f"{len(values)} values but {len(verdicts)} verdicts")
+    runs: list[tuple[str, list]] = []
+    for value, verdict in zip(values, verdicts, strict=True):
+        if runs and runs[-1][0] == verdict:
+            runs[-1][1].append(value)
+        else:
+            runs.append((verdict, [value]))
+    return runs
+
+
+def verdict_changes(
+    values: Sequence,
+    verdicts: Sequence[str],
+    text: str = "from {a} at {x} to {b} at {y}",
+    fmt: Callable[[Any], str] = "{:g}".format,
+) -> list[str]:
+    """Where a verdict changes along a sweep, one text per change (none when it holds).
+
+    Parameters
+    ----------
+    values : sequence, length M
+        The swept values, in the order of the sweep (ascending).
+    verdicts : sequence of str, length M
+        The verdict at each point.
+    text : str, default "from {a} at {x} to {b} at {y}"
+        The words of one change: ``{a}`` and ``{b}`` the verdicts before and after, ``{x}``
+        the last value with ``{a}`` and ``{y}`` the first with ``{b}``, written by ``fmt``.
+    fmt : callable, default ``"{:g}".format``
+        Writes a value.
+
+    Returns
+    -------
+    list of str
+        One text per change; empty when the verdict holds or there are no points.
+
+    Raises
+    ------
+    CalibrationError
+        If the lengths differ (:func:`verdict_runs`).
+    """
+    if not len(values) and not len(verdicts):
+        return []
+    runs = verdict_runs(values, verdicts)
+    pairs = zip(runs, runs[1:], strict=False)
+    return [text.format(a=a, x=fmt(xa[-1]), b=b, y=fmt(xb[0])) for (a, xa), (b, xb) in pairs]
+
+
+# ----------------------------------------------------------------------------------------------
 # reading a map
 
 
@@ -633,14 +782,8 @@ def thresholds(table: pd.DataFrame, claim: str, label: str) -> list[str]:
     sweep = table[
         (table["claim"] == claim) & (table["stage"] == "sweep") & (table["input"] == label)
     ].sort_values("value")
-    out = []
-    pairs = zip(sweep.iloc[:-1].itertuples(), sweep.iloc[1:].itertuples(), strict=True)
-    for a, b in pairs:
-        if a.verdict != b.verdict:
-            out.append(
-                f"{a.verdict} -> {b.verdict} between {_number(a.value)} and {_number(b.value)}"
-            )
-    return out
+    text = "{a} -> {b} between {x} and {y}"
+    return verdict_changes(sweep["value"].tolist(), sweep["verdict"].tolist(), text, _number)
 
 
 def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> pd.DataFrame:
@@ -736,7 +879,9 @@ __all__ = [
     "assign_claims",
     "calibrated_input",
     "matches",
+    "paper_spec",
     "point_setting",
+    "screened_inputs",
     "select_inputs",
     "MAP_COLUMNS",
     "STAGES",
@@ -747,4 +892,6 @@ __all__ = [
     "ledger_inputs",
     "robustness_map",
     "thresholds",
+    "verdict_changes",
+    "verdict_runs",
 ]

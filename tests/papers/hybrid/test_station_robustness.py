@@ -95,10 +95,8 @@ def test_the_adapter_gives_the_reports_verdicts():
 
 def test_only_refuses_an_input_the_map_does_not_screen():
     with pytest.raises(CalibrationError, match=r"\['sensor.nothing'\]"):
-        robustness.map_spec("", only=["sensor.nothing"])
-    with pytest.raises(CalibrationError, match="its map is drawn on that file"):
-        robustness.map_spec("my_station.toml")
-    spec = robustness.map_spec("", only=["cameras.pixel_sigma"])
+        robustness.map_spec(only=["sensor.nothing"])
+    spec = robustness.map_spec(only=["cameras.pixel_sigma"])
     assert [item.key for item in spec.inputs] == ["cameras.pixel_sigma"]
 
 
@@ -113,7 +111,7 @@ def spot_check(folder, count: int = 3) -> int:
     params = json.loads((folder / "run.json").read_text())["parameters"]
     trials = pd.read_csv(folder / "trials_robustness.csv", keep_default_na=False,
                          na_values={"value": [""], "value2": [""]})
-    spec = robustness.map_spec("", params["robustness_inputs"])
+    spec = robustness.map_spec(params["robustness_inputs"])
     rng = np.random.default_rng(params["seed"])
     for _, row in trials.iloc[rng.choice(len(trials), size=count, replace=False)].iterrows():
         setting = point_setting(
@@ -135,7 +133,7 @@ def test_spot_check_of_a_map(tmp_path):
     from calstudy.io.runs import TRIALS_FLOAT_FORMAT
 
     inputs = ["sensor.centre_floor_mm"]
-    spec = robustness.map_spec("", inputs)
+    spec = robustness.map_spec(inputs)
     _, trials = robustness_map(spec, 3, n_screen=6, n_sweep=6, sweep_size=2,
                                engine={"n_jobs": 1, "cache_dir": tmp_path / "cache"})
     trials = trials[trials["claim"] == "hybrid.handeye"].reset_index(drop=True)

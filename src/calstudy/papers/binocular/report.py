@@ -20,9 +20,10 @@ from calstudy.claims import (
     claim_row,
     control_rows,
     judge_claim,
-    verdict_runs,
+    null_gate,
 )
 from calstudy.core.labels import claim_label
+from calstudy.core.robustness import verdict_runs
 from calstudy.core.stats import median_interval
 from calstudy.core.verdicts import not_testable
 from calstudy.estimators import binocular as bino
@@ -284,22 +285,8 @@ def judge_correction(trials: pd.DataFrame, claim: str):
     claim's verdict after the oracle gate; a claim whose null control passes is ``not
     testable`` (the test cannot tell the method from one that improves anything)."""
     pub = published(*PUBLISHED[claim])
-    judged = judge_claim(claim, with_nulls(trials), CLAIMS[claim], published=pub[1] / pub[0])
-    claim_v, null, oracle = judged
-    if null.verdict == "not reproduced":
-        return judged
-    return Judged(
-        not_testable(
-            f"the null control (the method where its error source is absent) comes out "
-            f"{null.verdict}, ratio {null.effect_median:.3g} [{null.effect_low:.3g}, "
-            f"{null.effect_high:.3g}]: the figure rewards what the method does without its "
-            f"error source (the claim alone: {claim_v.verdict}, ratio "
-            f"{claim_v.effect_median:.3g}); N={claim_v.n}",
-            kind="ratio",
-            n=claim_v.n,
-        ),
-        null,
-        oracle,
+    return null_gate(
+        judge_claim(claim, with_nulls(trials), CLAIMS[claim], published=pub[1] / pub[0])
     )
 
 

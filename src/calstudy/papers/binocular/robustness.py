@@ -36,10 +36,9 @@ from calstudy.core.montecarlo import Experiment
 from calstudy.core.robustness import (
     Input,
     MapSpec,
-    assign_claims,
     calibrated_input,
-    ledger_inputs,
-    select_inputs,
+    paper_spec,
+    screened_inputs,
 )
 from calstudy.core.verdicts import not_testable
 from calstudy.papers.binocular import experiments, report
@@ -156,11 +155,21 @@ def map_inputs(
     """
     calibrated = dict(calibrated or {})
     scenario = load_scenario(scenario_dir or None)
-    found, skipped = ledger_inputs(scenario, ("assumed", "calibrated"))
     mechanism = scenario.sensor.optics.mechanism
     unused = {
-        key: other for other, keys in MECHANISM_INPUTS.items() if other != mechanism for key in keys
+        key: f"read only under the {other} mechanism (the scenario runs {mechanism})"
+        for other, keys in MECHANISM_INPUTS.items()
+        if other != mechanism
+        for key in keys
     }
+    found, skipped = screened_inputs(
+        scenario,
+        CLAIM_PARTS,
+        NOT_READ,
+        kinds=("assumed", "calibrated"),
+        only_read=ONLY_READ,
+        unused=unused,
+    )
     known = {item.key for item in found if item.kind == "calibrated"}
     unknown = sorted(set(calibrated) - known)
     if unknown:
@@ -168,19 +177,11 @@ def map_inputs(
             f"calibrated inputs {unknown} are not calibrated inputs with a range in the ledger "
             f"of the binocular scenario (those are {sorted(known)})"
         )
-    for item in found:
-        if item.key in unused:
-            skipped.append(
-                f"{item.label}: read only under the {unused[item.key]} mechanism (the scenario "
-                f"runs {mechanism})"
-            )
-    used = [item for item in found if item.key not in unused]
-    out = assign_claims(used, CLAIM_PARTS, NOT_READ, skipped, ONLY_READ)
     return [
         calibrated_input(item, *calibrated.get(item.key, (item.base, None)), CALIBRATION_SIGMAS)
         if item.kind == "calibrated"
         else item
-        for item in out
+        for item in found
     ], skipped
 
 
@@ -265,14 +266,15 @@ def map_spec(
     CalibrationError
         If ``only`` names an input the map does not screen, and as :func:`map_inputs`.
     """
-    calibrated = dict(calibrated or {})
-    inputs, skipped = map_inputs(scenario_dir, calibrated)
-    inputs = select_inputs(inputs, only, "binocular scenario")
-    base = {key: float(value) for key, (value, _) in calibrated.items()}
-
-    def experiment(group: str, setting: Mapping, n_trials: int):
-        return robustness_experiment(scenario_dir, n_trials, {**base, **setting} or None, group)
-
-    return MapSpec(
-        CLAIM_PARTS, tuple(inputs), experiment, claim_statistics, judge_claims, tuple(skipped)
+    base = {key: float(value) for key, (value, _) in (calibrated or {}).items()}
+    return paper_spec(
+        CLAIM_PARTS,
+        map_inputs(scenario_dir, calibrated),
+        lambda group, setting, n: robustness_experiment(
+            scenario_dir, n, {**base, **setting} or None, group
+        ),
+        claim_statistics,
+        judge_claims,
+        only=only,
+        scenario="binocular scenario",
     )

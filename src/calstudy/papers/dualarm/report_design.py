@@ -12,10 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from calstudy.claims import ClaimColumns, judge_along, verdict_runs
+from calstudy.claims import ClaimColumns, judge_along
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.labels import claim_label
+from calstudy.core.robustness import verdict_changes
 from calstudy.core.stats import median_interval
 from calstudy.models.targets import circle_centre_bias
 from calstudy.papers.dualarm import simulate as sim
@@ -98,18 +99,14 @@ def sweep_sentences(table: pd.DataFrame, scn: Scenario) -> str:
             f"median {line['median_mm'].iloc[0]:.3f} mm at {_fmt(xs[0])}, "
             f"{line['median_mm'].iloc[-1]:.3f} mm at {_fmt(xs[-1])}"
         )
-        runs = verdict_runs(xs, verdicts)
-        if len(runs) == 1:
+        steps = "; ".join(verdict_changes(xs, verdicts, "from '{a}' at {x} to '{b}' at {y}"))
+        if steps:
+            out.append(f"Along the {name}, the verdict changes {steps} ({ends}).")
+        else:
             out.append(
                 f"Along the {name} ({', '.join(map(_fmt, xs))}), the verdict stays "
                 f"'{verdicts[0]}' ({ends})."
             )
-        else:
-            steps = "; ".join(
-                f"from '{a}' at {_fmt(xa[-1])} to '{b}' at {_fmt(xb[0])}"
-                for (a, xa), (b, xb) in zip(runs, runs[1:], strict=False)
-            )
-            out.append(f"Along the {name}, the verdict changes {steps} ({ends}).")
     return " ".join(out)
 
 

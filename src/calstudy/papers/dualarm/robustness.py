@@ -25,10 +25,9 @@ import pandas as pd
 from calstudy.core.robustness import (
     Input,
     MapSpec,
-    assign_claims,
     calibrated_input,
-    ledger_inputs,
-    select_inputs,
+    paper_spec,
+    screened_inputs,
 )
 from calstudy.papers.dualarm import derived, experiments, report
 from calstudy.papers.dualarm.scenario import load_scenario
@@ -135,15 +134,21 @@ def map_inputs(
     (list of Input, list of str)
         The inputs and the ranged inputs not screened (with the reason).
     """
-    found, skipped = ledger_inputs(load_scenario(scenario_toml or None), SCREENED_KINDS)
-    found += [
+    extra = [
         calibrated_input(key, value, u, CALIBRATION_SIGMAS, bounds="half")
         for key, (value, u) in calibrated.items()
     ]
-    paper = paper_values(scn)
     not_read = {cid: NOT_READ[part] for cid, part in CLAIM_PARTS.items()}
+    found, skipped = screened_inputs(
+        load_scenario(scenario_toml or None),
+        CLAIM_PARTS,
+        not_read,
+        kinds=SCREENED_KINDS,
+        extra=extra,
+    )
+    paper = paper_values(scn)
     out = []
-    for item in assign_claims(found, CLAIM_PARTS, not_read, skipped):
+    for item in found:
         changes: dict = {}
         if item.key in paper:
             changes.update(paper=paper[item.key][0], paper_note=paper[item.key][1])
@@ -198,10 +203,9 @@ def map_spec(
     base = {"drift_scale": drift[0], "plate_sigma_px": plate[0]}
     scn = load_scenario(scenario_toml or None)
     caps = {**default_caps(scn), **(caps or {})}
-    inputs, skipped = map_inputs(
+    inputs = map_inputs(
         scenario_toml, scn, {"drift_scale": drift, "plate_sigma_px": plate}, caps
     )
-    inputs = select_inputs(inputs, only, "dualarm scenario")
 
     def experiment(part: str, setting: Mapping, n_trials: int):
         keywords = {**base, **{k: v for k, v in setting.items() if "." not in k}}
@@ -210,10 +214,12 @@ def map_spec(
             scenario_toml, n_trials, section=part, overrides=overrides, **keywords
         )
 
-    def statistics(part: str, rows: pd.DataFrame):
-        return report.claim_statistics(rows)
-
-    def judge(part: str, rows: pd.DataFrame):
-        return judge_claims(rows, published)
-
-    return MapSpec(CLAIM_PARTS, tuple(inputs), experiment, statistics, judge, tuple(skipped))
+    return paper_spec(
+        CLAIM_PARTS,
+        inputs,
+        experiment,
+        lambda _, rows: report.claim_statistics(rows),
+        lambda _, rows: judge_claims(rows, published),
+        only=only,
+        scenario="dualarm scenario",
+    )

@@ -19,18 +19,12 @@ is added to a coordinate's readings, which is all an offset and a drift do, so n
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
 
-from calstudy.core.robustness import (
-    Input,
-    MapSpec,
-    assign_claims,
-    ledger_inputs,
-    select_inputs,
-)
+from calstudy.core.robustness import MapSpec, paper_spec, screened_inputs
 from calstudy.papers.hybrid import experiments, report
 from calstudy.papers.hybrid.report_sweeps import deviation_statistics
 from calstudy.papers.hybrid.scenario import load_scenario
@@ -49,24 +43,6 @@ NOT_READ = {
     "hybrid.deviation": (),
     "hybrid.correlation": AFTER_FIG6,
 }
-
-
-def map_inputs(scenario_toml: str) -> tuple[list[Input], list[str]]:
-    """The inputs of the map: the ledger's assumed inputs with a range, each with the claims
-    whose computation reads it.
-
-    Parameters
-    ----------
-    scenario_toml : str
-        The production file ("" for the study's).
-
-    Returns
-    -------
-    (list of Input, list of str)
-        The inputs and the ranged inputs not screened (with the reason).
-    """
-    found, skipped = ledger_inputs(load_scenario(scenario_toml or None))
-    return assign_claims(found, CLAIMS, NOT_READ, skipped), skipped
 
 
 def claim_statistics(rows: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -106,31 +82,25 @@ def judge_claims(rows: pd.DataFrame) -> dict:
 
 
 def map_spec(scenario_toml: str, only: Sequence[str] = ()) -> MapSpec:
-    """The :class:`~calstudy.core.robustness.MapSpec` of the three claims.
+    """The :class:`~calstudy.core.robustness.MapSpec` of the three claims: every ranged assumed
+    input of the production scenario, for the claims whose computation reads it.
 
     Parameters
     ----------
     scenario_toml : str
         The production file ("" for the study's).
     only : sequence of str, optional
-        Screen only these inputs (dotted keys, a vector's components all); empty: every input
-        of :func:`map_inputs`.
-
-    Raises
-    ------
-    CalibrationError
-        If ``only`` names an input the map does not screen.
+        The inputs to screen (:func:`calstudy.core.robustness.paper_spec`, which refuses one the
+        map does not screen); empty: every input.
     """
-    inputs, skipped = map_inputs(scenario_toml)
-    inputs = select_inputs(inputs, only, "hybrid production scenario")
-
-    def experiment(group: str, setting: Mapping, n_trials: int):
-        return experiments.robustness_experiment(scenario_toml, n_trials, dict(setting) or None)
-
-    def statistics(group: str, rows: pd.DataFrame):
-        return claim_statistics(rows)
-
-    def judge(group: str, rows: pd.DataFrame):
-        return judge_claims(rows)
-
-    return MapSpec(CLAIM_PARTS, tuple(inputs), experiment, statistics, judge, tuple(skipped))
+    return paper_spec(
+        CLAIM_PARTS,
+        screened_inputs(load_scenario(scenario_toml or None), CLAIMS, NOT_READ),
+        lambda _, setting, n: experiments.robustness_experiment(
+            scenario_toml, n, dict(setting) or None
+        ),
+        lambda _, rows: claim_statistics(rows),
+        lambda _, rows: judge_claims(rows),
+        only=only,
+        scenario="hybrid production scenario",
+    )

@@ -11,18 +11,20 @@ beside the published ones, the summaries of the sweeps, and the claims ``hybrid.
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import pandas as pd
 
 from calstudy.claims import (
-    TOO_FEW,
     ClaimColumns,
     Judged,
     claim_row,
     control_rows,
     judge_claim,
+    null_gate,
     verdict_or_none,
+    verdict_text,
 )
 from calstudy.core.errors import CalibrationError
 from calstudy.core.labels import plain
@@ -611,15 +613,17 @@ def summarise_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (name, value), sub in sweep.groupby(["parameter", "value"], sort=False):
         row = {"parameter": name, "value": value, "trials": len(sub)}
-        row["correlation_verdict"] = _verdict_text(
-            lambda s=sub: judge_claim(
-                "hybrid.correlation",
-                s,
-                CLAIMS["hybrid.correlation"],
-                reference=kolmogorov_bound(168),
+        row["correlation_verdict"] = verdict_text(
+            verdict_or_none(
+                lambda s=sub: judge_claim(
+                    "hybrid.correlation",
+                    s,
+                    CLAIMS["hybrid.correlation"],
+                    reference=kolmogorov_bound(168),
+                )
             )
         )
-        row["deviation_verdict"] = _verdict_text(lambda s=sub: deviation_verdicts(s))
+        row["deviation_verdict"] = verdict_text(verdict_or_none(partial(deviation_verdicts, sub)))
         for col in ("within_0p3", "r_above_0p7", "r_distance"):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
         rows.append(row)
@@ -647,11 +651,11 @@ def summarise_robot_error_sweep(sweep: pd.DataFrame) -> pd.DataFrame:
         ):
             row[col], row[f"{col}_low"], row[f"{col}_high"] = median_and_spread(sub[col])
         row["systematic_verdict"] = (
-            _verdict_text(lambda s=sub: _systematic_verdict(s, pub)[0])
+            verdict_text(verdict_or_none(lambda s=sub: _systematic_verdict(s, pub)[0]))
             if "systematic_coord_floor_mm" in sub
             else "no robot-off point"
         )
-        row["deviation_verdict"] = _verdict_text(lambda s=sub: deviation_verdicts(s))
+        row["deviation_verdict"] = verdict_text(verdict_or_none(partial(deviation_verdicts, sub)))
         row["within_0p3_uncompensated"] = float(np.median(sub["within_0p3_uncompensated"]))
         rows.append(row)
     return pd.DataFrame(rows)
@@ -679,13 +683,6 @@ def station_table1(run: dict, n_compensation: int) -> pd.DataFrame:
                 }
             )
     return pd.DataFrame(rows)
-
-
-def _verdict_text(make) -> str:
-    """The verdict of ``make()`` (a :class:`calstudy.claims.Judged`), or why there is none (too
-    few trials for an interval)."""
-    judged = verdict_or_none(make)
-    return TOO_FEW if judged is None else judged.claim.verdict
 
 
 def _systematic_verdict(sub: pd.DataFrame, pub, min_trials: int = 200):
@@ -769,19 +766,6 @@ def correlation_statistics(sub: pd.DataFrame) -> dict[str, np.ndarray]:
     }
 
 
-def _null_gate(claim, null):
-    """The claim's verdict, or not testable when its null control does not come out
-    ``not reproduced`` (doing nothing passes: the test is broken there)."""
-    if null.verdict == "not reproduced":
-        return claim
-    return not_testable(
-        f"the null control comes out {null.verdict} ({null.note}): the test cannot tell the "
-        f"method from doing nothing here (the claim alone came out {claim.verdict})",
-        kind=claim.kind,
-        n=claim.n,
-    )
-
-
 def production_verdicts(sub: pd.DataFrame, min_trials: int = 200) -> dict[str, Judged]:
     """The three claims of notebook 02 on the trials of ``sub`` (one ``n_compensation``): claim
     id -> :class:`calstudy.claims.Judged` (the verdict after its gates, the null control, the
@@ -811,8 +795,8 @@ def production_verdicts(sub: pd.DataFrame, min_trials: int = 200) -> dict[str, J
     null = judge_claim("hybrid.correlation", stats, ClaimColumns("r_distance_null"), **rule).claim
     return {
         "hybrid.systematic": Judged(_gate_by_robot_off(v.claim, off), off),
-        "hybrid.deviation": Judged(_null_gate(dev.claim, dev.null), dev.null, dev.oracle),
-        "hybrid.correlation": Judged(_null_gate(corr, null), null),
+        "hybrid.deviation": null_gate(dev),
+        "hybrid.correlation": null_gate(Judged(corr, null)),
     }
 
 
@@ -926,7 +910,7 @@ def summarise_part_variation(trials: pd.DataFrame) -> pd.DataFrame:
                 "r_distance_p95": float(np.quantile(sub["r_distance"], 0.95)),
                 "bound": kolmogorov_bound(n_defined),
                 "r_above_0p7": float(np.median(sub["r_above_0p7"])),
-                "verdict": TOO_FEW if judged is None else judged.claim.verdict,
+                "verdict": verdict_text(judged),
             }
         )
     return pd.DataFrame(rows)

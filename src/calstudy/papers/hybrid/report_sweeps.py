@@ -15,15 +15,15 @@ import pandas as pd
 from scipy.stats import chi2
 
 from calstudy.claims import (
-    TOO_FEW,
     ClaimColumns,
     judge_along,
     judge_claim,
     verdict_or_none,
-    verdict_runs,
+    verdict_text,
 )
 from calstudy.core.errors import CalibrationError
 from calstudy.core.labels import plain
+from calstudy.core.robustness import verdict_changes
 from calstudy.core.stats import median_and_spread, rms_ratio_interval
 from calstudy.papers.hybrid.compensation import shortfall_bound, shortfall_distance
 from calstudy.papers.hybrid.scenario import load_published
@@ -155,7 +155,7 @@ def _bound_summary(ratios: pd.Series, judged, extra: dict) -> dict:
         "ci_high": np.nan if v is None else v.ci_high,
         "p95_ratio": float(np.quantile(ratios, 0.95)),
         **extra,
-        "verdict": TOO_FEW if v is None else v.verdict,
+        "verdict": verdict_text(judged),
     }
 
 
@@ -183,7 +183,7 @@ def summarise_noise_model(trials: pd.DataFrame) -> pd.DataFrame:
         reference=CRB_MULTIPLE,
     )
     out["null_median_ratio"] = [float(np.median(sub["null control"])) for _, sub, _ in nulls]
-    out["null_verdict"] = [TOO_FEW if j is None else j.claim.verdict for _, _, j in nulls]
+    out["null_verdict"] = [verdict_text(j) for _, _, j in nulls]
     rot = trials.pivot_table(
         index=["parameter", "value", "trial"], columns="method", values="rotation_error_deg"
     )
@@ -245,7 +245,7 @@ def summarise_stationary_sweep(stationary: pd.DataFrame, key: str) -> pd.DataFra
                 "ci_high": np.nan if v is None else v.ci_high,
                 "per_trial_p95": float(np.quantile(sub["ratio"], 0.95)),
                 "oracle_rms_ratio": float(oracle_ratio),
-                "verdict": TOO_FEW if v is None else v.verdict,
+                "verdict": verdict_text(judged),
             }
         )
     return pd.DataFrame(rows)
@@ -291,11 +291,7 @@ def where_verdict_changes(values, verdicts, default, what: str, unit: str = "") 
     values = [values[i] for i in order]
     verdicts = [verdicts[i] for i in order]
     unit = f" {unit}" if unit else ""
-    runs = verdict_runs(values, verdicts)
-    changes = [
-        f"from {a} at {xa[-1]:g}{unit} to {b} at {xb[0]:g}{unit}"
-        for (a, xa), (b, xb) in zip(runs, runs[1:], strict=False)
-    ]
+    changes = verdict_changes(values, verdicts, fmt=lambda x: f"{x:g}{unit}")
     span = f"{values[0]:g}-{values[-1]:g}{unit}"
     at = [v for x, v in zip(values, verdicts, strict=True) if np.isclose(x, float(default))]
     at_default = f", {at[0]} at the default {float(default):g}{unit}" if at else ""
@@ -420,7 +416,7 @@ def summarise_drift(sweep: pd.DataFrame) -> pd.DataFrame:
                 "shortfall": float(np.median(shortfall_distance(counts, pub.deviation_percent))),
                 "kolmogorov": float(np.median(bin_distance(counts, pub.deviation_percent))),
                 "chi_square": float(np.median(chi_square_distance(counts, pub.deviation_percent))),
-                "verdict": TOO_FEW if judged is None else judged.claim.verdict,
+                "verdict": verdict_text(judged),
             }
         )
     return pd.DataFrame(rows)

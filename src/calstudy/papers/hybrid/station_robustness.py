@@ -24,20 +24,14 @@ datums: a robust *not testable* over their range says that no input there makes 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
 
 from calstudy.core.errors import CalibrationError
 from calstudy.core.montecarlo import Experiment
-from calstudy.core.robustness import (
-    Input,
-    MapSpec,
-    assign_claims,
-    ledger_inputs,
-    select_inputs,
-)
+from calstudy.core.robustness import MapSpec, paper_spec, screened_inputs
 from calstudy.papers.hybrid import experiments, handeye_experiments, report
 from calstudy.papers.hybrid.scenario import load_station
 
@@ -101,24 +95,6 @@ def robustness_experiment(group: str, n_trials: int = 10, overrides: dict | None
     return Experiment(f"robustness_{group}", trial, setup, n_trials, point)
 
 
-def map_inputs(station_toml: str = "") -> tuple[list[Input], list[str]]:
-    """The inputs of the map: the ledger's assumed inputs of ``station.toml`` with a range,
-    each with the claims whose computation reads it.
-
-    Parameters
-    ----------
-    station_toml : str
-        The station file ("" for the study's).
-
-    Returns
-    -------
-    (list of Input, list of str)
-        The inputs and the ranged inputs not screened (with the reason).
-    """
-    found, skipped = ledger_inputs(load_station(station_toml or None))
-    return assign_claims(found, CLAIM_PARTS, NOT_READ, skipped), skipped
-
-
 def claim_statistics(group: str, rows: pd.DataFrame) -> dict[str, np.ndarray]:
     """Each claim's statistic per trial, as its verdict judges it: the paper's hand-eye error
     over the bound (the larger of rotation and translation), the homography chain's RMS field
@@ -161,35 +137,23 @@ def judge_claims(group: str, rows: pd.DataFrame) -> dict:
     }
 
 
-def map_spec(station_toml: str = "", only: Sequence[str] = ()) -> MapSpec:
-    """The :class:`~calstudy.core.robustness.MapSpec` of the three claims.
+def map_spec(only: Sequence[str] = ()) -> MapSpec:
+    """The :class:`~calstudy.core.robustness.MapSpec` of the three claims: every ranged assumed
+    input of ``data/hybrid/station.toml`` (the file the trials read), for the claims whose
+    computation reads it.
 
     Parameters
     ----------
-    station_toml : str
-        The station file ("" for the study's; a file of one's own must keep the study's
-        provenance for the ranges).
     only : sequence of str, optional
-        Screen only these inputs (dotted keys, a vector's components all); empty: every input
-        of :func:`map_inputs`.
-
-    Raises
-    ------
-    CalibrationError
-        If ``only`` names an input the map does not screen, or a station file is given (the
-        trials read the study's station).
+        The inputs to screen (:func:`calstudy.core.robustness.paper_spec`, which refuses one the
+        map does not screen); empty: every input.
     """
-    if station_toml:
-        raise CalibrationError(
-            f"station_toml {station_toml!r}: notebook 01's trials read data/hybrid/station.toml; "
-            "its map is drawn on that file"
-        )
-    inputs, skipped = map_inputs(station_toml)
-    inputs = select_inputs(inputs, only, "hybrid station")
-
-    def experiment(group: str, setting: Mapping, n_trials: int):
-        return robustness_experiment(group, n_trials, dict(setting) or None)
-
-    return MapSpec(
-        CLAIM_PARTS, tuple(inputs), experiment, claim_statistics, judge_claims, tuple(skipped)
+    return paper_spec(
+        CLAIM_PARTS,
+        screened_inputs(load_station(), CLAIM_PARTS, NOT_READ),
+        lambda group, setting, n: robustness_experiment(group, n, dict(setting) or None),
+        claim_statistics,
+        judge_claims,
+        only=only,
+        scenario="hybrid station",
     )

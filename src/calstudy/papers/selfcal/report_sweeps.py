@@ -25,8 +25,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from calstudy.claims import Judged, verdict_runs  # noqa: E402
+from calstudy.claims import Judged  # noqa: E402
 from calstudy.core.errors import CalibrationError  # noqa: E402
+from calstudy.core.robustness import verdict_runs  # noqa: E402
 from calstudy.papers.selfcal.experiments import (  # noqa: E402
     NULL,
     NULL_ROBOT_NOISE,
@@ -155,14 +156,16 @@ def _join(values: list[str]) -> str:
     return values[0] if len(values) == 1 else ", ".join(values[:-1]) + " and " + values[-1]
 
 
-def _by_verdict(points: pd.DataFrame, key: str, column: str) -> str:
-    """``"reproduced at every scale swept"`` or ``"reproduced at 0 and 1, direction only at 4"``."""
+def _by_label(values, labels, swept: str = "scale", at: str = "") -> str:
+    """The swept values grouped by their label (a verdict, a route): ``"reproduced at every
+    scale swept"`` or ``"reproduced at 0 and 1, direction only at 4"`` (``at`` before the
+    values)."""
     groups: dict[str, list[str]] = {}
-    for value, verdict in zip(points[key], points[column], strict=True):
-        groups.setdefault(str(verdict), []).append(f"{value:g}")
+    for value, label in zip(values, labels, strict=True):
+        groups.setdefault(str(label), []).append(f"{value:g}")
     if len(groups) == 1:
-        return f"{next(iter(groups))} at every scale swept"
-    return ", ".join(f"{verdict} at {_join(values)}" for verdict, values in groups.items())
+        return f"{next(iter(groups))} at every {swept} swept"
+    return ", ".join(f"{label} at {at}{_join(values)}" for label, values in groups.items())
 
 
 def sweep_sentences(verdicts: pd.DataFrame, key: str) -> dict[str, str]:
@@ -175,7 +178,7 @@ def sweep_sentences(verdicts: pd.DataFrame, key: str) -> dict[str, str]:
         first, last = points.iloc[0], points.iloc[-1]
         unit = first["unit"]
         text = (
-            f"{_by_verdict(points, key, 'verdict')}; median {_figure_text(first)} at "
+            f"{_by_label(points[key], points['verdict'])}; median {_figure_text(first)} at "
             f"{first[key]:g} and {_figure_text(last)} at {last[key]:g} ({unit})"
         )
         if np.isfinite(first["p95"]) and np.isfinite(last["p95"]):
@@ -184,8 +187,8 @@ def sweep_sentences(verdicts: pd.DataFrame, key: str) -> dict[str, str]:
         text += f"; N = {_join([str(n) for n in counts])} per point"
         if points["null_control"].fillna("").astype(str).str.len().all():
             text += (
-                f"; null control {_by_verdict(points, key, 'null_control')}, oracle control "
-                f"{_by_verdict(points, key, 'oracle_control')}"
+                f"; null control {_by_label(points[key], points['null_control'])}, oracle control "
+                f"{_by_label(points[key], points['oracle_control'])}"
             )
         out[cid] = text
     return out
@@ -225,14 +228,8 @@ def rank_sentence(calib: pd.DataFrame, n_params: int) -> str:
 
 def best_route_sentence(table: pd.DataFrame, key: str) -> str:
     """Which route is the best at each value of a sweep, from :func:`sweep_table`."""
-    groups: dict[str, list[str]] = {}
-    for value, route in zip(table[key], table["best_route"], strict=True):
-        groups.setdefault(str(route), []).append(f"{value:g}")
-    if len(groups) == 1:
-        return f"{next(iter(groups))} at every {key.replace('_', ' ')} swept"
-    return ", ".join(
-        f"{route} at {key.replace('_', ' ')} {_join(values)}" for route, values in groups.items()
-    )
+    swept = key.replace("_", " ")
+    return _by_label(table[key], table["best_route"], swept, f"{swept} ")
 
 
 def basin_sentence(table: pd.DataFrame, bound: float) -> str:
@@ -259,8 +256,8 @@ def condition_sentence(verdicts: pd.DataFrame, key: str, claim: str, own: float,
     Raises
     ------
     CalibrationError
-        If the rows have no point at ``own`` for ``claim`` (:func:`calstudy.claims.verdict_runs`
-        for empty rows).
+        If the rows have no point at ``own`` for ``claim``
+        (:func:`calstudy.core.robustness.verdict_runs` for empty rows).
     """
     points = verdicts[verdicts["claim"] == claim].sort_values(key)
     runs = verdict_runs(points[key].tolist(), points["verdict"].tolist())

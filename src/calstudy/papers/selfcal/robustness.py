@@ -16,18 +16,12 @@ their figures as they are).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
 
-from calstudy.core.robustness import (
-    Input,
-    MapSpec,
-    assign_claims,
-    ledger_inputs,
-    select_inputs,
-)
+from calstudy.core.robustness import MapSpec, paper_spec, screened_inputs
 from calstudy.papers.selfcal import experiments, report
 from calstudy.papers.selfcal.scenario import Scenario, load_scenario
 
@@ -38,24 +32,6 @@ CLAIM_PARTS = {cid: GROUP for cid in report.CLAIMS}
 #: inputs (dotted keys, or a prefix ending in ".") each claim's computation does not read: not
 #: screened for that claim (a test checks that changing them leaves its statistic as it is)
 NOT_READ = {cid: () if cid == "selfcal.convergence" else ("poor_start.",) for cid in report.CLAIMS}
-
-
-def map_inputs(scenario_toml: str) -> tuple[list[Input], list[str]]:
-    """The inputs of the map: the ledger's assumed inputs with a range, each with the claims
-    whose computation reads it.
-
-    Parameters
-    ----------
-    scenario_toml : str
-        The scenario file ("" for the study's).
-
-    Returns
-    -------
-    (list of Input, list of str)
-        The inputs and the ranged inputs not screened (with the reason).
-    """
-    found, skipped = ledger_inputs(load_scenario(scenario_toml or None))
-    return assign_claims(found, CLAIM_PARTS, NOT_READ, skipped), skipped
 
 
 def claim_statistics(calib: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -96,32 +72,26 @@ def judge_claims(calib: pd.DataFrame, scenario: Scenario) -> dict:
 
 
 def map_spec(scenario_toml: str, only: Sequence[str] = ()) -> MapSpec:
-    """The :class:`~calstudy.core.robustness.MapSpec` of the five claims.
+    """The :class:`~calstudy.core.robustness.MapSpec` of the five claims: every ranged assumed
+    input of the scenario, for the claims whose computation reads it.
 
     Parameters
     ----------
     scenario_toml : str
         The scenario file ("" for the study's).
     only : sequence of str, optional
-        Screen only these inputs (dotted keys, a vector's components all); empty: every input
-        of :func:`map_inputs`.
-
-    Raises
-    ------
-    CalibrationError
-        If ``only`` names an input the map does not screen.
+        The inputs to screen (:func:`calstudy.core.robustness.paper_spec`, which refuses one the
+        map does not screen); empty: every input.
     """
     scenario = load_scenario(scenario_toml or None)
-    inputs, skipped = map_inputs(scenario_toml)
-    inputs = select_inputs(inputs, only, "selfcal scenario")
-
-    def experiment(group: str, setting: Mapping, n_trials: int):
-        return experiments.robustness_experiment(scenario_toml, n_trials, dict(setting) or None)
-
-    def statistics(group: str, rows: pd.DataFrame):
-        return claim_statistics(rows)
-
-    def judge(group: str, rows: pd.DataFrame):
-        return judge_claims(rows, scenario)
-
-    return MapSpec(CLAIM_PARTS, tuple(inputs), experiment, statistics, judge, tuple(skipped))
+    return paper_spec(
+        CLAIM_PARTS,
+        screened_inputs(scenario, CLAIM_PARTS, NOT_READ),
+        lambda _, setting, n: experiments.robustness_experiment(
+            scenario_toml, n, dict(setting) or None
+        ),
+        lambda _, rows: claim_statistics(rows),
+        lambda _, rows: judge_claims(rows, scenario),
+        only=only,
+        scenario="selfcal scenario",
+    )
