@@ -30,14 +30,6 @@ from calstudy.core.errors import CalibrationError
 MIN_PAIRS = 6
 #: an update with ``delta^T H delta / s^2`` below this is smaller than its own standard error
 NOISE_STEP = 1.0
-#: [e_j]_x, the cross-product matrices of the unit vectors
-_SKEW = np.array(
-    [
-        [[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
-        [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]],
-        [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
-    ]
-)
 _EYE3 = np.eye(3)
 _EYE3.flags.writeable = False
 
