@@ -184,21 +184,28 @@ def require_columns(path: str | Path, header: Iterable[str], columns: Iterable[s
         )
 
 
-def check_ids(path: str | Path, ids: np.ndarray) -> np.ndarray:
-    """The ``id`` column of a CSV file, checked to hold distinct integers.
+def check_ids(
+    path: str | Path, ids: np.ndarray, lines, column: str = "id", unique: bool = True
+) -> np.ndarray:
+    """An id column of a CSV file, checked to hold integers, distinct ones if ``unique``.
 
     Parameters
     ----------
     path : str or pathlib.Path
         The file, for the messages.
     ids : numpy.ndarray, shape (N,)
-        The parsed column, first data row first (row 2 of the file when no comment lines
-        precede it).
+        The parsed column, first data row first.
+    lines : sequence of int, length N
+        The file line of each row (as :func:`read_csv_table` gives it), for the messages.
+    column : str
+        The column's name, for the messages.
+    unique : bool
+        Refuse a value that appears more than once.
 
     Returns
     -------
-    numpy.ndarray, shape (N,)
-        ``ids`` unchanged.
+    numpy.ndarray of int, shape (N,)
+        The ids.
 
     Raises
     ------
@@ -207,8 +214,12 @@ def check_ids(path: str | Path, ids: np.ndarray) -> np.ndarray:
     """
     if np.any(ids != np.round(ids)):
         bad = int(np.argmax(ids != np.round(ids)))
-        raise CalibrationError(f"{path}: row {bad + 2}, column 'id': {ids[bad]} is not an integer")
+        raise CalibrationError(
+            f"{path}: row {lines[bad]}, column {column!r}: {ids[bad]} is not an integer"
+        )
     uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        raise CalibrationError(f"{path}: id {int(uniq[counts > 1][0])} appears more than once")
-    return ids
+    if unique and np.any(counts > 1):
+        raise CalibrationError(
+            f"{path}: {column} {int(uniq[counts > 1][0])} appears more than once"
+        )
+    return ids.astype(int)

@@ -311,7 +311,7 @@ def read_pose_list(path) -> PoseList:
     if not rows:
         raise CalibrationError(f"{path}: no pose rows")
     values = _values(path, rows, cols, index)
-    ids = check_ids(path, values[:, 0])
+    ids = check_ids(path, values[:, 0], [n for n, _ in rows])
     nr = len(rrot)
     if rform == "quaternion":
         _check_quaternions(path, rows, rprefix, values[:, 4 : 4 + nr])
@@ -321,7 +321,7 @@ def read_pose_list(path) -> PoseList:
     c0 = 4 + nr
     camera = geo.make_transform(_rotations(cform, values[:, c0 + 3 :]), values[:, c0 : c0 + 3])
     return PoseList(
-        ids.astype(int),
+        ids,
         robot,
         camera,
         rprefix,

@@ -245,10 +245,10 @@ def read_sphere_measurements(path) -> SphereMeasurements:
     values[:, 1:4] *= np.nan_to_num(factors["xyz"], nan=1.0)
     values[:, 4:7] *= np.nan_to_num(factors["abc"], nan=1.0)
     values[:, 7:10] *= np.nan_to_num(factors["sxyz"], nan=1.0)
-    ids = check_ids(path, values[:, 0])
+    ids = check_ids(path, values[:, 0], [n for n, _ in rows])
     rot = geo.euler_zyx_to_matrix(values[:, 4], values[:, 5], values[:, 6])
     return SphereMeasurements(
-        ids=ids.astype(int),
+        ids=ids,
         group=groups,
         flange2base=geo.make_transform(rot, values[:, 1:4]),
         centres=values[:, 7:10],
