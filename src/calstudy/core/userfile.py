@@ -119,8 +119,9 @@ def read_csv_table(path: str | Path, what: str) -> tuple[list[str], list[tuple[i
     FileNotFoundError
         If ``path`` is not a file (naming it and ``what``).
     CalibrationError
-        For an empty file, a file that is not UTF-8 text, or a row whose cell count differs
-        from the header's (naming the row; a decimal comma is the usual cause).
+        For a file without data rows (empty or a header only), a file that is not UTF-8 text,
+        or a row whose cell count differs from the header's (naming the row; a decimal comma is
+        the usual cause).
     """
     path = Path(path)
     if not path.is_file():
@@ -137,8 +138,10 @@ def read_csv_table(path: str | Path, what: str) -> tuple[list[str], list[tuple[i
         for i, ln in enumerate(text.splitlines(), start=1)
         if ln.strip() and not ln.lstrip().startswith("#")
     ]
-    if not lines:
-        raise CalibrationError(f"{path}: the file is empty (no header)")
+    if len(lines) < 2:
+        raise CalibrationError(
+            f"{path}: no data rows (the {what} {'has a header only' if lines else 'is empty'})"
+        )
     first = lines[0][1]
     delimiter = ";" if ";" in first and "," not in first else ","
     parsed = list(csv.reader(io.StringIO("\n".join(ln for _, ln in lines)), delimiter=delimiter))

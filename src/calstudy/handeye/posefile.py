@@ -308,8 +308,6 @@ def read_pose_list(path) -> PoseList:
     cunit, cform, ctrans, crot = _pose_columns(path, header, cprefix)
     cols = ["id"] + rtrans + rrot + ctrans + crot
     index = [header.index(c) for c in cols]
-    if not rows:
-        raise CalibrationError(f"{path}: no pose rows")
     values = _values(path, rows, cols, index)
     ids = check_ids(path, values[:, 0], [n for n, _ in rows])
     nr = len(rrot)

@@ -231,8 +231,6 @@ def read_sphere_measurements(path) -> SphereMeasurements:
         On any of the checks above.
     """
     header, rows = read_csv_table(path, "fixed-sphere measurement file")
-    if not rows:
-        raise CalibrationError(f"{path}: no measurement rows")
     mapping, factors = _sphere_columns(path, header)
     values, groups = _cells(path, header, rows, mapping)
     absent = [g for g in ("translation", "rotation") if not np.any(groups == g)]

@@ -150,15 +150,6 @@ class MeasuredCell:
 # reading
 
 
-def _csv_rows(path: Path, what: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """Header and (line number, cells) of the data rows (the user-file tokeniser); a file
-    without data rows is refused."""
-    header, rows = read_csv_table(path, what)
-    if not rows:
-        raise CalibrationError(f"{path}: no data rows")
-    return header, rows
-
-
 def _unit_columns(path, header, stems, units: dict, what: str) -> tuple[list[str], float]:
     """Columns ``<stem>_<unit>`` for one unit of ``units``; the factor to mm or rad."""
     found = [u for u in units if all(f"{s}_{u}" in header for s in stems)]
@@ -183,7 +174,7 @@ def _column(path, header, rows, name, parse=True):
 def read_spheres(path) -> tuple[np.ndarray, np.ndarray]:
     """Sphere ids (k,) and tracker readings (k, 3) mm of ``spheres.csv``."""
     path = Path(path)
-    header, rows = _csv_rows(path, "sphere table")
+    header, rows = read_csv_table(path, "sphere table")
     ids = check_ids(path, _column(path, header, rows, "sphere"), [n for n, _ in rows], "sphere")
     cols, factor = _unit_columns(path, header, ["x", "y", "z"], LENGTH_UNITS, "sphere centres")
     xyz = np.column_stack([_column(path, header, rows, c) for c in cols]) * factor
@@ -201,7 +192,7 @@ def read_measurements(path, sphere_ids) -> pd.DataFrame:
     """The rows of ``measurements.csv``: ``pose, set, sphere`` (index), ``q1..q6`` rad and
     ``cx, cy, cz`` mm, with the source line number in ``line``."""
     path = Path(path)
-    header, rows = _csv_rows(path, "measurement table")
+    header, rows = read_csv_table(path, "measurement table")
     lines = [n for n, _ in rows]
     poses = check_ids(path, _column(path, header, rows, "pose"), lines, "pose")
     sets = _column(path, header, rows, "set", parse=False)
