@@ -450,7 +450,7 @@ CASES = [
     # the pose-list CSV
     ("read_pose_list-missing_file", pose_csv("missing_file"), FileNotFoundError, "none.csv"),
     ("read_pose_list-empty", pose_csv("empty"), E, "empty"),
-    ("read_pose_list-no_id", pose_csv("no_id"), E, "missing column 'id'"),
+    ("read_pose_list-no_id", pose_csv("no_id"), E, r"missing column\(s\) id \(the header has nr, flange2base_x_mm"),
     ("read_pose_list-no_camera_prefix", pose_csv("two_robot_prefixes"), E, "exactly one prefix"),
     ("read_pose_list-quaternion_norm", pose_csv("quaternion_norm"), E, r"row 3, columns flange2base_qw..flange2base_qz: the quaternion has norm"),
     ("read_pose_list-decimal_comma", pose_csv("decimal_comma"), E, r"row 2, column 'flange2base_x_mm': '12,5'.*write 12\.5"),

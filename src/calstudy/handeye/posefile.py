@@ -14,7 +14,13 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.userfile import LENGTH_UNITS, check_ids, parse_number, read_csv_table
+from calstudy.core.userfile import (
+    LENGTH_UNITS,
+    check_ids,
+    parse_number,
+    read_csv_table,
+    require_columns,
+)
 from calstudy.handeye.inputs import (
     CAMERA_CONVENTIONS,
     ROBOT_CONVENTIONS,
@@ -165,9 +171,7 @@ def _pose_columns(path, header, prefix):
             + f"; found {forms or 'none'}"
         )
     rot = [f"{prefix}_{c}" for c in ROTATION_FORMS[forms[0]]]
-    missing = [c for c in trans + rot if c not in header]
-    if missing:
-        raise CalibrationError(f"{path}: missing column(s) {', '.join(missing)}")
+    require_columns(path, header, trans + rot)
     return unit, forms[0], trans, rot
 
 
@@ -300,8 +304,7 @@ def read_pose_list(path) -> PoseList:
     """
     path = Path(path)
     header, rows = read_csv_table(path, "pose list")
-    if "id" not in header:
-        raise CalibrationError(f"{path}: missing column 'id'")
+    require_columns(path, header, ["id"])
     rprefix = _find_prefix(path, header, list(ROBOT_CONVENTIONS), "robot")
     cprefix = _find_prefix(path, header, list(CAMERA_CONVENTIONS), "camera")
     runit, rform, rtrans, rrot = _pose_columns(path, header, rprefix)

@@ -19,6 +19,7 @@ from calstudy.core.userfile import (
     check_ids,
     parse_number,
     read_csv_table,
+    require_columns,
 )
 
 SPHERE_CSV_COLUMNS = ("id", "group", "x", "y", "z", "a", "b", "c", "sx", "sy", "sz")
@@ -138,12 +139,8 @@ def _sphere_columns(path, header: list[str]) -> tuple[dict[str, str], dict[str, 
             )
         unit = found.pop()
         factors[group] = float("nan") if unit is None else units[unit]
-    for col in ("id", "group"):
-        if col not in header:
-            raise CalibrationError(
-                f"{path}: missing column {col!r}; the header has {', '.join(header)}"
-            )
-        mapping[col] = col
+    require_columns(path, header, ["id", "group"])
+    mapping |= {"id": "id", "group": "group"}
     return mapping, factors
 
 

@@ -58,6 +58,7 @@ from calstudy.core.userfile import (
     check_ids,
     parse_number,
     read_csv_table,
+    require_columns,
 )
 from calstudy.estimators.shared_error import SharedErrorFit, shared_error_fit
 from calstudy.models.kinematics import Robot
@@ -163,8 +164,7 @@ def _unit_columns(path, header, stems, units: dict, what: str) -> tuple[list[str
 
 
 def _column(path, header, rows, name, parse=True):
-    if name not in header:
-        raise CalibrationError(f"{path}: missing column {name!r}")
+    require_columns(path, header, [name])
     k = header.index(name)
     if not parse:
         return [(n, r[k].strip()) for n, r in rows]
