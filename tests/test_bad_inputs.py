@@ -428,7 +428,7 @@ CASES = [
     # the fixed-sphere CSV
     ("read_sphere_csv-missing_file", sphere_csv("missing_file"), FileNotFoundError, "no_such.csv"),
     ("read_sphere_csv-empty", sphere_csv("empty"), E, "empty"),
-    ("read_sphere_csv-header_only", sphere_csv("header_only"), E, "no measurement rows"),
+    ("read_sphere_csv-header_only", sphere_csv("header_only"), E, "no data rows"),
     ("read_sphere_csv-radians", sphere_csv("radians"), E, "look like radians.*a_rad"),
     ("read_sphere_csv-flange_in_metres", sphere_csv("flange_metres"), E, "flange positions x, y, z are all below 10.*metres"),
     ("read_sphere_csv-sensor_in_metres", sphere_csv("sensor_metres"), E, "sphere centres sx, sy, sz are all below 10.*metres"),
@@ -450,12 +450,12 @@ CASES = [
     # the pose-list CSV
     ("read_pose_list-missing_file", pose_csv("missing_file"), FileNotFoundError, "none.csv"),
     ("read_pose_list-empty", pose_csv("empty"), E, "empty"),
-    ("read_pose_list-no_id", pose_csv("no_id"), E, "missing column 'id'"),
+    ("read_pose_list-no_id", pose_csv("no_id"), E, r"missing column\(s\) id \(the header has nr, flange2base_x_mm"),
     ("read_pose_list-no_camera_prefix", pose_csv("two_robot_prefixes"), E, "exactly one prefix"),
     ("read_pose_list-quaternion_norm", pose_csv("quaternion_norm"), E, r"row 3, columns flange2base_qw..flange2base_qz: the quaternion has norm"),
     ("read_pose_list-decimal_comma", pose_csv("decimal_comma"), E, r"row 2, column 'flange2base_x_mm': '12,5'.*write 12\.5"),
     ("read_pose_list-short_row", pose_csv("short_row"), E, "row 3 has 14 cells; the header has 15"),
-    ("read_pose_list-no_rows", pose_csv("no_rows"), E, "no pose rows"),
+    ("read_pose_list-no_rows", pose_csv("no_rows"), E, r"no data rows \(the pose list has a header only\)"),
     ("read_pose_list-unit", pose_csv("bad_unit"), E, "one unit of mm, cm, m, in"),
     ("read_pose_list-text_cell", pose_csv("text_cell"), E, r"row 4, column 'flange2base_qy': 'n/a' is not a number"),
     # robot tables

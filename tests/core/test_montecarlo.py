@@ -37,7 +37,6 @@ from calstudy.core.montecarlo import (
     Experiment,
     child_rng,
     run,
-    run_many,
     streams,
     trial_rng,
     trial_rows,
@@ -436,16 +435,13 @@ def test_progress_goes_to_stderr_only(capsys):
     assert_same_bytes(loud, quiet)
 
 
-def test_run_many_and_single_point():
+def test_experiments_of_other_names_draw_other_streams():
     a = Experiment("a", one_row, None, 3)
     b = Experiment("b", one_row, None, 2)
-    tables = run_many([a, b], SEED, n_jobs=1, progress=False)
-    assert list(tables) == ["a", "b"]
+    tables = {exp.name: run(exp, SEED, n_jobs=1, progress=False) for exp in (a, b)}
     assert list(tables["a"].columns) == ["trial", "u"]
     assert tables["a"]["u"].tolist() == [trial_rng(SEED, "a", {}, t).random() for t in range(3)]
     assert not np.isin(tables["b"]["u"], tables["a"]["u"]).any()
-    with pytest.raises(CalibrationError, match="repeated"):
-        run_many([a, a], SEED, n_jobs=1, progress=False)
 
 
 def test_streams_are_new_at_every_call_and_independent_of_draw_counts():

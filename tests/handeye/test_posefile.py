@@ -47,6 +47,13 @@ def test_pose_list_errors_name_row_and_column(tmp_path):
     (tmp_path / "conv.csv").write_text("\n".join([header] + lines[1:]) + "\n")
     with pytest.raises(CalibrationError, match="camera poses by exactly one prefix"):
         posefile.read_pose_list(tmp_path / "conv.csv")
+    # an id that is not an integer, named by its file line (below two comment lines)
+    cells = lines[2].split(",")
+    cells[0] = "2.5"
+    text = "\n".join(["# a comment", "# another", lines[0], lines[1], ",".join(cells)])
+    (tmp_path / "id.csv").write_text(text + "\n")
+    with pytest.raises(CalibrationError, match=r"row 5, column 'id': 2\.5 is not an integer"):
+        posefile.read_pose_list(tmp_path / "id.csv")
 
 
 def test_example_pose_list_in_data_reads():

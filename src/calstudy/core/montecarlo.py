@@ -67,7 +67,6 @@ __all__ = [
     "child_rng",
     "one_opencv_thread",
     "run",
-    "run_many",
     "streams",
     "trial_rng",
     "trial_rows",
@@ -742,34 +741,3 @@ def trial_rows(
         raise _trial_error(experiment, seed, point, trial, error) from error
     records = [{**pt, "trial": trial, **row} for row in rows]
     return pd.DataFrame.from_records(records)
-
-
-def run_many(
-    experiments: Sequence[Experiment], seed: int, **kwargs: Any
-) -> dict[str, pd.DataFrame]:
-    """Run several experiments one after the other with the same seed and options.
-
-    Parameters
-    ----------
-    experiments : sequence of Experiment
-        Experiments with distinct names.
-    seed : int
-        The seed of every run.
-    **kwargs
-        Passed to :func:`run` (``n_jobs``, ``scheduler``, ``cache_dir``, ``progress``).
-
-    Returns
-    -------
-    dict of str to pandas.DataFrame
-        The table of each experiment, by name, in the given order.
-
-    Raises
-    ------
-    CalibrationError
-        On repeated names, and as :func:`run`.
-    """
-    names = [getattr(exp, "name", None) for exp in experiments]
-    repeated = sorted({name for name in names if names.count(name) > 1}, key=str)
-    if repeated:
-        raise CalibrationError(f"experiment names must be distinct; repeated: {repeated}")
-    return {exp.name: run(exp, seed, **kwargs) for exp in experiments}

@@ -1,4 +1,5 @@
-"""Where calstudy's data and results live, in a checkout and in an installed package.
+"""Where calstudy's data and results live, in a checkout and in an installed package, and how
+a file of them is written (atomically: :func:`atomic_write`).
 
 ``data/`` (robot tables, scenarios, published numbers, the claims register) ships inside the
 package as ``calstudy/_data`` (in a checkout, a link to the repository's ``data/``), so
@@ -8,6 +9,9 @@ repository's ``results/`` in a checkout, and to ``./results`` of the working fol
 
 from __future__ import annotations
 
+import os
+import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
@@ -40,3 +44,42 @@ def results_path(stem: str, root: str | Path | None = None) -> Path:
     out = base / stem
     out.mkdir(parents=True, exist_ok=True)
     return out
+
+
+def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``.
+
+    An interrupted or failing ``write`` leaves ``path`` as it was (old content or absent) and
+    no temporary file behind; the written file is readable by all (mode 0644).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Destination file; missing parent folders are created.
+    write : callable
+        ``write(tmp)`` writes the whole content to the file ``tmp`` (a pathlib.Path).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    Exception
+        Whatever ``write`` raises (the temporary file is removed first).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        write(tmp)
+        # mkstemp creates 0600; results are ordinary readable files
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path

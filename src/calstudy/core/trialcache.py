@@ -20,7 +20,6 @@ import dataclasses
 import enum
 import hashlib
 import json
-import os
 import re
 from collections.abc import Callable, Mapping
 from pathlib import Path, PurePath
@@ -31,6 +30,7 @@ import pandas as pd
 from pydantic import BaseModel
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core.paths import atomic_write
 
 #: Version of the cache file layout and key; bump it when either changes.
 CACHE_FORMAT = 2
@@ -103,12 +103,12 @@ class TrialCache:
 
     def save(self, point: int, trial: int, rows: Rows) -> None:
         """Store the rows of one trial atomically."""
-        folder = self.dirs[point]
-        if not (folder / "key.json").exists():
-            folder.mkdir(parents=True, exist_ok=True)
-            _write_atomic(folder / "key.json", (_dumps(self.keys[point]) + "\n").encode())
-        record = {"key": self.keys[point], "trial": trial, "rows": rows}
-        _write_atomic(self._path(point, trial), encode_record(record))
+        key = self.dirs[point] / "key.json"
+        if not key.exists():
+            text = _dumps(self.keys[point]) + "\n"
+            atomic_write(key, lambda tmp: tmp.write_bytes(text.encode()))
+        record = encode_record({"key": self.keys[point], "trial": trial, "rows": rows})
+        atomic_write(self._path(point, trial), lambda tmp: tmp.write_bytes(record))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -190,16 +190,6 @@ def decode_record(data: bytes, path: str | Path) -> dict[str, Any]:
     where = f"trial cache file {path}"
     rows = [{k: _decode_value(v, where) for k, v in row.items()} for row in body["rows"]]
     return {"key": body["key"], "trial": body["trial"], "rows": rows}
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def _dumps(obj: object) -> str:

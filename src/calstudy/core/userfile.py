@@ -119,8 +119,9 @@ def read_csv_table(path: str | Path, what: str) -> tuple[list[str], list[tuple[i
     FileNotFoundError
         If ``path`` is not a file (naming it and ``what``).
     CalibrationError
-        For an empty file, a file that is not UTF-8 text, or a row whose cell count differs
-        from the header's (naming the row; a decimal comma is the usual cause).
+        For a file without data rows (empty or a header only), a file that is not UTF-8 text,
+        or a row whose cell count differs from the header's (naming the row; a decimal comma is
+        the usual cause).
     """
     path = Path(path)
     if not path.is_file():
@@ -137,8 +138,10 @@ def read_csv_table(path: str | Path, what: str) -> tuple[list[str], list[tuple[i
         for i, ln in enumerate(text.splitlines(), start=1)
         if ln.strip() and not ln.lstrip().startswith("#")
     ]
-    if not lines:
-        raise CalibrationError(f"{path}: the file is empty (no header)")
+    if len(lines) < 2:
+        raise CalibrationError(
+            f"{path}: no data rows (the {what} {'has a header only' if lines else 'is empty'})"
+        )
     first = lines[0][1]
     delimiter = ";" if ";" in first and "," not in first else ","
     parsed = list(csv.reader(io.StringIO("\n".join(ln for _, ln in lines)), delimiter=delimiter))
@@ -184,21 +187,28 @@ def require_columns(path: str | Path, header: Iterable[str], columns: Iterable[s
         )
 
 
-def check_ids(path: str | Path, ids: np.ndarray) -> np.ndarray:
-    """The ``id`` column of a CSV file, checked to hold distinct integers.
+def check_ids(
+    path: str | Path, ids: np.ndarray, lines, column: str = "id", unique: bool = True
+) -> np.ndarray:
+    """An id column of a CSV file, checked to hold integers, distinct ones if ``unique``.
 
     Parameters
     ----------
     path : str or pathlib.Path
         The file, for the messages.
     ids : numpy.ndarray, shape (N,)
-        The parsed column, first data row first (row 2 of the file when no comment lines
-        precede it).
+        The parsed column, first data row first.
+    lines : sequence of int, length N
+        The file line of each row (as :func:`read_csv_table` gives it), for the messages.
+    column : str
+        The column's name, for the messages.
+    unique : bool
+        Refuse a value that appears more than once.
 
     Returns
     -------
-    numpy.ndarray, shape (N,)
-        ``ids`` unchanged.
+    numpy.ndarray of int, shape (N,)
+        The ids.
 
     Raises
     ------
@@ -207,8 +217,12 @@ def check_ids(path: str | Path, ids: np.ndarray) -> np.ndarray:
     """
     if np.any(ids != np.round(ids)):
         bad = int(np.argmax(ids != np.round(ids)))
-        raise CalibrationError(f"{path}: row {bad + 2}, column 'id': {ids[bad]} is not an integer")
+        raise CalibrationError(
+            f"{path}: row {lines[bad]}, column {column!r}: {ids[bad]} is not an integer"
+        )
     uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        raise CalibrationError(f"{path}: id {int(uniq[counts > 1][0])} appears more than once")
-    return ids
+    if unique and np.any(counts > 1):
+        raise CalibrationError(
+            f"{path}: {column} {int(uniq[counts > 1][0])} appears more than once"
+        )
+    return ids.astype(int)

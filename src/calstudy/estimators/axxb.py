@@ -3,8 +3,9 @@
 :func:`opencv_handeye` wraps ``cv2.calibrateHandEye`` (Tsai, Park, Horaud, Andreff, Daniilidis):
 the pose of the sensor on the flange from flange poses and the poses of a fixed target in the
 sensor frame. Before OpenCV sees the poses, :func:`check_rotation_diversity` refuses motions that
-leave the rotation undetermined (pure translations, rotations about one axis, repeated poses),
-the one such check of the library.
+leave the rotation undetermined (pure translations, rotations about one axis, repeated poses) by
+the library's one motion-diversity rule, :func:`check_motions`, which the hand-eye calibration of
+a cell runs on its own choice of motions too.
 """
 
 from __future__ import annotations
@@ -77,14 +78,43 @@ def check_rotation_diversity(
 
 
 def _check_diversity(r: np.ndarray, min_rotation: float) -> None:
-    """:func:`check_rotation_diversity` on checked rotations ``(N, 3, 3)``, ``N >= 3``."""
+    """:func:`check_rotation_diversity` on checked rotations ``(N, 3, 3)``, ``N >= 3``: the
+    motions of every pair of poses."""
     i, j = np.triu_indices(len(r), 1)
-    rotvec = geo.matrix_to_rotvec(np.swapaxes(r[i], -1, -2) @ r[j])
+    check_motions(geo.matrix_to_rotvec(np.swapaxes(r[i], -1, -2) @ r[j]), len(r), min_rotation)
+
+
+def check_motions(rotvec: np.ndarray, n_poses: int, min_rotation: float) -> None:
+    """Refuse motions that leave a hand-eye rotation undetermined: the one motion-diversity rule.
+
+    At least one motion must rotate by ``min_rotation`` or more, and the axes of the rotating
+    motions must spread by ``min_rotation`` or more (the largest angle between two of them).
+
+    Parameters
+    ----------
+    rotvec : numpy.ndarray, shape (M, 3)
+        Rotation vectors of motions between pairs of poses, each in the frame of the motion's
+        first pose, rad.
+    n_poses : int
+        Poses the motions were formed from (named in the messages).
+    min_rotation : float
+        Smallest rotation of a motion, and smallest angle between two motion axes, rad (> 0).
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    CalibrationError
+        When no motion rotates by ``min_rotation`` (the largest rotation named), or all rotating
+        motions turn about one axis (the spread of the axes named).
+    """
     angles = np.linalg.norm(rotvec, axis=1)
     moving = angles >= min_rotation
     if not np.any(moving):
         raise CalibrationError(
-            f"no pair of the {len(r)} poses rotates by {np.degrees(min_rotation):.3g} deg or "
+            f"no pair of the {n_poses} poses rotates by {np.degrees(min_rotation):.3g} deg or "
             f"more (largest {np.degrees(angles.max()):.3g} deg): pure translations or repeated "
             "orientations leave the hand-eye rotation undetermined; include rotating motions"
         )
@@ -99,7 +129,7 @@ def _check_diversity(r: np.ndarray, min_rotation: float) -> None:
         )
     if spread < min_rotation:
         raise CalibrationError(
-            f"the {int(moving.sum())} rotating motions of the {len(r)} poses turn about one "
+            f"the {int(moving.sum())} rotating motions of the {n_poses} poses turn about one "
             f"axis (axes within {np.degrees(spread):.3g} deg, minimum "
             f"{np.degrees(min_rotation):.3g} deg): the hand-eye rotation about that axis and the "
             "translation along it are undetermined; include motions about two axes"

@@ -30,16 +30,6 @@ from calstudy.core.errors import CalibrationError
 MIN_PAIRS = 6
 #: an update with ``delta^T H delta / s^2`` below this is smaller than its own standard error
 NOISE_STEP = 1.0
-#: [e_j]_x, the cross-product matrices of the unit vectors
-_SKEW = np.array(
-    [
-        [[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
-        [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]],
-        [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
-    ]
-)
-_EYE3 = np.eye(3)
-_EYE3.flags.writeable = False
 
 
 @dataclass
@@ -66,16 +56,6 @@ class IcpResult:
     pairs: int
     rms_mm: float
     converged: bool
-
-
-def _rodrigues(omega: np.ndarray) -> np.ndarray:
-    """Rotation matrix ``(3, 3)`` of the rotation vector ``omega`` (rad), without a scipy object."""
-    angle = float(np.sqrt(omega @ omega))
-    o0, o1, o2 = omega.tolist()
-    k = np.array([[0.0, -o2, o1], [o2, 0.0, -o0], [-o1, o0, 0.0]])
-    if angle < 1e-12:
-        return _EYE3 + k
-    return _EYE3 + np.sin(angle) / angle * k + (1.0 - np.cos(angle)) / angle**2 * (k @ k)
 
 
 def _weighted_rigid_step(
@@ -122,7 +102,7 @@ def _weighted_rigid_step(
     )
     delta = -np.linalg.solve(h, g)
     s2 = float((r**2 @ w).sum()) / max(3 * n - 6, 1)
-    rot = _rodrigues(delta[:3])
+    rot = geo.so3_exp(delta[:3])[0]
     # rotation about the centroid, then the translation
     step = np.zeros((4, 4))
     step[:3, :3] = rot

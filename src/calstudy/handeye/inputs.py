@@ -16,15 +16,15 @@ import numpy as np
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
 from calstudy.core.userfile import LENGTH_UNITS
+from calstudy.estimators.axxb import check_motions
 from calstudy.handeye.refine import spread_subset
 
 #: largest ``max |R^T R - I|`` re-projected to SO(3) silently: rotation entries rounded to 4
 #: decimals are off by up to about 1.7e-4, single-precision ones by 1e-7
 ORTHO_TOL = 1e-3
-#: largest rotation between two poses below which the motions count as pure translations
+#: smallest rotation of a motion that counts, and smallest angle between two motion axes, of
+#: the motion check a calibration runs (:func:`calstudy.estimators.axxb.check_motions`)
 MIN_ROTATION = np.deg2rad(2.0)
-#: smallest ratio of the 2nd to the 1st singular value of the relative rotation vectors
-MIN_AXIS_SPREAD = 0.05
 #: storage forms of the robot poses (the first two are what the study uses)
 ROBOT_CONVENTIONS = {
     "gripper2base": False,
@@ -296,9 +296,10 @@ def motion_conditioning(a: np.ndarray) -> Conditioning:
     Raises
     ------
     CalibrationError
-        Fewer than 3 poses; fewer than 3 distinct robot poses (duplicates only); pure
-        translations (largest rotation below :data:`MIN_ROTATION`); rotations about one axis
-        (axis spread below :data:`MIN_AXIS_SPREAD`). The message names the cause and its number.
+        Fewer than 3 poses; fewer than 3 distinct robot poses (duplicates only); no motion
+        rotating by :data:`MIN_ROTATION`, or rotating motions whose axes lie within
+        :data:`MIN_ROTATION` of one axis (:func:`calstudy.estimators.axxb.check_motions`). The
+        message names the cause and its number.
     """
     n = a.shape[0]
     if n < 3:
@@ -316,21 +317,8 @@ def motion_conditioning(a: np.ndarray) -> Conditioning:
     i, j = np.concatenate([i, sub[si]]), np.concatenate([j, sub[sj]])
     rel = np.einsum("nji,njk->nik", a[i, :3, :3], a[j, :3, :3])
     rv = geo.so3_log(rel)
-    ang = np.linalg.norm(rv, axis=1)
-    if ang.max() < MIN_ROTATION:
-        raise CalibrationError(
-            f"pure translations: the largest rotation between two of the {n} robot poses is "
-            f"{np.rad2deg(ang.max()):.3g} deg (below {np.rad2deg(MIN_ROTATION):g} deg), so the "
-            "camera translation is undetermined; add poses that rotate the flange about at "
-            "least two non-parallel axes"
-        )
+    check_motions(rv, n, MIN_ROTATION)
     # sign-free axes: the outer-product sum is the same for +k and -k
     s = np.sqrt(np.clip(np.linalg.eigvalsh(rv.T @ rv)[::-1], 0.0, None))
-    spread, spread3 = float(s[1] / s[0]), float(s[2] / s[0])
-    if spread < MIN_AXIS_SPREAD:
-        raise CalibrationError(
-            f"rotations about one axis only: the relative rotation axes of the {n} poses are "
-            f"parallel (axis spread {spread:.3g}, below {MIN_AXIS_SPREAD:g}), so the camera "
-            "translation along that axis is undetermined; add poses rotating about another axis"
-        )
-    return Conditioning(n, n_distinct, float(np.rad2deg(ang.max())), spread, spread3)
+    max_rotation = float(np.rad2deg(np.linalg.norm(rv, axis=1).max()))
+    return Conditioning(n, n_distinct, max_rotation, float(s[1] / s[0]), float(s[2] / s[0]))

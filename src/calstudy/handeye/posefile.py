@@ -14,7 +14,13 @@ import numpy as np
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.userfile import LENGTH_UNITS, check_ids, parse_number, read_csv_table
+from calstudy.core.userfile import (
+    LENGTH_UNITS,
+    check_ids,
+    parse_number,
+    read_csv_table,
+    require_columns,
+)
 from calstudy.handeye.inputs import (
     CAMERA_CONVENTIONS,
     ROBOT_CONVENTIONS,
@@ -165,9 +171,7 @@ def _pose_columns(path, header, prefix):
             + f"; found {forms or 'none'}"
         )
     rot = [f"{prefix}_{c}" for c in ROTATION_FORMS[forms[0]]]
-    missing = [c for c in trans + rot if c not in header]
-    if missing:
-        raise CalibrationError(f"{path}: missing column(s) {', '.join(missing)}")
+    require_columns(path, header, trans + rot)
     return unit, forms[0], trans, rot
 
 
@@ -300,18 +304,15 @@ def read_pose_list(path) -> PoseList:
     """
     path = Path(path)
     header, rows = read_csv_table(path, "pose list")
-    if "id" not in header:
-        raise CalibrationError(f"{path}: missing column 'id'")
+    require_columns(path, header, ["id"])
     rprefix = _find_prefix(path, header, list(ROBOT_CONVENTIONS), "robot")
     cprefix = _find_prefix(path, header, list(CAMERA_CONVENTIONS), "camera")
     runit, rform, rtrans, rrot = _pose_columns(path, header, rprefix)
     cunit, cform, ctrans, crot = _pose_columns(path, header, cprefix)
     cols = ["id"] + rtrans + rrot + ctrans + crot
     index = [header.index(c) for c in cols]
-    if not rows:
-        raise CalibrationError(f"{path}: no pose rows")
     values = _values(path, rows, cols, index)
-    ids = check_ids(path, values[:, 0])
+    ids = check_ids(path, values[:, 0], [n for n, _ in rows])
     nr = len(rrot)
     if rform == "quaternion":
         _check_quaternions(path, rows, rprefix, values[:, 4 : 4 + nr])
@@ -321,7 +322,7 @@ def read_pose_list(path) -> PoseList:
     c0 = 4 + nr
     camera = geo.make_transform(_rotations(cform, values[:, c0 + 3 :]), values[:, c0 : c0 + 3])
     return PoseList(
-        ids.astype(int),
+        ids,
         robot,
         camera,
         rprefix,

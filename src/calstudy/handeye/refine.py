@@ -42,11 +42,6 @@ PARAM_NAMES = ["X_rx", "X_ry", "X_rz", "X_tx", "X_ty", "X_tz"] + [
 ]
 
 
-def _so3_jr(phi: np.ndarray) -> np.ndarray:
-    """Right Jacobian of SO(3), ``exp(phi + e) = exp(phi) exp(Jr(phi) e)``: (N, 3) -> (N, 3, 3)."""
-    return geo.so3_left_jacobian(-np.atleast_2d(phi))
-
-
 # ----------------------------------------------------------------------------------------------
 # residuals and closed forms
 
@@ -308,8 +303,8 @@ class PoseProblem:
         ry, r_hat, u, _ = self._predict(p)
         n = r_hat.shape[0]
         e = geo.so3_log(np.swapaxes(r_hat, 1, 2) @ self.b[:, :3, :3])
-        jl_y = _so3_jr(p[0:3])[0].T
-        jr_z = _so3_jr(p[6:9])[0]
+        jl_y = geo.so3_left_jacobian(-p[0:3])[0].T
+        jr_z = geo.so3_left_jacobian(-p[6:9])[0]
         jl_inv_e = np.swapaxes(geo.so3_right_jacobian_inverse(e), 1, 2)
         jac = np.zeros((n, 6, 12))
         jac[:, :3, 0:3] = geo.skew(u) @ jl_y
@@ -542,8 +537,8 @@ class _Reprojection:
     def jacobian(self, p):
         k, pts, n = self.k, self.pts, self.prob.c.shape[0]
         ry, r_hat, _, cam = self.parts(p)
-        jl_y = _so3_jr(p[0:3])[0].T
-        jr_z = _so3_jr(p[6:9])[0]
+        jl_y = geo.so3_left_jacobian(-p[0:3])[0].T
+        jr_z = geo.so3_left_jacobian(-p[6:9])[0]
         m = pts.shape[0]
         dcam = np.zeros((n, m, 3, 12))
         dcam[..., 0:3] = -geo.skew(cam - p[3:6]) @ jl_y

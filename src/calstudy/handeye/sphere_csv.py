@@ -19,6 +19,7 @@ from calstudy.core.userfile import (
     check_ids,
     parse_number,
     read_csv_table,
+    require_columns,
 )
 
 SPHERE_CSV_COLUMNS = ("id", "group", "x", "y", "z", "a", "b", "c", "sx", "sy", "sz")
@@ -138,12 +139,8 @@ def _sphere_columns(path, header: list[str]) -> tuple[dict[str, str], dict[str, 
             )
         unit = found.pop()
         factors[group] = float("nan") if unit is None else units[unit]
-    for col in ("id", "group"):
-        if col not in header:
-            raise CalibrationError(
-                f"{path}: missing column {col!r}; the header has {', '.join(header)}"
-            )
-        mapping[col] = col
+    require_columns(path, header, ["id", "group"])
+    mapping |= {"id": "id", "group": "group"}
     return mapping, factors
 
 
@@ -231,8 +228,6 @@ def read_sphere_measurements(path) -> SphereMeasurements:
         On any of the checks above.
     """
     header, rows = read_csv_table(path, "fixed-sphere measurement file")
-    if not rows:
-        raise CalibrationError(f"{path}: no measurement rows")
     mapping, factors = _sphere_columns(path, header)
     values, groups = _cells(path, header, rows, mapping)
     absent = [g for g in ("translation", "rotation") if not np.any(groups == g)]
@@ -245,10 +240,10 @@ def read_sphere_measurements(path) -> SphereMeasurements:
     values[:, 1:4] *= np.nan_to_num(factors["xyz"], nan=1.0)
     values[:, 4:7] *= np.nan_to_num(factors["abc"], nan=1.0)
     values[:, 7:10] *= np.nan_to_num(factors["sxyz"], nan=1.0)
-    ids = check_ids(path, values[:, 0])
+    ids = check_ids(path, values[:, 0], [n for n, _ in rows])
     rot = geo.euler_zyx_to_matrix(values[:, 4], values[:, 5], values[:, 6])
     return SphereMeasurements(
-        ids=ids.astype(int),
+        ids=ids,
         group=groups,
         flange2base=geo.make_transform(rot, values[:, 1:4]),
         centres=values[:, 7:10],

@@ -29,7 +29,7 @@ import yaml
 
 from calstudy.claims import CLAIM_COLUMNS, VERDICTS, claim_register
 from calstudy.core.labels import claim_label
-from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
+from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR, atomic_write
 from calstudy.core.verdicts import BAND_PP, FACTOR
 from calstudy.io.claims_cells import (
     VERDICT_COLOURS,
@@ -41,7 +41,7 @@ from calstudy.io.claims_cells import (
     published_value,
     typeset,
 )
-from calstudy.io.results import atomic_write, read_claims
+from calstudy.io.results import read_claims
 from calstudy.io.robustness_grid import grid_figure, read_maps
 
 __all__ = [

@@ -22,8 +22,7 @@ import os
 import platform
 import re
 import shutil
-import tempfile
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +37,7 @@ from calstudy.claims import (
     claim_register,
 )
 from calstudy.core.errors import CalibrationError
-from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR
+from calstudy.core.paths import DATA_DIR, REPO_ROOT, RESULTS_DIR, atomic_write
 from calstudy.io.dependencies import label, notebook_inputs
 
 NOTEBOOKS_DIR = REPO_ROOT / "notebooks"
@@ -69,45 +68,6 @@ _CLAIM_FLOAT_COLUMNS = ("reproduced", "ci_low", "ci_high", "replication_rate")
 
 # ----------------------------------------------------------------------------------------------
 # atomic files
-
-
-def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
-    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it to ``path``.
-
-    An interrupted or failing ``write`` leaves ``path`` as it was (old content or absent) and
-    no temporary file behind; the written file is readable by all (mode 0644).
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        Destination file; missing parent folders are created.
-    write : callable
-        ``write(tmp)`` writes the whole content to the file ``tmp`` (a pathlib.Path).
-
-    Returns
-    -------
-    pathlib.Path
-        ``path``.
-
-    Raises
-    ------
-    Exception
-        Whatever ``write`` raises (the temporary file is removed first).
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    tmp = Path(name)
-    try:
-        write(tmp)
-        # mkstemp creates 0600; results are ordinary readable files
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
 
 
 def write_table(df: pd.DataFrame, path: str | Path, float_format: str = FLOAT_FORMAT) -> Path:

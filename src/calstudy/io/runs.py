@@ -28,8 +28,8 @@ import pandas as pd
 
 from calstudy.core import montecarlo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.paths import RESULTS_DIR
-from calstudy.io.results import atomic_write, write_table
+from calstudy.core.paths import RESULTS_DIR, atomic_write
+from calstudy.io.results import write_table
 
 #: Float format of the stored trial rows: enough digits to recompute every table from them.
 TRIALS_FLOAT_FORMAT = "%.10g"

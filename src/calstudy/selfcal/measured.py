@@ -58,6 +58,7 @@ from calstudy.core.userfile import (
     check_ids,
     parse_number,
     read_csv_table,
+    require_columns,
 )
 from calstudy.estimators.shared_error import SharedErrorFit, shared_error_fit
 from calstudy.models.kinematics import Robot
@@ -150,15 +151,6 @@ class MeasuredCell:
 # reading
 
 
-def _csv_rows(path: Path, what: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """Header and (line number, cells) of the data rows (the user-file tokeniser); a file
-    without data rows is refused."""
-    header, rows = read_csv_table(path, what)
-    if not rows:
-        raise CalibrationError(f"{path}: no data rows")
-    return header, rows
-
-
 def _unit_columns(path, header, stems, units: dict, what: str) -> tuple[list[str], float]:
     """Columns ``<stem>_<unit>`` for one unit of ``units``; the factor to mm or rad."""
     found = [u for u in units if all(f"{s}_{u}" in header for s in stems)]
@@ -172,32 +164,18 @@ def _unit_columns(path, header, stems, units: dict, what: str) -> tuple[list[str
 
 
 def _column(path, header, rows, name, parse=True):
-    if name not in header:
-        raise CalibrationError(f"{path}: missing column {name!r}")
+    require_columns(path, header, [name])
     k = header.index(name)
     if not parse:
         return [(n, r[k].strip()) for n, r in rows]
     return np.array([parse_number(path, n, name, r[k].strip()) for n, r in rows])
 
 
-def _ids(path, header, rows, name) -> np.ndarray:
-    values = _column(path, header, rows, name)
-    bad = np.flatnonzero(values != np.round(values))
-    if bad.size:
-        raise CalibrationError(
-            f"{path}: row {rows[bad[0]][0]}, column {name!r}: {values[bad[0]]} is not an integer"
-        )
-    return values.astype(int)
-
-
 def read_spheres(path) -> tuple[np.ndarray, np.ndarray]:
     """Sphere ids (k,) and tracker readings (k, 3) mm of ``spheres.csv``."""
     path = Path(path)
-    header, rows = _csv_rows(path, "sphere table")
-    ids = _ids(path, header, rows, "sphere")
-    uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        raise CalibrationError(f"{path}: sphere {int(uniq[counts > 1][0])} appears more than once")
+    header, rows = read_csv_table(path, "sphere table")
+    ids = check_ids(path, _column(path, header, rows, "sphere"), [n for n, _ in rows], "sphere")
     cols, factor = _unit_columns(path, header, ["x", "y", "z"], LENGTH_UNITS, "sphere centres")
     xyz = np.column_stack([_column(path, header, rows, c) for c in cols]) * factor
     spread = float(np.ptp(xyz, axis=0).max()) if len(xyz) > 1 else math.inf
@@ -214,14 +192,14 @@ def read_measurements(path, sphere_ids) -> pd.DataFrame:
     """The rows of ``measurements.csv``: ``pose, set, sphere`` (index), ``q1..q6`` rad and
     ``cx, cy, cz`` mm, with the source line number in ``line``."""
     path = Path(path)
-    header, rows = _csv_rows(path, "measurement table")
-    poses = _ids(path, header, rows, "pose")
-    check_ids(path, poses.astype(float))
+    header, rows = read_csv_table(path, "measurement table")
+    lines = [n for n, _ in rows]
+    poses = check_ids(path, _column(path, header, rows, "pose"), lines, "pose")
     sets = _column(path, header, rows, "set", parse=False)
     for n, s in sets:
         if s not in SETS:
             raise CalibrationError(f"{path}: row {n}, column 'set': {s!r} is not one of {SETS}")
-    sphere = _ids(path, header, rows, "sphere")
+    sphere = check_ids(path, _column(path, header, rows, "sphere"), lines, "sphere", unique=False)
     known = {int(s): i for i, s in enumerate(sphere_ids)}
     for (n, _), s in zip(rows, sphere, strict=True):
         if s not in known:
@@ -230,7 +208,7 @@ def read_measurements(path, sphere_ids) -> pd.DataFrame:
             )
     qcols, qf = _unit_columns(path, header, [f"q{i}" for i in range(1, 7)], ANGLE_UNITS, "joints")
     ccols, cf = _unit_columns(path, header, ["cx", "cy", "cz"], LENGTH_UNITS, "sensor centres")
-    out = pd.DataFrame({"line": [n for n, _ in rows], "pose": poses, "set": [s for _, s in sets]})
+    out = pd.DataFrame({"line": lines, "pose": poses, "set": [s for _, s in sets]})
     out["sphere"] = [known[int(s)] for s in sphere]
     joints = np.column_stack([_column(path, header, rows, c) for c in qcols])
     if qf != 1.0 and float(np.abs(joints).max()) <= math.pi:

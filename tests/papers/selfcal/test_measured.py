@@ -109,6 +109,13 @@ def _break(folder, name, old, new):
             "row 4, column 'sphere': sphere 99 is not in spheres.csv",
         ),
         (measured.SPHERES_FILE, "2,3982.874", "1,3982.874", "sphere 1 appears more than once"),
+        (measured.MEASUREMENTS_FILE, "2,calibration,1", "1,calibration,1", "pose 1 appears more"),
+        (
+            measured.MEASUREMENTS_FILE,
+            "2,calibration,1",
+            "2.5,calibration,1",
+            "row 4, column 'pose': 2.5 is not an integer",
+        ),
         (measured.SPHERES_FILE, "x_mm", "x_in", "sphere centres need columns"),
         (measured.CELL_FILE, "zyx_deg = [30", "zyx = [30", "base.zyx_deg: missing"),
     ],
