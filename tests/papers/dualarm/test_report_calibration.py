@@ -8,7 +8,6 @@ import pandas as pd
 import pytest
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.jointcal import rmse_spread
 from calstudy.core.montecarlo import run
 from calstudy.core.stats import round_to_uncertainty
 from calstudy.papers.dualarm import experiments
@@ -40,34 +39,33 @@ def drift_pilot(truth=1.8, off=None, n=30, scales=SCALES):
 
 
 def test_the_joint_fit_recovers_a_known_drift_scale(scenario):
-    fit = rc.drift_fit(drift_pilot(1.8), PUBLISHED, scenario)
+    fit = rc.drift_fit(drift_pilot(1.8), PUBLISHED)
     assert fit.identified and not fit.at_edge
     assert len(fit.met()) == 4
     assert fit.value == pytest.approx(1.8, abs=2 * fit.uncertainty)
     assert fit.value == pytest.approx(1.8, rel=1e-3)
-    # each figure is a mean of n_views - 1 distances of one scan
-    assert fit.agreement["tolerance"].iloc[0] == pytest.approx(
-        np.exp(rc.COVERAGE * rmse_spread(scenario.icp.n_views - 1)) - 1
-    )
+    # each pair's tolerance is two of its spreads over the pilot's trials (the made-up noise)
+    pilot = drift_pilot(1.8)
+    at1 = pilot[pilot["drift_scale"] == 1.0]
+    own = [np.std(np.log(at1[rc.pair_column(a, s)]), ddof=1) for a, s, _ in PAIRS]
+    np.testing.assert_allclose(fit.agreement["tolerance"], np.expm1(2 * np.array(own)))
 
 
 def test_a_pair_that_no_shared_scale_meets_is_reported(scenario):
     pilot = drift_pilot(1.8, off=("before_1B_mm", 4.0))
-    fit = rc.drift_fit(pilot, PUBLISHED, scenario)
+    fit = rc.drift_fit(pilot, PUBLISHED)
     assert not fit.identified
     assert "before_1B_mm" not in fit.met() and len(fit.met()) == 3
     table = rc.calibration_table(fit, pilot, "drift_scale")
     text = rc.drift_text(table)
     assert "does not meet arm 1 sphere B" in text and "All four are met" not in text
-    fine = rc.calibration_table(
-        rc.drift_fit(drift_pilot(1.8), PUBLISHED, scenario), pilot, "drift_scale"
-    )
+    fine = rc.calibration_table(rc.drift_fit(drift_pilot(1.8), PUBLISHED), pilot, "drift_scale")
     assert "All four are met" in rc.drift_text(fine)
 
 
 def test_the_calibration_table_holds_the_grid_medians_and_the_fit(scenario):
     pilot = drift_pilot(1.8)
-    fit = rc.drift_fit(pilot, PUBLISHED, scenario)
+    fit = rc.drift_fit(pilot, PUBLISHED)
     table = rc.calibration_table(fit, pilot, "drift_scale")
     grid = table[table["point"] == "grid"]
     at = grid[(grid["drift_scale"] == 2.0) & (grid["baseline"] == "before_2A_mm")]
@@ -83,18 +81,18 @@ def test_the_calibration_table_holds_the_grid_medians_and_the_fit(scenario):
 
 def test_the_fed_value_is_the_fit_rounded_to_its_uncertainty(scenario):
     pilot = drift_pilot(1.8)
-    fit = rc.drift_fit(pilot, PUBLISHED, scenario)
+    fit = rc.drift_fit(pilot, PUBLISHED)
     value = rc.fed_value(fit, "drift_scale")
     assert value == round_to_uncertainty(fit.value, fit.uncertainty)
     decade = 10.0 ** np.floor(np.log10(fit.uncertainty))
     assert value == pytest.approx(round(fit.value / decade) * decade)
     # another machine's last bits give the same value
     nudged = pilot.assign(**{c: pilot[c] * (1 + 1e-13) for c in pilot if c.startswith("before")})
-    assert rc.fed_value(rc.drift_fit(nudged, PUBLISHED, scenario), "drift_scale") == value
+    assert rc.fed_value(rc.drift_fit(nudged, PUBLISHED), "drift_scale") == value
 
 
 def test_a_fit_at_the_end_of_the_sweep_is_refused(scenario):
-    fit = rc.drift_fit(drift_pilot(6.0), PUBLISHED, scenario)
+    fit = rc.drift_fit(drift_pilot(6.0), PUBLISHED)
     assert fit.at_edge
     with pytest.raises(
         CalibrationError, match=r"drift_scale: the joint fit 3 lies at an end of the swept 1-3"
@@ -103,14 +101,14 @@ def test_a_fit_at_the_end_of_the_sweep_is_refused(scenario):
 
 
 def test_a_pilot_without_a_pair_or_the_input_is_refused(scenario):
-    with pytest.raises(CalibrationError, match=r"gives no 'before_2B_mm' at 1"):
-        rc.drift_fit(drift_pilot().drop(columns="before_2B_mm"), PUBLISHED, scenario)
+    with pytest.raises(CalibrationError, match=r"no column 'before_2B_mm'"):
+        rc.drift_fit(drift_pilot().drop(columns="before_2B_mm"), PUBLISHED)
     with pytest.raises(CalibrationError, match=r"no column 'drift_scale'"):
-        rc.drift_fit(drift_pilot().rename(columns={"drift_scale": "s"}), PUBLISHED, scenario)
+        rc.drift_fit(drift_pilot().rename(columns={"drift_scale": "s"}), PUBLISHED)
     with pytest.raises(
         CalibrationError, match=r"3 samples cannot give a 95 % interval.*at least 6 needed"
     ):
-        rc.drift_fit(drift_pilot(n=3), PUBLISHED, scenario)
+        rc.drift_fit(drift_pilot(n=3), PUBLISHED)
 
 
 def test_the_plate_noise_meets_table3_on_a_known_curve(scenario):
@@ -127,11 +125,11 @@ def test_the_plate_noise_meets_table3_on_a_known_curve(scenario):
             for t in range(30)
         ]
     )
-    fit = rc.plate_fit(pilot, PUBLISHED, scenario)
+    fit = rc.plate_fit(pilot, PUBLISHED)
     assert fit.identified
     assert fit.value == pytest.approx(0.9, rel=1e-3)
-    n = scenario.global_test.n_groups * scenario.global_test.n_poses
-    assert fit.agreement["tolerance"].item() == pytest.approx(np.exp(2 * rmse_spread(n)) - 1)
+    own = np.std(np.log(noise), ddof=1)
+    assert fit.agreement["tolerance"].item() == pytest.approx(np.expm1(2 * own))
     assert "Table 3's 0.556 mm, met" in rc.plate_text(
         rc.calibration_table(fit, pilot, "plate_sigma_px")
     )
@@ -154,6 +152,6 @@ def test_a_small_real_drift_pilot_recovers_the_scale_that_made_its_targets(scena
     published = PUBLISHED.model_copy(
         update={"icp": PUBLISHED.icp.model_copy(update={"rows": made})}
     )
-    fit = rc.drift_fit(rows[rows["drift_scale"] != 2.0], published, scenario)
+    fit = rc.drift_fit(rows[rows["drift_scale"] != 2.0], published)
     assert fit.identified
     assert abs(fit.value - 2.0) < 0.15

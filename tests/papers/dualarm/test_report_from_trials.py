@@ -12,7 +12,7 @@ from support import assert_same_table
 from calstudy.core.paths import RESULTS_DIR
 from calstudy.io.results import claims_table
 from calstudy.papers.dualarm import report, report_calibration
-from calstudy.papers.dualarm.scenario import load_published, load_scenario
+from calstudy.papers.dualarm.scenario import load_published
 
 FOLDER = RESULTS_DIR / "05_dualarm_global_calibration"
 
@@ -30,11 +30,11 @@ def _compare(fresh: pd.DataFrame, name: str) -> None:
 
 
 def _fits():
-    published, scn = load_published(), load_scenario()
+    published = load_published()
     drift, plate = _trials("drift_pilot"), _trials("plate_pilot")
     return (
-        (report_calibration.drift_fit(drift, published, scn), drift, "drift_scale"),
-        (report_calibration.plate_fit(plate, published, scn), plate, "plate_sigma_px"),
+        (report_calibration.drift_fit(drift, published), drift, "drift_scale"),
+        (report_calibration.plate_fit(plate, published), plate, "plate_sigma_px"),
     )
 
 
