@@ -19,11 +19,11 @@ PAIRS = [(arm, sphere, before) for arm, sphere, before, _ in PUBLISHED.icp.rows]
 SCALES = (1.0, 1.5, 2.0, 3.0)
 
 
-def drift_pilot(truth=1.8, off=None, n=30, scales=SCALES):
+def drift_pilot(truth=1.8, off=None, n=30, scales=SCALES, sigma=0.3):
     """Each pair's before-ICP error proportional to the scale, meeting the paper's value at
     ``truth`` (pair ``off``: ``(column, factor)`` misses it by that factor at every scale), with
-    the same lognormal trial noise at every scale, of median 1."""
-    noise = np.exp(np.random.default_rng(5).normal(0.0, 0.3, (n, len(PAIRS))))
+    the same lognormal trial noise (``sigma`` of its log) at every scale, of median 1."""
+    noise = np.exp(np.random.default_rng(5).normal(0.0, sigma, (n, len(PAIRS))))
     noise /= np.median(noise, axis=0)  # each pair's median exactly on its line
     rows = []
     for s in scales:
@@ -61,6 +61,21 @@ def test_a_pair_that_no_shared_scale_meets_is_reported(scenario):
     assert "does not meet arm 1 sphere B" in text and "All four are met" not in text
     fine = rc.calibration_table(rc.drift_fit(drift_pilot(1.8), PUBLISHED), pilot, "drift_scale")
     assert "All four are met" in rc.drift_text(fine)
+
+
+def test_the_drift_text_says_whether_the_paper_figures_tell_the_pairs_apart(scenario):
+    ratio = f"{max(b for *_, b in PAIRS) / min(b for *_, b in PAIRS):.2f}"
+    wide = drift_pilot(1.8, sigma=0.5)
+    text = rc.drift_text(rc.calibration_table(rc.drift_fit(wide, PUBLISHED), wide, "drift_scale"))
+    assert f"within a factor {ratio} of one another" in text
+    assert "cannot tell the pairs apart" in text and "in the paper's order" in text
+    narrow = drift_pilot(1.8, sigma=0.05)
+    table = rc.calibration_table(rc.drift_fit(narrow, PUBLISHED), narrow, "drift_scale")
+    text = rc.drift_text(table)
+    assert f"span a factor {ratio}, beyond" in text and "cannot tell" not in text
+    off = drift_pilot(1.8, off=("before_1B_mm", 4.0))
+    text = rc.drift_text(rc.calibration_table(rc.drift_fit(off, PUBLISHED), off, "drift_scale"))
+    assert "the simulation orders them" in text and text.count("arm 1 sphere B") >= 3
 
 
 def test_the_calibration_table_holds_the_grid_medians_and_the_fit(scenario):

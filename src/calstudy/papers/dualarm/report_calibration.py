@@ -314,10 +314,40 @@ def _spreads(table: pd.DataFrame) -> str:
     )
 
 
+def _order(rows: pd.DataFrame, column: str) -> str:
+    return " < ".join(_pair_label(b) for b in rows.sort_values(column, kind="stable")["baseline"])
+
+
+def _discrimination(fit: pd.DataFrame) -> str:
+    spread = float(fit["paper"].max() / fit["paper"].min())
+    allowed = float(1 + fit["tolerance"].min())
+    paper, simulated = _order(fit, "paper"), _order(fit, "median")
+    order = (
+        f"the simulation puts them in the paper's order, {paper}"
+        if paper == simulated
+        else f"the simulation orders them {simulated}, the paper {paper}"
+    )
+    if spread <= allowed:
+        return (
+            f" The paper's four figures lie within a factor {spread:.2f} of one another, inside "
+            f"even the narrowest tolerance, a factor {allowed:.2f}: they cannot tell the pairs "
+            "apart within one experiment's scatter, so a drift met by all four says only that "
+            "one drift scale is consistent with them, not that the study's model reproduces "
+            f"their order ({order})."
+        )
+    return (
+        f" The paper's four figures span a factor {spread:.2f}, beyond the narrowest "
+        f"tolerance, a factor {allowed:.2f}, so one experiment's scatter does not cover all "
+        f"their differences ({order})."
+    )
+
+
 def drift_text(table: pd.DataFrame) -> str:
     """The drift's joint calibration in sentences from :func:`calibration_table`: the fed scale
     and its uncertainty, each pair's median against the paper's and whether it is met, the
-    scale that meets each pair best alone, the tolerance, and the judgement (rule 14)."""
+    scale that meets each pair best alone, the tolerance, the judgement (rule 14), and what the
+    paper's four figures can tell apart: the ratio of the largest to the smallest against the
+    tolerance factor, and the simulated order of the pairs against the paper's."""
     fit = table[table["point"] == "joint fit"]
     first = fit.iloc[0]
     pairs = "; ".join(
@@ -333,15 +363,15 @@ def drift_text(table: pd.DataFrame) -> str:
         f"{alone} in that order. "
     )
     if first["identified"]:
-        return (
-            text + "All four are met at once: one drift scale is consistent with the four figures."
+        text += "All four are met at once: one drift scale is consistent with the four figures."
+    else:
+        missed = [_pair_label(b) for b in fit.loc[~fit["met"].astype(bool), "baseline"]]
+        text += (
+            f"The joint scale does not meet {', '.join(missed)}: the paper's four figures do not "
+            "identify one drift of the study's model. The joint fit is kept, and the robustness "
+            "map carries its uncertainty."
         )
-    missed = [_pair_label(b) for b in fit.loc[~fit["met"].astype(bool), "baseline"]]
-    return text + (
-        f"The joint scale does not meet {', '.join(missed)}: the paper's four figures do not "
-        "identify one drift of the study's model. The joint fit is kept, and the robustness map "
-        "carries its uncertainty."
-    )
+    return text + _discrimination(fit)
 
 
 def plate_text(table: pd.DataFrame) -> str:
