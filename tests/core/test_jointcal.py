@@ -50,6 +50,9 @@ def test_conflicting_baselines_meet_in_the_weighted_middle_and_are_not_identifie
         figures, GRID, [Baseline("falls", 0.025, 0.05), Baseline("rises", 0.08, 0.2)]
     )
     assert tight.value == pytest.approx(4.0 * 2.0 ** (25.0 / 425.0), rel=3e-3)
+    # each row carries its baseline's spread, and the tolerance is its coverage of spreads
+    assert tight.agreement["spread"].tolist() == [0.05, 0.2]
+    np.testing.assert_allclose(tight.agreement["tolerance"], np.expm1([0.1, 0.4]))
 
 
 def test_a_baseline_beyond_the_range_pins_the_fit_to_its_end():

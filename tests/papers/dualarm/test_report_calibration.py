@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 from calstudy.core.errors import CalibrationError
+from calstudy.core.jointcal import Baseline
 from calstudy.core.montecarlo import run
 from calstudy.core.stats import round_to_uncertainty
 from calstudy.papers.dualarm import experiments
@@ -92,6 +93,11 @@ def test_the_calibration_table_holds_the_grid_medians_and_the_fit(scenario):
     assert len(grid) == 4 * len(SCALES) and len(fitted) == 4
     assert (fitted["drift_scale"] == rc.fed_value(fit, "drift_scale")).all()
     assert fitted["paper"].tolist() == [before for _, _, before in PAIRS]
+    # the fit's spread is the median over the grid of the trials' spread, and met within the
+    # baselines' coverage of it
+    own = grid.groupby("baseline", sort=False)["trial_spread"].median()
+    np.testing.assert_allclose(fitted["spread"], own[fitted["baseline"]].to_numpy())
+    assert rc.coverage(table) == Baseline("any", 1.0, 1.0).coverage
 
 
 def test_the_fed_value_is_the_fit_rounded_to_its_uncertainty(scenario):
