@@ -5,10 +5,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.jointcal import Baseline, joint_calibration, rmse_spread
+from calstudy.core.jointcal import Baseline, joint_calibration, joint_calibration_rows, rmse_spread
 
 GRID = [1.0, 2.0, 4.0, 8.0, 16.0]
 
@@ -94,3 +95,26 @@ def test_bad_inputs_are_named():
         Baseline("x", 1.0, 0.0)
     with pytest.raises(CalibrationError, match=r"baseline 'falls' at 1: median -0\.1"):
         joint_calibration(lambda x: {"falls": np.full(8, -0.1)}, GRID, ok)
+
+
+def test_the_rows_of_a_sweep_give_the_same_fit_as_its_figures():
+    noise = np.exp(np.random.default_rng(3).normal(0.0, 0.2, 12))
+    rows = pd.DataFrame(
+        [
+            {"x": x, "trial": t, "falls": 0.1 / x * noise[t], "rises": 0.01 * x * noise[-1 - t]}
+            for x in GRID
+            for t in range(12)
+        ]
+    ).sample(frac=1.0, random_state=0)  # any row order
+
+    def own(x: float) -> dict:
+        return {"falls": 0.1 / x * noise, "rises": 0.01 * x * noise[::-1]}
+
+    base = [Baseline("falls", 0.025, 0.1), Baseline("rises", 0.05, 0.1)]
+    fit, ref = joint_calibration_rows(rows, "x", base), joint_calibration(own, GRID, base)
+    assert (fit.value, fit.uncertainty) == (ref.value, ref.uncertainty)
+    pd.testing.assert_frame_equal(fit.agreement, ref.agreement)
+    with pytest.raises(CalibrationError, match=r"the sweep rows have no column 'f'"):
+        joint_calibration_rows(rows, "f", base)
+    with pytest.raises(CalibrationError, match=r"gives no 'rises' at 1"):
+        joint_calibration_rows(rows.drop(columns="rises"), "x", base)

@@ -236,3 +236,35 @@ def joint_calibration(
         )
     edge = bool(best <= fine[0] or best >= fine[-1])
     return JointFit(value, uncertainty, edge, pd.DataFrame(rows), table)
+
+
+def joint_calibration_rows(rows: pd.DataFrame, x: str, baselines: Sequence[Baseline]) -> JointFit:
+    """:func:`joint_calibration` on the rows of a sweep: at each value of column ``x`` the
+    trials' figures are the columns named by the baselines, in ``trial`` order.
+
+    Parameters
+    ----------
+    rows : pandas.DataFrame
+        One row per trial and value: ``x``, ``trial`` and one column per baseline (> 0).
+    x : str
+        The input's column; its distinct values are the grid.
+    baselines : sequence of Baseline
+        As for :func:`joint_calibration`.
+
+    Returns
+    -------
+    JointFit
+
+    Raises
+    ------
+    CalibrationError
+        If ``rows`` has no column ``x``, or as :func:`joint_calibration`.
+    """
+    if x not in rows:
+        raise CalibrationError(f"the sweep rows have no column {x!r} (they have {list(rows)})")
+
+    def figures(value: float) -> dict:
+        at = rows[rows[x] == value].sort_values("trial")
+        return {b.name: at[b.name].to_numpy(float) for b in baselines if b.name in at}
+
+    return joint_calibration(figures, sorted(rows[x].unique()), baselines)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from calstudy.core.jointcal import Baseline, JointFit, joint_calibration, rmse_spread
+from calstudy.core.jointcal import Baseline, JointFit, joint_calibration_rows, rmse_spread
 from calstudy.core.labels import claim_label
 from calstudy.papers.binocular.report import default, judge_correction
 from calstudy.papers.binocular.scenario import published
@@ -52,13 +52,10 @@ def _select(sweep: pd.DataFrame, geometry) -> pd.DataFrame:
 def fit_mechanism(sweep: pd.DataFrame, geometry=None) -> JointFit:
     """The joint calibration of the F-number on one mechanism's F-number sweep (rows of
     ``optics_trial``; ``geometry`` ``(rim radius, rim distance)`` mm selects a rim's rows)."""
-    rows = _select(sweep, geometry)
-
-    def figures(f: float) -> dict:
-        at = rows[rows["f_number"] == f].sort_values("trial")
-        return {"table2": at["t2_without"], "fig13": at[FIG13_SWEEP_COLUMN]}
-
-    return joint_calibration(figures, sorted(rows["f_number"].unique()), baselines())
+    rows = _select(sweep, geometry).rename(
+        columns={"t2_without": "table2", FIG13_SWEEP_COLUMN: "fig13"}
+    )
+    return joint_calibration_rows(rows, "f_number", baselines())
 
 
 def joint_table(fits: dict) -> pd.DataFrame:

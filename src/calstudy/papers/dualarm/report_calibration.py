@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.jointcal import Baseline, JointFit, joint_calibration
+from calstudy.core.jointcal import Baseline, JointFit, joint_calibration_rows
 from calstudy.core.stats import round_to_uncertainty
 from calstudy.papers.dualarm.schema import PublishedFile
 
@@ -151,17 +151,6 @@ def plate_baselines(published: PublishedFile, pilot: pd.DataFrame) -> list[Basel
     return [Baseline(PLATE_COLUMN, float(t3["circular plate"][3]), spread)]
 
 
-def _fit(pilot: pd.DataFrame, x: str, baselines: list[Baseline]) -> JointFit:
-    if x not in pilot:
-        raise CalibrationError(f"the pilot rows have no column {x!r} (they have {list(pilot)})")
-
-    def figures(value: float) -> dict:
-        at = pilot[pilot[x] == value].sort_values("trial")
-        return {b.name: at[b.name].to_numpy(float) for b in baselines if b.name in at}
-
-    return joint_calibration(figures, sorted(pilot[x].unique()), baselines)
-
-
 def drift_fit(pilot: pd.DataFrame, published: PublishedFile) -> JointFit:
     """The drift scale calibrated to the four before-ICP errors at once (:func:`drift_baselines`).
 
@@ -185,7 +174,7 @@ def drift_fit(pilot: pd.DataFrame, published: PublishedFile) -> JointFit:
         If a column is missing, the grid has fewer than two scales or fewer than six trials per
         scale (the median's interval), or an error is not positive.
     """
-    return _fit(pilot, "drift_scale", drift_baselines(published, pilot))
+    return joint_calibration_rows(pilot, "drift_scale", drift_baselines(published, pilot))
 
 
 def plate_fit(pilot: pd.DataFrame, published: PublishedFile) -> JointFit:
@@ -209,7 +198,7 @@ def plate_fit(pilot: pd.DataFrame, published: PublishedFile) -> JointFit:
     CalibrationError
         As :func:`drift_fit`.
     """
-    return _fit(pilot, "plate_sigma_px", plate_baselines(published, pilot))
+    return joint_calibration_rows(pilot, "plate_sigma_px", plate_baselines(published, pilot))
 
 
 def fed_value(fit: JointFit, name: str) -> float:
