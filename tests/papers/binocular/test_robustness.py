@@ -143,6 +143,28 @@ def test_a_new_ledger_entry_is_screened_without_a_change_of_code(tmp_path):
     assert "sensor.image.pixel_pitch_mm" not in {i.key for i in robustness.map_inputs("")[0]}
 
 
+def test_a_calibrated_input_no_claim_reads_is_accepted_and_not_screened(tmp_path):
+    """A ledger input marked calibrated with a range but read only under the other defocus
+    mechanism is a calibrated input of the ledger: its value is accepted, and it is not
+    screened."""
+    folder = tmp_path / "scenario"
+    shutil.copytree(data_path("binocular"), folder)
+    text = (folder / "sensor.toml").read_text()
+    ref = next(line for line in text.splitlines() if line.startswith("provenance.rim_radius_mm"))
+    text = text.replace(
+        ref,
+        'provenance.rim_radius_mm = { kind = "calibrated", target = "a test", code = "a:test", '
+        "range = [8.0, 20.0] }",
+    )
+    (folder / "sensor.toml").write_text(text)
+    rim = "sensor.optics.rim_radius_mm"
+    inputs, skipped = robustness.map_inputs(str(folder), {rim: (10.0, 1.0)})
+    assert rim not in {i.key for i in inputs}
+    assert any(s.startswith(rim) and "rim mechanism" in s for s in skipped)
+    with pytest.raises(CalibrationError, match=r"those are \['sensor.optics.f_number', 'sensor"):
+        robustness.map_inputs(str(folder), {"sensor.optics.focus_distance_mm": (850.0, 10.0)})
+
+
 def test_only_refuses_an_input_the_map_does_not_screen():
     with pytest.raises(CalibrationError, match=r"\['sensor.nothing'\]"):
         robustness.map_spec("", only=["sensor.nothing"])

@@ -37,6 +37,7 @@ from calstudy.core.robustness import (
     Input,
     MapSpec,
     calibrated_input,
+    ledger_inputs,
     paper_spec,
     screened_inputs,
 )
@@ -170,7 +171,7 @@ def map_inputs(
         only_read=ONLY_READ,
         unused=unused,
     )
-    known = {item.key for item in found if item.kind == "calibrated"}
+    known = {item.key for item in ledger_inputs(scenario, ("calibrated",))[0]}
     unknown = sorted(set(calibrated) - known)
     if unknown:
         raise CalibrationError(
