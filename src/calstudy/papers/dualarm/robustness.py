@@ -108,7 +108,6 @@ def default_caps(scn: Scenario) -> dict[str, float]:
 
 
 def map_inputs(
-    scenario_toml: str,
     scn: Scenario,
     calibrated: Mapping[str, tuple[float, float]],
     caps: Mapping[str, float] | None = None,
@@ -118,10 +117,8 @@ def map_inputs(
 
     Parameters
     ----------
-    scenario_toml : str
-        The scenario file ("" for the study's).
     scn : Scenario
-        The station loaded from it.
+        The station (its validated scenario file).
     calibrated : mapping of str to (float, float)
         Keyword of a calibrated input of the experiment (``drift_scale``, ``plate_sigma_px``)
         -> (value, standard uncertainty).
@@ -140,7 +137,7 @@ def map_inputs(
     ]
     not_read = {cid: NOT_READ[part] for cid, part in CLAIM_PARTS.items()}
     found, skipped = screened_inputs(
-        load_scenario(scenario_toml or None),
+        scn,
         CLAIM_PARTS,
         not_read,
         kinds=SCREENED_KINDS,
@@ -203,9 +200,7 @@ def map_spec(
     base = {"drift_scale": drift[0], "plate_sigma_px": plate[0]}
     scn = load_scenario(scenario_toml or None)
     caps = {**default_caps(scn), **(caps or {})}
-    inputs = map_inputs(
-        scenario_toml, scn, {"drift_scale": drift, "plate_sigma_px": plate}, caps
-    )
+    screened = map_inputs(scn, {"drift_scale": drift, "plate_sigma_px": plate}, caps)
 
     def experiment(part: str, setting: Mapping, n_trials: int):
         keywords = {**base, **{k: v for k, v in setting.items() if "." not in k}}
@@ -216,7 +211,7 @@ def map_spec(
 
     return paper_spec(
         CLAIM_PARTS,
-        inputs,
+        screened,
         experiment,
         lambda _, rows: report.claim_statistics(rows),
         lambda _, rows: judge_claims(rows, published),
