@@ -129,14 +129,14 @@ def test_loglog_crossing_and_the_verdicts_along_an_f_number_sweep():
     assert report.loglog_crossing(table["f_number"], table["t2_without_mm"], 0.5) is None
     # ratio 0.9 against the paper's 0.837 and a significant oracle: reproduced at every point
     assert set(table["verdict_coc"]) == {"reproduced"}
-    text = report.verdict_changes(table, "f_number", "binocular.coc", "F-number", "")
+    text = report.sweep_verdict_sentence(table, "f_number", "binocular.coc", "F-number", "")
     assert text == (
         "Over the F-number sweep (f/4 to f/11) the circle-of-confusion rectification "
         "claim stays reproduced."
     )  # the claim in words, not its id
     table.loc[2, "verdict_coc"] = "not testable"
-    text = report.verdict_changes(table, "f_number", "binocular.coc", "F-number", "")
+    text = report.sweep_verdict_sentence(table, "f_number", "binocular.coc", "F-number", "")
     assert text.endswith("is reproduced at f/4 to f/5.6, not testable at f/11.")
     table.loc[0, "verdict_coc"] = "not reproduced"
-    text = report.verdict_changes(table, "f_number", "binocular.coc", "F-number", "")
+    text = report.sweep_verdict_sentence(table, "f_number", "binocular.coc", "F-number", "")
     assert text.endswith("not reproduced at f/4, reproduced at f/5.6, not testable at f/11.")

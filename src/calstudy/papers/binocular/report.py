@@ -605,7 +605,7 @@ def loglog_crossing(x, y, goal: float) -> float | None:
     return None
 
 
-def verdict_changes(table: pd.DataFrame, key: str, claim: str, label: str, unit: str) -> str:
+def sweep_verdict_sentence(table: pd.DataFrame, key: str, claim: str, label: str, unit: str) -> str:
     """One sentence: the verdict of ``claim`` along a sweep (column ``key`` of ``table``, verdicts
     in ``verdict_<name>``) and where it changes; the claim is named in words
     (:data:`calstudy.core.labels.CLAIM_LABELS`)."""
