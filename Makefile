@@ -87,8 +87,8 @@ $(STAMP): environment.txt pyproject.toml
 NOTEBOOK_JOBS ?= 2
 CORES := $(shell getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
 CORES_PER_NOTEBOOK := $(shell echo $$(( $(CORES) / $(NOTEBOOK_JOBS) > 0 ? $(CORES) / $(NOTEBOOK_JOBS) : 1 )))
-# Seconds each took in a fresh `make reproduce` on 2 cores (one core each, other work on the
-# machine): 05 1,557, 04 1,370, 03 304, 02 222, 01 174, 06 13. A notebook not listed runs last.
+# Seconds each took in a fresh `make reproduce` on 2 idle cores (one core each): 05 1,332,
+# 04 1,249, 03 284, 02 187, 01 122, 06 9. A notebook not listed runs last.
 LONGEST_FIRST := 05_dualarm_global_calibration 04_binocular_correction \
 	03_selfcal_one_step_identification 02_hybrid_production_compensation \
 	01_hybrid_global_calibration 06_handeye_your_cell

@@ -89,6 +89,20 @@ def test_a_flip_is_conditional_with_its_threshold_within_a_grid_step():
     assert "reproduced -> not reproduced between" in summary.at["toy.flip", "thresholds"]
 
 
+def test_a_claim_judged_otherwise_on_its_own_trials_is_conditional_and_says_both():
+    table, _ = _map()
+    base = table[(table["claim"] == "toy.flat") & (table["stage"] == "base")].iloc[0]
+    other = "direction only" if base["verdict"] != "direction only" else "reproduced"
+    same = claim_summary(table, INPUTS, verdicts={"toy.flat": base["verdict"]}).set_index("id")
+    assert same.at["toy.flat", "robustness"] == "robust"
+    summary = claim_summary(table, INPUTS, verdicts={"toy.flat": other}).set_index("id")
+    assert summary.at["toy.flat", "robustness"] == "conditional"
+    assert summary.at["toy.flat", "verdicts"].split("; ")[:2] == [other, base["verdict"]]
+    sentence = summary.at["toy.flat", "sentence"]
+    assert sentence.startswith(f"toy.flat is {other} at the scenario's values on its own trials, ")
+    assert f"{base['verdict']} on the {base['n']} trials of the map's point" in sentence
+
+
 def test_a_flat_claim_is_robust_and_an_unused_input_does_not_matter():
     table, _ = _map()
     summary = claim_summary(table, INPUTS).set_index("id")

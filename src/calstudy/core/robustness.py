@@ -786,7 +786,12 @@ def thresholds(table: pd.DataFrame, claim: str, label: str) -> list[str]:
     return verdict_changes(sweep["value"].tolist(), sweep["verdict"].tolist(), text, _number)
 
 
-def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> pd.DataFrame:
+def claim_summary(
+    table: pd.DataFrame,
+    inputs: Sequence[Input],
+    skipped=(),
+    verdicts: Mapping[str, str] | None = None,
+) -> pd.DataFrame:
     """Per claim of a map: robust or conditional, the verdicts taken, the inputs its verdict
     depends on (a swept verdict changes along them), the thresholds of every input that
     matters (and where the chain cannot run) and one sentence for the chapter (columns
@@ -800,13 +805,20 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
         The map's inputs (for where the paper's numbers put them).
     skipped : sequence of str
         Ranged inputs the map did not screen, with the reason (named in the sentence).
+    verdicts : mapping of str to str, optional
+        Each claim's verdict on the notebook's own trials at the scenario's values (the claims
+        table). Where it differs from the verdict of the map's base point (fewer trials), the
+        scenario lies near a threshold: the claim takes both verdicts, so it is conditional,
+        and the sentence gives both.
     """
     by_label = {item.label: item for item in inputs}
     rows = []
     for claim, t in table.groupby("claim", sort=False):
         judged = t[t["stage"].isin(["base", "sweep", "grid"]) & (t["error"] == "")]
-        base_v = t.loc[t["stage"] == "base", "verdict"].iloc[0]
-        taken = list(dict.fromkeys([base_v, *judged["verdict"]]))
+        base = t[t["stage"] == "base"].iloc[0]
+        base_v = base["verdict"]
+        full_v = (verdicts or {}).get(claim, base_v)
+        taken = list(dict.fromkeys([full_v, base_v, *judged["verdict"]]))
         screen = t[t["stage"] == "screen"]
         matter = list(dict.fromkeys(screen.loc[screen["matters"] == "yes", "input"]))
         screened = screen["input"].nunique()
@@ -836,8 +848,14 @@ def claim_summary(table: pd.DataFrame, inputs: Sequence[Input], skipped=()) -> p
                 f"{_number(item.base)}: {text}{where})"
             )
         robust = len(taken) == 1
+        near = (
+            ""
+            if full_v == base_v
+            else f" on its own trials, {base_v} on the {base['n']} trials of the map's point "
+            "there (the scenario lies near a threshold),"
+        )
         head = (
-            f"{claim} is {base_v} at the scenario's values and "
+            f"{claim} is {full_v} at the scenario's values{near} and "
             f"{'robust' if robust else 'conditional'} over the {screened} inputs screened"
         )
         body = "; its verdict depends on " + "; ".join(sentences) if sentences else ""
