@@ -10,7 +10,17 @@ import numpy as np
 import pytest
 
 from calstudy import CalibrationError
-from calstudy.core.schema import Radians, Schema, apply_overrides, read_toml, with_inputs
+from calstudy.core.schema import (
+    Radians,
+    Schema,
+    apply_overrides,
+    load_paper_file,
+    one_each,
+    ordered,
+    read_toml,
+    validate,
+    with_inputs,
+)
 from calstudy.core.trialcache import _scenario_digest
 from calstudy.papers.selfcal.scenario import load_scenario
 
@@ -131,3 +141,50 @@ def test_a_file_that_is_not_toml_is_named_once(tmp_path):
     with pytest.raises(CalibrationError) as info:
         load_model(bad, Schema, "a scenario")
     assert str(info.value).count(str(bad)) == 1, str(info.value)
+
+
+class _Ordered(Schema):
+    low: float
+    high: float
+    first: float = 0.0
+    last: float = 1.0
+    names: list[str] = []
+    xyz: list[float] = []
+    tilts: list[float] = []
+
+    _strict = ordered("low", "high")
+    _loose = ordered("first", "last", strict=False)
+    _counts = one_each("names", "xyz", "tilts", note="one per name")
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ({"low": 2.0, "high": 2.0}, r"t: low = 2\.0 is not below high = 2\.0$"),
+        ({"low": 1.0, "high": 2.0, "first": 1.5}, r"t: first = 1\.5 exceeds last = 1\.0$"),
+        (
+            {"low": 1.0, "high": 2.0, "names": ["a", "b"], "xyz": [0.0], "tilts": [0.0, 1.0]},
+            r"t: 2 names but 1 xyz; one per name$",
+        ),
+        (
+            {"low": 1.0, "high": 2.0, "names": ["a"], "xyz": [0.0, 1.0], "tilts": []},
+            r"t: 1 names but 2 xyz, 0 tilts; one per name$",
+        ),
+    ],
+)
+def test_ordered_and_one_each_name_the_inputs_and_their_values(table, message):
+    with pytest.raises(CalibrationError, match=message):
+        validate(_Ordered, table, "t")
+
+
+def test_ordered_allows_equal_values_when_not_strict_and_one_each_equal_counts():
+    table = {"low": 1.0, "high": 2.0, "first": 1.0, "names": ["a"], "xyz": [0.0], "tilts": [1.0]}
+    assert validate(_Ordered, table, "t").first == 1.0
+
+
+def test_load_paper_file_reads_the_papers_file_or_ones_own(tmp_path):
+    own = tmp_path / "cell.toml"
+    own.write_text("low = 1.0\nhigh = 3.0\n")
+    assert load_paper_file("selfcal", "missing.toml", _Ordered, "cell", own).high == 3.0
+    with pytest.raises(FileNotFoundError, match="missing.toml"):
+        load_paper_file("selfcal", "missing.toml", _Ordered, "cell")

@@ -55,7 +55,7 @@ from pydantic import (
 )
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.paths import DATA_DIR
+from calstudy.core.paths import DATA_DIR, scenario_file
 from calstudy.core.userfile import number_problem
 
 M = TypeVar("M", bound=BaseModel)
@@ -537,6 +537,100 @@ def check_principal_point(cx: float, cy: float, width: int, height: int) -> None
         )
 
 
+def ordered(low: str, high: str, strict: bool = True):
+    """A table's rule that its input ``low`` lies below its input ``high`` (``strict``) or at
+    most at it, for the table's class body: ``_order = ordered("canny_low", "canny_high")``.
+
+    Parameters
+    ----------
+    low, high : str
+        Names of two numeric fields of the table, in the file's units.
+    strict : bool
+        Refuse ``low == high`` too.
+
+    Returns
+    -------
+    pydantic model validator
+        Raises ValueError ``"low = 0.75 is not below high = 0.5"`` (``strict``) or ``"low = 40.0
+        exceeds high = 30.0"``, which :func:`validate` reports with the file and the table.
+    """
+
+    def check(table):
+        a, b = getattr(table, low), getattr(table, high)
+        if a >= b if strict else a > b:
+            raise ValueError(f"{low} = {a} {'is not below' if strict else 'exceeds'} {high} = {b}")
+        return table
+
+    return model_validator(mode="after")(check)
+
+
+def one_each(first: str, *others: str, note: str = "one each"):
+    """A table's rule that its lists ``others`` have as many entries as its list ``first``, for
+    the table's class body: ``_one_each = one_each("methods", "rows")``.
+
+    Parameters
+    ----------
+    first : str
+        Name of the list field that sets the count.
+    *others : str
+        Names of the list fields that must have as many entries.
+    note : str
+        The end of the message, saying what is wanted (``"one per region"``).
+
+    Returns
+    -------
+    pydantic model validator
+        Raises ValueError ``"2 regions but 3 names, 3 centres_mm; one per region"``, naming each
+        list whose count differs, which :func:`validate` reports with the file and the table.
+    """
+
+    def check(table):
+        n = len(getattr(table, first))
+        wrong = [f"{len(getattr(table, k))} {k}" for k in others if len(getattr(table, k)) != n]
+        if wrong:
+            raise ValueError(f"{n} {first} but {', '.join(wrong)}; {note}")
+        return table
+
+    return model_validator(mode="after")(check)
+
+
+def load_paper_file(
+    paper: str,
+    name: str,
+    model: type[M],
+    what: str,
+    path: str | Path | None = None,
+    overrides: Mapping[str, object] | None = None,
+) -> M:
+    """:func:`load_model` of ``path``, default (None or ``""``) the paper's own file
+    ``data/<paper>/<name>``.
+
+    Parameters
+    ----------
+    paper, name : str
+        The paper's data folder and the file's name in it (``"dualarm"``, ``"scenario.toml"``).
+    model : type of Schema
+        The file's schema.
+    what : str
+        What the file is, for messages (``"dualarm scenario"``).
+    path : str or Path, optional
+        A file of one's own with the same keys.
+    overrides : mapping of str to object, optional
+        Dotted keys of the file and their values (:func:`apply_overrides`).
+
+    Returns
+    -------
+    Schema
+        The validated, frozen file.
+
+    Raises
+    ------
+    FileNotFoundError, CalibrationError
+        As :func:`load_model`.
+    """
+    return load_model(scenario_file(paper, name, path), model, what, overrides)
+
+
 #: a rigid 4 x 4 transform written as four rows (last row ``[0, 0, 0, 1]``, an orthonormal
 #: rotation of determinant +1 within :func:`rotation_problem`'s tolerance)
 Rigid4x4 = rigid_transform()
@@ -609,6 +703,9 @@ __all__ = [
     "format_errors",
     "is_study_file",
     "load_model",
+    "load_paper_file",
+    "one_each",
+    "ordered",
     "read_toml",
     "rigid_transform",
     "rotation_problem",

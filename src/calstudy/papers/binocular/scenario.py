@@ -27,7 +27,7 @@ from calstudy.core.schema import (
     Schema,
     apply_overrides,
     is_study_file,
-    load_model,
+    load_paper_file,
     read_toml,
     validate,
 )
@@ -280,8 +280,8 @@ def paper_table(name: str) -> SensorFile | CalibratorFile | StationFile:
     """
     if name not in SCHEMAS:
         raise CalibrationError(f"no binocular table {name!r}; the tables are {', '.join(TABLES)}")
-    path = scenario_file(PAPER, f"{name}.toml")
-    return load_model(path, SCHEMAS[name], f"binocular {name} table")  # kept by its file key
+    # kept by its file key
+    return load_paper_file(PAPER, f"{name}.toml", SCHEMAS[name], f"binocular {name} table")
 
 
 def published(name: str, key: str):

@@ -40,6 +40,8 @@ from calstudy.core.schema import (
     Texts,
     Vec3,
     check_principal_point,
+    one_each,
+    ordered,
     rigid_transform,
     rotation_problem,
 )
@@ -253,13 +255,7 @@ class Detection(Inputs):
     min_edge_points: Annotated[int, Field(ge=5, le=100_000)]
     ray_tolerance_mm: PositiveFinite
 
-    @model_validator(mode="after")
-    def _order(self) -> Detection:
-        if self.canny_low >= self.canny_high:
-            raise ValueError(
-                f"canny_low = {self.canny_low} is not below canny_high = {self.canny_high}"
-            )
-        return self
+    _order = ordered("canny_low", "canny_high")
 
 
 class SensorFile(Ledgered):
@@ -407,14 +403,7 @@ class Poses(Inputs):
     roll_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)]
     distance_spread_mm: NonNegativeFinite
 
-    @model_validator(mode="after")
-    def _spread(self) -> Poses:
-        if self.distance_spread_mm >= self.observation_distance_mm:
-            raise ValueError(
-                f"distance_spread_mm = {self.distance_spread_mm} is not below "
-                f"observation_distance_mm = {self.observation_distance_mm}"
-            )
-        return self
+    _spread = ordered("distance_spread_mm", "observation_distance_mm")
 
 
 class RobotTable(Inputs):
@@ -449,14 +438,11 @@ class Field_(Inputs):
     def _names(cls, regions: list) -> list:
         return _distinct(regions, "region names")
 
+    #: runs before :meth:`_faces`, which pairs regions with centres
+    _one_each = one_each("regions", "names", "standard_mm", "centres_mm", note="one per region")
+
     @model_validator(mode="after")
-    def _one_each(self) -> Field_:
-        n = len(self.regions)
-        counts = {k: len(getattr(self, k)) for k in ("names", "standard_mm", "centres_mm")}
-        wrong = {k: v for k, v in counts.items() if v != n}
-        if wrong:
-            listed = ", ".join(f"{v} {k}" for k, v in wrong.items())
-            raise ValueError(f"{n} regions but {listed}; one per region")
+    def _faces(self) -> Field_:
         face = np.array(self.faces_point_mm, dtype=float)
         for region, centre in zip(self.regions, self.centres_mm, strict=True):
             if float(np.linalg.norm(face - np.array(centre, dtype=float))) < 1e-6:

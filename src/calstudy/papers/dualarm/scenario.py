@@ -13,8 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-from calstudy.core.paths import scenario_file
-from calstudy.core.schema import load_model
+from calstudy.core.schema import load_paper_file
 from calstudy.papers.dualarm.schema import PublishedFile, Scenario
 
 PAPER = "dualarm"
@@ -59,8 +58,9 @@ def load_scenario(
         of range (``loss_rate = 1.5``, ``points_per_scan = -500``), markers without a group; the
         message names the file, the key, the value and the allowed range.
     """
-    src = scenario_file(PAPER, "scenario.toml", path)
-    return load_model(src, Scenario, "dualarm scenario", overrides)
+    return load_paper_file(
+        PAPER, "scenario.toml", Scenario, "dualarm scenario", path, overrides
+    )
 
 
 def load_published(path: str | Path | None = None) -> PublishedFile:
@@ -79,8 +79,9 @@ def load_published(path: str | Path | None = None) -> PublishedFile:
         (a missing or unknown key, a negative error, a group or an arm-sphere pair given twice,
         methods and rows that differ in number).
     """
-    src = scenario_file(PAPER, "published.toml", path)
-    return load_model(src, PublishedFile, "dualarm published results")
+    return load_paper_file(
+        PAPER, "published.toml", PublishedFile, "dualarm published results", path
+    )
 
 
 __all__ = ["SPHERES", "load_published", "load_scenario"]

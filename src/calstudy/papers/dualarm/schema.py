@@ -43,6 +43,7 @@ from calstudy.core.schema import (
     Texts,
     Vec3,
     check_principal_point,
+    one_each,
 )
 from calstudy.models.sensors import PinholeCamera
 from calstudy.models.stereo import StereoRig, stereo_rig
@@ -171,10 +172,11 @@ class Markers(Inputs):
     xyz_mm: Annotated[list[Vec3], Field(min_length=3, max_length=MAX_MARKERS)]
     groups: Annotated[list[str], Field(min_length=2, max_length=2)]
 
+    #: runs before :meth:`_consistent`
+    _one_each = one_each("names", "xyz_mm")
+
     @model_validator(mode="after")
     def _consistent(self) -> Markers:
-        if len(self.names) != len(self.xyz_mm):
-            raise ValueError(f"{len(self.names)} names but {len(self.xyz_mm)} xyz_mm; one each")
         if len(set(self.names)) != len(self.names):
             dup = sorted({n for n in self.names if self.names.count(n) > 1})
             raise ValueError(f"marker names repeated: {dup}")
@@ -567,11 +569,7 @@ class MethodTable(Documented):
     rows: list[Annotated[tuple[Mm, Mm, Mm, Mm], Row]]
     not_testable: str = ""
 
-    @model_validator(mode="after")
-    def _one_row_per_method(self) -> MethodTable:
-        if len(self.rows) != len(self.methods):
-            raise ValueError(f"{len(self.methods)} methods but {len(self.rows)} rows; one each")
-        return self
+    _one_row_per_method = one_each("methods", "rows")
 
 
 class PublishedFile(Documented):

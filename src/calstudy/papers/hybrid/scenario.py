@@ -29,8 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from calstudy.core.errors import CalibrationError
-from calstudy.core.paths import scenario_file
-from calstudy.core.schema import Schema, load_model
+from calstudy.core.schema import Schema, load_paper_file
 from calstudy.estimators.workpiece import RPS_EQUATIONS
 from calstudy.papers.hybrid.schema import ProductionFile, PublishedFile, StationFile
 
@@ -89,8 +88,9 @@ def load_station(
         range), a hand-eye matrix that is not rigid, collinear datums; or an override names no
         input.
     """
-    source = scenario_file(PAPER, STATION_FILE, path)
-    return load_model(source, StationFile, "hybrid station description", overrides)
+    return load_paper_file(
+        PAPER, STATION_FILE, StationFile, "hybrid station description", path, overrides
+    )
 
 
 def load_production(
@@ -99,16 +99,18 @@ def load_production(
     """The production description (default ``data/hybrid/production.toml``), validated against
     :class:`~calstudy.papers.hybrid.schema.ProductionFile` (parameters, returns and errors as
     :func:`load_station`)."""
-    source = scenario_file(PAPER, PRODUCTION_FILE, path)
-    return load_model(source, ProductionFile, "hybrid production description", overrides)
+    return load_paper_file(
+        PAPER, PRODUCTION_FILE, ProductionFile, "hybrid production description", path, overrides
+    )
 
 
 def load_published(path: str | Path | None = None) -> PublishedFile:
     """The published numbers (default ``data/hybrid/published.toml``), checked against
     :class:`~calstudy.papers.hybrid.schema.PublishedFile` (shares that agree with their counts,
     ascending bin edges; errors as :func:`load_station`)."""
-    source = scenario_file(PAPER, PUBLISHED_FILE, path)
-    return load_model(source, PublishedFile, "published numbers of the hybrid paper")
+    return load_paper_file(
+        PAPER, PUBLISHED_FILE, PublishedFile, "published numbers of the hybrid paper", path
+    )
 
 
 # ---------------------------------------------------------------------------------------------

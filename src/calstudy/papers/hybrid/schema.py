@@ -38,6 +38,8 @@ from calstudy.core.schema import (
     Row,
     Schema,
     Vec3,
+    one_each,
+    ordered,
 )
 from calstudy.models.sensors import PinholeCamera
 
@@ -138,14 +140,7 @@ class Moves(Inputs):
     translation_ranges_mm: Annotated[list[PositiveFinite], Field(min_length=1)]
     across_plane_ranges_mm: Annotated[list[NonNegativeFinite], Field(min_length=1)]
 
-    @model_validator(mode="after")
-    def _range(self) -> Moves:
-        if self.rotation_min_deg > self.rotation_range_deg:
-            raise ValueError(
-                f"rotation_min_deg = {self.rotation_min_deg} exceeds rotation_range_deg = "
-                f"{self.rotation_range_deg}"
-            )
-        return self
+    _range = ordered("rotation_min_deg", "rotation_range_deg", strict=False)
 
 
 class Cameras(Pinhole, Inputs):
@@ -189,14 +184,7 @@ class Stationary(Inputs):
         rot = rot @ geo.rotvec_to_matrix(np.column_stack([zero, tilts[:, 1], zero]))
         return _frozen(geo.make_transform(rot, np.array(self.positions_mm, dtype=float)))
 
-    @model_validator(mode="after")
-    def _same_count(self) -> Stationary:
-        if len(self.tilts_deg) != len(self.positions_mm):
-            raise ValueError(
-                f"{len(self.positions_mm)} positions_mm but {len(self.tilts_deg)} tilts_deg; "
-                "one tilt per sensor"
-            )
-        return self
+    _same_count = one_each("positions_mm", "tilts_deg", note="one tilt per sensor")
 
 
 class Workpiece(Inputs):

@@ -24,7 +24,6 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from calstudy.core.ledger import Inputs, Ledgered, noise_level
-from calstudy.core.paths import scenario_file
 from calstudy.core.schema import (
     Degrees,
     Documented,
@@ -32,7 +31,7 @@ from calstudy.core.schema import (
     PositiveFinite,
     PositiveInt,
     Vec3,
-    load_model,
+    load_paper_file,
 )
 from calstudy.models.kinematics import Robot
 from calstudy.models.reach import reach_bound
@@ -284,8 +283,9 @@ def load_scenario(
         ``views_per_sphere = 0``), an envelope that is not a box or beyond the robot's reach;
         the message names the file, the key, the value and the allowed range.
     """
-    path = scenario_file("selfcal", "scenario.toml", path)
-    return load_model(path, Scenario, "selfcal scenario", overrides)
+    return load_paper_file(
+        "selfcal", "scenario.toml", Scenario, "selfcal scenario", path, overrides
+    )
 
 
 
