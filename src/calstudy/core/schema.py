@@ -594,6 +594,34 @@ def one_each(first: str, *others: str, note: str = "one each"):
     return model_validator(mode="after")(check)
 
 
+def distinct(values: list, what: str, note: str = "") -> list:
+    """``values`` if no entry is given twice; for a schema's validators.
+
+    Parameters
+    ----------
+    values : list
+        Names or keys (hashable, sortable).
+    what : str
+        What the entries are, for the message (``"marker names"``).
+    note : str
+        Appended to the message (``"; one row each"``).
+
+    Returns
+    -------
+    list
+        ``values`` itself.
+
+    Raises
+    ------
+    ValueError
+        ``"marker names repeated: ['5817-17']"``, listing each repeated entry once, sorted.
+    """
+    dup = sorted({v for v in values if values.count(v) > 1})
+    if dup:
+        raise ValueError(f"{what} repeated: {dup}{note}")
+    return values
+
+
 def load_paper_file(
     paper: str,
     name: str,
@@ -681,6 +709,7 @@ def validate_rows(
 __all__ = [
     "apply_overrides",
     "Degrees",
+    "distinct",
     "Documented",
     "Finite",
     "Fraction",

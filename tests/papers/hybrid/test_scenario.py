@@ -25,9 +25,8 @@ def test_published_table1_counts_match_its_percentages():
 def test_duplicated_feature_ids_in_the_data_file_raise():
     features = [f.model_dump() for f in scenario.load_production().flexible.features]
     features[1]["id"] = features[0]["id"]
-    with pytest.raises(
-        CalibrationError, match=r"production.toml: duplicated feature points \['H01'\]"
-    ):
+    message = r"production.toml: feature point ids repeated: \['H01'\]: each point needs its own id"
+    with pytest.raises(CalibrationError, match=message):
         scenario.load_production(overrides={"flexible.features": features})
 
 

@@ -40,6 +40,7 @@ from calstudy.core.schema import (
     Texts,
     Vec3,
     check_principal_point,
+    distinct,
     one_each,
     ordered,
     rigid_transform,
@@ -94,13 +95,6 @@ def _metres(values, what: str) -> None:
         raise ValueError(
             f"{what} is {size:g} mm, below {METRES_SUSPECT_MM:g} mm: metres? (write millimetres)"
         )
-
-
-def _distinct(names: list, what: str) -> list:
-    dup = sorted({n for n in names if names.count(n) > 1})
-    if dup:
-        raise ValueError(f"{what} repeated: {dup}")
-    return names
 
 
 def _rotation(matrix: list, what: str) -> None:
@@ -310,7 +304,7 @@ class Standard(Inputs):
     @field_validator("names")
     @classmethod
     def _names(cls, names: list) -> list:
-        return _distinct(names, "distance names")
+        return distinct(names, "distance names")
 
     @field_validator("distance_mm")
     @classmethod
@@ -436,7 +430,7 @@ class Field_(Inputs):
     @field_validator("regions")
     @classmethod
     def _names(cls, regions: list) -> list:
-        return _distinct(regions, "region names")
+        return distinct(regions, "region names")
 
     #: runs before :meth:`_faces`, which pairs regions with centres
     _one_each = one_each("regions", "names", "standard_mm", "centres_mm", note="one per region")
@@ -462,15 +456,9 @@ class StationPublished(Documented):
     table5_updated: list[Five]
     table5_rmse: list[Pair]
 
-    @model_validator(mode="after")
-    def _regions(self) -> StationPublished:
-        counts = [len(self.table5_preliminary), len(self.table5_updated), len(self.table5_rmse)]
-        if len(set(counts)) != 1:
-            raise ValueError(
-                "table5_preliminary, table5_updated and table5_rmse list "
-                f"{counts[0]}, {counts[1]} and {counts[2]} regions; one each"
-            )
-        return self
+    _regions = one_each(
+        "table5_preliminary", "table5_updated", "table5_rmse", note="one row per region"
+    )
 
 
 class StationFile(Ledgered):

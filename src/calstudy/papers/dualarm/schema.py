@@ -43,6 +43,7 @@ from calstudy.core.schema import (
     Texts,
     Vec3,
     check_principal_point,
+    distinct,
     one_each,
 )
 from calstudy.models.sensors import PinholeCamera
@@ -177,9 +178,7 @@ class Markers(Inputs):
 
     @model_validator(mode="after")
     def _consistent(self) -> Markers:
-        if len(set(self.names)) != len(self.names):
-            dup = sorted({n for n in self.names if self.names.count(n) > 1})
-            raise ValueError(f"marker names repeated: {dup}")
+        distinct(self.names, "marker names")
         strays = [n for n in self.names if n.split("-")[0] not in self.groups]
         if strays:
             raise ValueError(
@@ -525,14 +524,6 @@ def _pose(rotvec, translation) -> np.ndarray:
     return geo.make_transform(geo.rotvec_to_matrix(rotvec), translation)
 
 
-def _one_row_each(rows: list, what: str) -> list:
-    groups = [r[0] for r in rows]
-    dup = sorted({g for g in groups if groups.count(g) > 1})
-    if dup:
-        raise ValueError(f"{what} repeated: {dup}; one row each")
-    return rows
-
-
 class IcpTable(Documented):
     """The ``[icp]`` table of data/dualarm/published.toml: ``[arm, sphere, before, after]``."""
 
@@ -544,7 +535,7 @@ class IcpTable(Documented):
     @field_validator("rows")
     @classmethod
     def _pairs(cls, rows: list) -> list:
-        _one_row_each([((arm, sphere), *rest) for arm, sphere, *rest in rows], "arm-sphere pairs")
+        distinct([(arm, sphere) for arm, sphere, *_ in rows], "arm-sphere pairs", "; one row each")
         return rows
 
 
@@ -558,7 +549,8 @@ class GroupTable(Documented):
     @field_validator("rows")
     @classmethod
     def _groups(cls, rows: list) -> list:
-        return _one_row_each(rows, "groups")
+        distinct([r[0] for r in rows], "groups", "; one row each")
+        return rows
 
 
 class MethodTable(Documented):

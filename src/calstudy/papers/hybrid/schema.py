@@ -38,6 +38,7 @@ from calstudy.core.schema import (
     Row,
     Schema,
     Vec3,
+    distinct,
     one_each,
     ordered,
 )
@@ -372,9 +373,7 @@ class ProductionFile(Ledgered):
     def plausibility(self) -> None:
         """Every feature point has its own id."""
         ids = [f.id for f in self.flexible.features] + list(self.stationary_features.ids)
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        if dup:
-            raise ValueError(f"duplicated feature points {dup}: each point needs its own id")
+        distinct(ids, "feature point ids", ": each point needs its own id")
 
 
 # ---------------------------------------------------------------------------------------------
