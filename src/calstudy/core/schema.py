@@ -16,7 +16,9 @@ changed copy without validation (an oracle, a sweep point beyond the file's rang
 :func:`with_inputs` one validated again. :func:`validate_rows` checks the rows of a CSV file
 that :func:`calstudy.core.userfile.read_csv_table` read. The range types (:data:`Finite`,
 :data:`PositiveFinite`, ...), :func:`rigid_transform` (:data:`Rigid4x4`), :class:`Pinhole`,
-:class:`Radians` and :class:`Texts` are the building blocks of the schemas.
+:class:`Radians` and :class:`Texts` are the building blocks of the schemas; :func:`ordered`,
+:func:`one_each` and :func:`distinct` their rules across keys (two inputs in order, lists of one
+length, names given once), and :func:`load_paper_file` loads a paper's file or one's own copy.
 
 A paper's ``scenario.py`` uses it as::
 
