@@ -40,14 +40,6 @@ def load_scenario(
     Scenario
         The validated, frozen station (lengths mm, derived angles rad).
 
-    Parameters
-    ----------
-    path : path-like, optional
-        A scenario file of one's own (same keys).
-    overrides : mapping of str to object, optional
-        Inputs set by their dotted keys (``{"detection.sigma_px": 0.05}``) before the file is
-        validated, so that a value outside the input's ledger range is refused.
-
     Raises
     ------
     FileNotFoundError
