@@ -102,9 +102,10 @@ class JointFit:
         True when the fit lies at an end of the grid (the baselines pull beyond the range).
     agreement : pandas.DataFrame
         One row per baseline: ``baseline``, ``target``, ``spread`` (its relative standard
-        uncertainty), ``tolerance`` (relative, ``exp(tol) - 1``), ``median`` at the fit,
-        ``ratio`` (median / target), ``met`` at the joint fit, and ``alone`` (the value that
-        meets it best on its own) with ``met_alone`` (whether any value of the range meets it).
+        uncertainty), ``coverage`` (the tolerance in spreads), ``tolerance`` (relative,
+        ``exp(tol) - 1``), ``median`` at the fit, ``ratio`` (median / target), ``met`` at the
+        joint fit, and ``alone`` (the value that meets it best on its own) with ``met_alone``
+        (whether any value of the range meets it).
     grid : pandas.DataFrame
         Per grid value and baseline: ``value``, ``baseline``, ``median``, ``ci_low``,
         ``ci_high``, ``n``.
@@ -226,6 +227,7 @@ def joint_calibration(
                 "baseline": b.name,
                 "target": b.target,
                 "spread": b.spread,
+                "coverage": b.coverage,
                 "tolerance": math.exp(b.tolerance) - 1.0,
                 "median": math.exp(at),
                 "ratio": math.exp(at - targets[k]),

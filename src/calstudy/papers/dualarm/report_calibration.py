@@ -255,7 +255,8 @@ def calibration_table(fit: JointFit, pilot: pd.DataFrame, x: str) -> pd.DataFram
         experiment's figure, beside the baseline's assumed ``spread``). Rows ``joint fit``: per
         baseline, ``x`` the value fed to the experiments (:func:`fed_value`), ``fit`` and
         ``fit_u`` the unrounded fit and its standard uncertainty, the median there, its
-        ``ratio`` to the paper's value, the relative ``tolerance``, whether it is ``met``
+        ``ratio`` to the paper's value, the relative ``tolerance`` and its ``coverage`` in
+        spreads, whether it is ``met``
         jointly, the value that meets it best ``alone`` and whether any value of the range
         does (``met_alone``), and whether the input is ``identified`` (every baseline met).
 
@@ -277,7 +278,8 @@ def calibration_table(fit: JointFit, pilot: pd.DataFrame, x: str) -> pd.DataFram
     ).rename(columns={"target": "paper"})
     out = pd.concat([g, a], ignore_index=True)
     columns = ["point", x, "baseline", "paper", "median", "ci_low", "ci_high", "n"]
-    columns += ["trial_spread", "spread", "ratio", "tolerance", "met", "alone", "met_alone"]
+    columns += ["trial_spread", "spread", "coverage", "ratio", "tolerance", "met", "alone"]
+    columns += ["met_alone"]
     return out[[*columns, "fit", "fit_u", "identified"]]
 
 
@@ -294,8 +296,7 @@ def _span(values, fmt: str) -> str:
 def coverage(table: pd.DataFrame) -> float:
     """The tolerance of a :func:`calibration_table` in spreads: a figure is met within this many
     standard deviations of its log (the baselines' coverage, the same for all)."""
-    fit = table[table["point"] == "joint fit"]
-    return float(np.round(np.log1p(fit["tolerance"]) / fit["spread"], 9).max())
+    return float(table.loc[table["point"] == "joint fit", "coverage"].max())
 
 
 def _spreads(table: pd.DataFrame) -> str:
