@@ -53,3 +53,22 @@ def test_simulated_run_has_the_paper_layout_and_frame_fixed_coordinates():
     # each program pose puts its feature near the middle of the sensor's field
     p = simulate_production.sensor_pose_check(ps)
     assert np.abs(p[:, :2]).max() < 20.0 and np.abs(p[:, 2] - 250.0).max() < 20.0
+
+
+def test_the_taught_program_follows_the_stand_off():
+    # the program is kept by what its inverse kinematics reads: a station with another stand-off
+    # gets its own program, whatever stations the process taught before (a trial's rows must not
+    # depend on which trials its worker ran first)
+    s, _ = ideal_station(seed=8)
+    features = scenario.panel_features(scenario.load_production(), s.config)
+    taught = simulate_production.teach_program(s, features)
+    moved = dataclasses.replace(s, standoff=s.standoff - 20.0)
+    q = simulate_production.teach_program(moved, features)
+    assert np.abs(q - taught).max() > 1e-3
+    simulate_production._PROGRAM_CACHE.clear()
+    np.testing.assert_array_equal(simulate_production.teach_program(moved, features), q)
+    # every taught sensor pose moves 20 mm (along its axis, to stay 20 mm nearer the part)
+    sensor = np.array([s.nominal.fk(qi) @ s.sensor2flange_true for qi in taught])
+    sensor_moved = np.array([s.nominal.fk(qi) @ s.sensor2flange_true for qi in q])
+    gap = np.linalg.norm(sensor[:, :3, 3] - sensor_moved[:, :3, 3], axis=1)
+    np.testing.assert_allclose(gap, 20.0, atol=1e-6)

@@ -12,7 +12,6 @@ this module; a trial function is ``trial(setup, rng, **point) -> list[dict]``.
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 
 import numpy as np
@@ -203,20 +202,12 @@ def handeye_run(
     ]
 
 
-#: validated stations by their overrides (JSON text): a trial reads its station from here
-_STATIONS: dict = {}
-
-
 def station_config(overrides=None):
     """``station.toml`` with ``overrides`` (dotted keys -> values, validated against the
-    ledger ranges), or None for the file as it is (what :func:`make_station` then loads); read
-    once per process and set of overrides."""
-    if not overrides:
-        return None
-    key = json.dumps(overrides, sort_keys=True)
-    if key not in _STATIONS:
-        _STATIONS[key] = load_station(overrides=dict(overrides))
-    return _STATIONS[key]
+    ledger ranges), or None for the file as it is (what :func:`make_station` then loads); the
+    validated file is kept by :func:`~calstudy.core.schema.load_model`, by its version and the
+    overrides."""
+    return load_station(overrides=dict(overrides)) if overrides else None
 
 
 def handeye_setup(baselines: bool) -> dict:

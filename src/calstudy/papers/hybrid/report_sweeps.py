@@ -333,16 +333,18 @@ def deviation_distribution(trials: pd.DataFrame, n_compensation: int) -> pd.Data
     sub = trials[trials["n_compensation"] == n_compensation]
     counts = sub[[f"deviation_bin{k}" for k in range(5)]].to_numpy(float)
     n = counts.sum(axis=1, keepdims=True)
-    rows = [
-        {
-            "figure": f"share {label} mm (%)",
-            "simulated": float(np.median(100.0 * counts[:, k] / n[:, 0])),
-            "spread_low": float(np.quantile(100.0 * counts[:, k] / n[:, 0], 0.025)),
-            "spread_high": float(np.quantile(100.0 * counts[:, k] / n[:, 0], 0.975)),
-            "published": float(pub.deviation_percent[k]),
-        }
-        for k, label in enumerate(pub.deviation_bins)
-    ]
+    rows = []
+    for k, label in enumerate(pub.deviation_bins):
+        med, lo, hi = median_and_spread(100.0 * counts[:, k] / n[:, 0])
+        rows.append(
+            {
+                "figure": f"share {label} mm (%)",
+                "simulated": med,
+                "spread_low": lo,
+                "spread_high": hi,
+                "published": float(pub.deviation_percent[k]),
+            }
+        )
     for name, values, critical in (
         ("Kolmogorov distance", bin_distance(counts, pub.deviation_percent), None),
         ("chi-square (3 dof)", chi_square_distance(counts, pub.deviation_percent), CHI2_CRITICAL),

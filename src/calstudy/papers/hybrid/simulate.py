@@ -92,8 +92,10 @@ class HybridStation:
     free_direction: float
     config: StationFile | None = field(default=None, repr=False)
     translation_pattern: str = "random"
-    _sphere_ref: np.ndarray | None = field(default=None, repr=False)
-    _ik_memo: dict = field(default_factory=dict, repr=False, compare=False)
+    # memos of answers that depend on the fields above only; not copied by dataclasses.replace,
+    # so a station with other fields never reuses them
+    _sphere_ref: np.ndarray | None = field(default=None, init=False, repr=False)
+    _ik_memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     # ------------------------------------------------------------------ robot motion
 
@@ -286,7 +288,7 @@ class HybridStation:
             float(self.standoff),
             front2flange.tobytes(),
             self.target.back2front().tobytes(),
-            self.nominal.parameters().tobytes(),
+            self.nominal.key(),
         )
         if key not in _STATIONARY_SEEDS:
             for yaw in np.deg2rad(np.arange(0.0, 360.0, 15.0)):

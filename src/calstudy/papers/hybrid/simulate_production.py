@@ -50,18 +50,13 @@ def teach_program(station: HybridStation, features: Features) -> np.ndarray:
     """Joint angles ``(F_flex, 6)`` of the robot program, computed on the nominal robot.
 
     The program is written offline from CAD: nominal robot, the design hand-eye, the nominal
-    fixture pose. It depends on no random draw, so it is computed once and cached.
+    fixture pose, the stand-off. It depends on no random draw, so it is kept, by the robot and
+    the taught flange poses: what the inverse kinematics reads, so a station with another
+    stand-off or fixture never reuses another station's program.
     """
-    key = (
-        features.cad.tobytes(),
-        features.view.tobytes(),
-        features.yaw.tobytes(),
-        station.sensor2flange_true.tobytes(),
-        station.base2work_nominal.tobytes(),
-        station.nominal.parameters().tobytes(),
-    )
+    poses = sensor_poses(station, features) @ geo.invert(station.sensor2flange_true)
+    key = (station.nominal.key(), poses.tobytes())
     if key not in _PROGRAM_CACHE:
-        poses = sensor_poses(station, features) @ geo.invert(station.sensor2flange_true)
         q = []
         for pid, pose in zip(np.array(features.ids)[features.flexible], poses, strict=True):
             try:
