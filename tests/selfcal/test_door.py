@@ -192,3 +192,24 @@ def test_a_requirement_that_is_not_a_positive_length_is_refused(requirement):
 def test_a_missing_folder_is_named():
     with pytest.raises(FileNotFoundError, match="no_such_cell"):
         identify_cell(REPO_ROOT / "no_such_cell")
+
+
+DOOR_METHODS = [
+    f"{name}.{meth}"
+    for name in door.__all__
+    if inspect.isclass(getattr(door, name))
+    for meth, fn in vars(getattr(door, name)).items()
+    if not meth.startswith("_") and inspect.isfunction(fn)
+]
+
+
+@pytest.mark.parametrize("name", DOOR_METHODS)
+def test_every_public_method_of_the_door_has_numpydoc(name):
+    cls, meth = name.split(".")
+    fn = getattr(getattr(door, cls), meth)
+    doc = inspect.getdoc(fn) or ""
+    params = [p for p in inspect.signature(fn).parameters if p != "self"]
+    for heading in (["Parameters"] if params else []) + ["Returns", "Raises"]:
+        assert re.search(rf"^{heading}\n-{{{len(heading)}}}$", doc, re.M), (name, heading)
+    names = {n for line in re.findall(r"^([\w, ]+) :", doc, re.M) for n in line.split(", ")}
+    assert set(params) <= names, (name, set(params) - names)

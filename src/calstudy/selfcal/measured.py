@@ -561,10 +561,13 @@ class CellFit:
 
     @property
     def params(self) -> np.ndarray:
+        """The identified parameters ``(30,)`` (:data:`PARAM_NAMES`), mm and rad."""
         return self.fit.params
 
     @property
     def outliers(self) -> np.ndarray:
+        """Which measurement rows ``(n,)`` the outlier loop set aside (the ``outlier`` column of
+        :attr:`residuals`)."""
         return self.residuals["outlier"].to_numpy(bool)
 
     @property
@@ -573,9 +576,25 @@ class CellFit:
         return int(self.free.sum())
 
     def half_widths(self, level: float = 0.95) -> np.ndarray:
-        """Half-widths (30,) of the ``level`` intervals of the parameters, mm and rad: the standard
-        deviation times the normal quantile (declared noise) or the simulated quantile of the
-        studentised error (:attr:`residual_errors`); NaN for the fixed parameters."""
+        """Half-widths of the ``level`` intervals of the parameters: the standard deviation
+        times the normal quantile (declared noise) or the simulated quantile of the studentised
+        error (:attr:`residual_errors`).
+
+        Parameters
+        ----------
+        level : float, default 0.95
+            Coverage of each interval, in (0, 1).
+
+        Returns
+        -------
+        ndarray, shape (30,)
+            Half-widths in the parameters' units (mm and rad); NaN for the fixed parameters.
+
+        Raises
+        ------
+        CalibrationError
+            If ``level`` is not a number in (0, 1).
+        """
         level = interval_level(level)
         std = np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
         quantile = np.full(N_PARAMS, stats.norm.ppf(0.5 + level / 2))
@@ -585,18 +604,58 @@ class CellFit:
 
     def region_limit(self, level: float = 0.95) -> float:
         """The bound of ``d^T C^-1 d`` (``d`` the identified parameters' error, ``C`` their
-        covariance) of the joint ``level`` region: the chi-square quantile with as many degrees of
-        freedom as parameters identified (declared noise), else the simulated quantile
-        (:attr:`residual_errors`)."""
+        covariance) of the joint ``level`` region.
+
+        Parameters
+        ----------
+        level : float, default 0.95
+            Coverage of the region, in (0, 1).
+
+        Returns
+        -------
+        float
+            The chi-square quantile with as many degrees of freedom as parameters identified
+            (declared noise), else the simulated quantile (:attr:`residual_errors`).
+
+        Raises
+        ------
+        CalibrationError
+            If ``level`` is not a number in (0, 1).
+        """
         level = interval_level(level)
         if self.residual_errors is None:
             return float(stats.chi2.ppf(level, self.n_identified))
         return self.residual_errors.region_quantile(level)
 
     def in_region(self, params, level: float = 0.95) -> bool:
-        """Whether ``params`` (30,) lie within the joint ``level`` region of the identified
-        parameters (angles compared modulo a turn; the fixed parameters are not compared)."""
-        d = angle_wrap(np.asarray(params, float) - self.params)[self.free]
+        """Whether a parameter vector lies within the joint ``level`` region of the identified
+        parameters (:meth:`region_limit`).
+
+        Parameters
+        ----------
+        params : array_like, shape (30,)
+            Parameters to test (:data:`PARAM_NAMES`), mm and rad; angles are compared modulo a
+            turn and the fixed parameters are not compared.
+        level : float, default 0.95
+            Coverage of the region, in (0, 1).
+
+        Returns
+        -------
+        bool
+            True when ``d^T C^-1 d`` is within :meth:`region_limit`.
+
+        Raises
+        ------
+        CalibrationError
+            If ``params`` is not one value per parameter, or ``level`` is not a number in
+            (0, 1).
+        """
+        p = np.asarray(params, dtype=float)
+        if p.shape != self.params.shape:
+            raise CalibrationError(
+                f"params has shape {p.shape}; the model has {self.params.size} parameters"
+            )
+        d = angle_wrap(p - self.params)[self.free]
         c = self.covariance[np.ix_(self.free, self.free)]
         return bool(d @ np.linalg.solve(c, d) <= self.region_limit(level))
 

@@ -29,7 +29,7 @@ from calstudy.claims import (  # noqa: E402
     control_rows,
     judge_claim,
 )
-from calstudy.core.stats import median_interval  # noqa: E402
+from calstudy.core.stats import median_and_spread, median_interval  # noqa: E402
 from calstudy.papers.selfcal.experiments import (  # noqa: E402
     HISTORY_LENGTH,
     MAX_EVALUATIONS,
@@ -116,7 +116,7 @@ def summarise_history(calib: pd.DataFrame) -> pd.DataFrame:
         cols = [f"{start}_err_{i}" for i in range(HISTORY_LENGTH)]
         wide = one[cols].dropna().to_numpy(float)
         for it in range(HISTORY_LENGTH):
-            lo, med, hi = np.percentile(wide[:, it], [5, 50, 95])
+            med, lo, hi = median_and_spread(wide[:, it], level=0.90)
             rows.append(
                 {"start": start, "iteration": it, "median_mm": med, "p5_mm": lo, "p95_mm": hi}
             )
