@@ -507,8 +507,8 @@ CASES = [
     # imaging: circle of confusion, exposures, dot centres, the stereo rig
     ("roi_around-negative_radius", lambda p: optics.roi_around([100.0, 100.0], -10.0, 5.0, 1280, 1024), E, r"dot radius -10\.0 px must be > 0"),
     ("defocus-nan_image", lambda p: optics.defocus(np.full((20, 20), np.nan), 1.0), E, "image to blur has NaN or inf pixels"),
-    ("fuse_exposures-sigma_zero", lambda p: optics.fuse_exposures([DOT, DOT * 0.5], 1.0, 1.0, 0.0), E, "well-exposedness sigma = 0.0"),
-    ("fuse_exposures-negative_weight", lambda p: optics.fuse_exposures([DOT, DOT * 0.5], -1.0, 1.0, 0.2), E, r"fusion weights -1\.0, 1\.0"),
+    ("fuse_exposures-sigma_zero", lambda p: exposure.fuse_exposures([DOT, DOT * 0.5], 1.0, 1.0, 0.0), E, "well-exposedness sigma = 0.0"),
+    ("fuse_exposures-negative_weight", lambda p: exposure.fuse_exposures([DOT, DOT * 0.5], -1.0, 1.0, 0.2), E, r"fusion weights -1\.0, 1\.0"),
     ("detect_centre-thresholds_reversed", lambda p: coc.detect_centre(DOT, low=0.6, high=0.3), E, r"low = 0\.6, high = 0\.3: need 0 < low < high <= 1"),
     ("stereorig.perturbed-negative_sigma", lambda p: RIG.perturbed(SIGMAS | {"focal_px": -1.0}, np.random.default_rng(0)), E, r"calibration sigma focal_px = -1\.0"),
     ("stereorig.perturbed-missing_sigma", lambda p: RIG.perturbed({"focal_px": 1.0}, np.random.default_rng(0)), E, "calibration sigma principal_point_px = None"),
@@ -529,8 +529,8 @@ CASES = [
     ("coc_radius_far_mm-zero_distance", lambda p: optics.coc_radius_far_mm(0.0, 850.0, 16.0, 5.6), E, r"object distance d_B = 0\.0 mm must be a finite number > 0"),
     ("coc_radius_far_mm-zero_focus", lambda p: optics.coc_radius_far_mm(800.0, 0.0, 16.0, 5.6), E, r"focused distance d_A = 0\.0 mm"),
     ("coc_radius_far_mm-negative_f_number", lambda p: optics.coc_radius_far_mm(800.0, 850.0, 16.0, -5.6), E, r"F -5\.6 must be finite positive"),
-    ("fuse_exposures-nan_pixel", lambda p: optics.fuse_exposures([DOT, np.where(DOT > 0, np.nan, 0.0)]), E, r"image 1 holds nan at pixel \(13, 17\)"),
-    ("fuse_exposures-above_one", lambda p: optics.fuse_exposures([DOT * 1.5]), E, r"image 0 holds 1\.5 at pixel .*\[0, 1\]"),
+    ("fuse_exposures-nan_pixel", lambda p: exposure.fuse_exposures([DOT, np.where(DOT > 0, np.nan, 0.0)]), E, r"image 1 holds nan at pixel \(13, 17\)"),
+    ("fuse_exposures-above_one", lambda p: exposure.fuse_exposures([DOT * 1.5]), E, r"image 0 holds 1\.5 at pixel .*\[0, 1\]"),
     ("expose-negative_gain", lambda p: exposure.expose(DOT, 100.0, 1.3, 0.06, 1.5, -40.0, np.random.default_rng(0)), E, r"electrons_per_dn = -40\.0 must be > 0"),
     ("expose-zero_time", lambda p: exposure.expose(DOT, 0.0, 1.3, 0.06, 1.5, 40.0, np.random.default_rng(0)), E, r"exposure_ms = 0\.0 must be a finite number > 0"),
     ("expose-negative_read_noise", lambda p: exposure.expose(DOT, 100.0, 1.3, 0.06, -1.5, 40.0, np.random.default_rng(0)), E, r"read_noise_dn = -1\.5 must be a finite number >= 0"),
@@ -792,7 +792,7 @@ def test_property_circle_of_confusion(d_b, d_a, focal, f_number, pitch):
     st.floats(-0.1, 1.0),
 )
 def test_property_fusion(images, wc, we, sigma):
-    _check(optics.fuse_exposures, images, wc, we, sigma)
+    _check(exposure.fuse_exposures, images, wc, we, sigma)
 
 
 @PROFILE
@@ -800,7 +800,7 @@ def test_property_fusion(images, wc, we, sigma):
 def test_property_exposure(time_ms, peak, background, read_noise, gain, bits):
     """An exposure is an image of integers in [0, 2**bits - 1], or refused."""
     try:
-        out = optics.expose(DOT, time_ms, peak, background, read_noise, gain, np.random.default_rng(0), bits)
+        out = exposure.expose(DOT, time_ms, peak, background, read_noise, gain, np.random.default_rng(0), bits)
     except CalibrationError:
         return
     assert out.min() >= 0 and out.max() <= 2**bits - 1

@@ -46,7 +46,8 @@ from browser import INSTALL_HINT, Chromium, find_chromium
 
 from calstudy.claims import claim_register
 from calstudy.core.paths import REPO_ROOT, RESULTS_DIR
-from calstudy.io.book import PAPERS, VERDICT_COLOURS
+from calstudy.io.book import PAPERS
+from calstudy.io.claims_cells import VERDICT_COLOURS
 from calstudy.io.results import FONT_KEY, read_claims
 
 pytestmark = pytest.mark.book

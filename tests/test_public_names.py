@@ -1,7 +1,9 @@
 """The library, the benchmarks and the notebooks use public names only: none imports a private
 name (one with a leading underscore, dunders aside) of another module, of numpy or scipy, nor
 reaches one through an imported module (``np.linalg._umath_linalg``, ``estimation._fit``). A name
-a second module needs is public in its own home. (Tests may reach private helpers to test them.)"""
+a second module needs is public in its own home. (Tests may reach private helpers to test them.)
+Nor does any of them, tests included, take a name from a module that only imports it (a
+re-export): a name is imported from the module that defines it, or from a package's door."""
 
 from __future__ import annotations
 
@@ -103,3 +105,87 @@ def test_benchmarks_and_notebooks_use_public_names(path):
 )
 def test_the_check_finds_private_names(source, expected):
     assert private_uses(ast.parse(source)) == expected
+
+
+def _module_file(module: str) -> Path | None:
+    """The file of a ``calstudy`` module that is not a package (a package's ``__init__`` is a
+    door and may re-export), or None."""
+    path = SOURCE.joinpath(*module.split(".")[1:])
+    if (path / "__init__.py").exists() or not path.with_suffix(".py").exists():
+        return None
+    return path.with_suffix(".py")
+
+
+def defined_names(tree: ast.Module) -> set[str]:
+    """Names a module defines at its top level (functions, classes, assignments, also inside a
+    top-level ``if`` or ``try``); not the names it imports."""
+    names: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            names.add(node.name)
+        elif isinstance(node, ast.Assign | ast.AnnAssign | ast.AugAssign | ast.If | ast.Try):
+            for sub in ast.walk(node):
+                if isinstance(sub, ast.FunctionDef | ast.ClassDef):
+                    names.add(sub.name)
+                elif isinstance(sub, ast.Name) and isinstance(sub.ctx, ast.Store):
+                    names.add(sub.id)
+    return names
+
+
+def reexported_uses(tree: ast.Module, defined=None) -> list[tuple[int, str]]:
+    """(line, dotted name) of every name ``tree`` imports from a calstudy module (not a door)
+    that does not define it; ``defined(module)`` gives a module's own names."""
+    if defined is None:
+        def defined(module):
+            path = _module_file(module)
+            return None if path is None else defined_names(ast.parse(path.read_text()))
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("calstudy."):
+            own = defined(node.module)
+            if own is not None:
+                found += [(node.lineno, f"{node.module}.{a.name}") for a in node.names
+                          if a.name not in own]
+    return found
+
+
+def _all_files() -> list[Path]:
+    return [*_files(), *sorted((REPO_ROOT / "tests").rglob("*.py")),
+            *sorted((REPO_ROOT / "benchmarks").glob("*.py")), *sorted(NOTEBOOKS.glob("*.ipynb"))]
+
+
+@pytest.mark.parametrize("path", _all_files(), ids=lambda p: p.relative_to(REPO_ROOT).as_posix())
+def test_names_come_from_their_home(path):
+    source = notebook_code(path) if path.suffix == ".ipynb" else path.read_text()
+    uses = reexported_uses(ast.parse(source))
+    assert not uses, f"{path.relative_to(REPO_ROOT)} imports names through a re-export: {uses}"
+
+
+@pytest.mark.parametrize("path", _files(), ids=lambda p: p.relative_to(SOURCE).as_posix())
+def test_a_module_exports_only_its_own_names(path):
+    tree = ast.parse(path.read_text())
+    exported = [
+        elt.value
+        for node in tree.body
+        if isinstance(node, ast.Assign)
+        and any(isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets)
+        for elt in node.value.elts
+    ]
+    if path.name != "__init__.py":
+        assert set(exported) <= defined_names(tree), (
+            f"{path.relative_to(REPO_ROOT)} lists names it does not define in __all__: "
+            f"{sorted(set(exported) - defined_names(tree))}"
+        )
+
+
+@pytest.mark.parametrize(
+    ("source", "expected"),
+    [
+        ("from calstudy.m import own, other", [(1, "calstudy.m.other")]),
+        ("from calstudy.door import other", []),  # a door (package) may re-export
+        ("from calstudy.m import own\nfrom numpy import other", []),
+    ],
+)
+def test_the_check_finds_reexports(source, expected):
+    homes = {"calstudy.m": {"own"}, "calstudy.door": None}
+    assert reexported_uses(ast.parse(source), homes.get) == expected

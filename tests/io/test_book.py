@@ -19,18 +19,18 @@ from calstudy.io.book import (
     claim_target,
     main,
     percent,
-    published_value,
     read_results,
     render_claims_page,
-    typeset,
 )
 from calstudy.io.claims_cells import (
     bound_value,
     headings,
     judged_in,
     published_figure,
+    published_value,
     ratio_of,
     section_id,
+    typeset,
 )
 from calstudy.io.results import aggregate_claims, write_claims
 

@@ -113,7 +113,8 @@ def test_the_data_its_modules_open_is_among_its_inputs(notebook):
 @pytest.mark.parametrize("notebook", NOTEBOOKS, ids=lambda p: p.stem)
 def test_run_json_digest_covers_the_same_files(notebook, tmp_path):
     assert [deps.label(p) for p in source_files(notebook)] == sorted(_labels(notebook))
-    # an edit to another paper's package leaves the digest as it is
+    # the digest covers the notebook itself: a copy under another name has its own (that no
+    # other paper's package is among its files: test_each_paper_package_is_in_its_notebooks_only)
     other = tmp_path / f"{notebook.stem[:3]}other_{notebook.name[3:]}"
     other.write_text(notebook.read_text())
     assert source_digest(notebook) != source_digest(other)

@@ -11,7 +11,7 @@ from support import disk_image
 
 from calstudy.core.errors import CalibrationError
 from calstudy.estimators.coc import detect_centre
-from calstudy.models import optics
+from calstudy.models import exposure, optics
 
 
 def test_coc_radius_zero_at_focus_and_far_field_limit():
@@ -33,9 +33,9 @@ def test_coc_radius_rejects_a_non_finite_distance():
 
 def test_fusion_of_equal_images_is_the_image_and_checks_shapes():
     img = (disk_image() * 255).astype(np.uint8)
-    np.testing.assert_allclose(optics.fuse_exposures([img, img]), img / 255.0, atol=1e-6)
+    np.testing.assert_allclose(exposure.fuse_exposures([img, img]), img / 255.0, atol=1e-6)
     with pytest.raises(CalibrationError, match="one shape"):
-        optics.fuse_exposures([img, img[:-1]])
+        exposure.fuse_exposures([img, img[:-1]])
 
 
 def test_dot_touching_the_image_border():

@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from calstudy import CalibrationError
 from calstudy.core import geometry as geo
-from calstudy.models.kinematics import Link, Robot
-from calstudy.models.reach import IK_TOL, ReachBound, reach_bound
+from calstudy.models.kinematics import IK_TOL, Link, Robot
+from calstudy.models.reach import ReachBound, reach_bound
 from calstudy.models.robots import load_robot, perturb_robot
 
 

@@ -19,7 +19,6 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
-from scipy.spatial.transform import Rotation
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
@@ -212,7 +211,7 @@ class _Layout:
         rv[self.free], tr[self.free] = block[:, :3], block[:, 3:]
         p = np.full((self.n_markers, 3), np.nan)
         p[self.used] = x[6 * len(self.free) :].reshape(-1, 3)
-        return rv, Rotation.from_rotvec(rv).as_matrix(), tr, p
+        return rv, geo.rotvec_to_matrix(rv), tr, p
 
 
 def _sparsity(layout: _Layout, view_idx: np.ndarray, marker_idx: np.ndarray):
@@ -466,7 +465,7 @@ def refine_camera_pose(
     sigma_obs = _euclid_sigma(p_cam, sigma_mm, depth_ref_mm)[:, None]
 
     def fun(x):
-        rot = Rotation.from_rotvec(x[None, :3]).as_matrix()
+        rot = geo.rotvec_to_matrix(x[None, :3])
         reproj, euclid = _residual_blocks(
             rig, rot, x[None, 3:], pts, view_idx, marker_idx, uv_l, uv_r, p_cam
         )
@@ -476,7 +475,7 @@ def refine_camera_pose(
         rv = x[None, :3]
         blocks = _jacobian_blocks(
             rig,
-            Rotation.from_rotvec(rv).as_matrix(),
+            geo.rotvec_to_matrix(rv),
             x[None, 3:],
             geo.so3_left_jacobian(rv),
             pts,
@@ -493,7 +492,7 @@ def refine_camera_pose(
     )
     if res.status <= 0:
         raise CalibrationError(f"camera pose refinement did not converge ({res.message})")
-    return geo.make_transform(Rotation.from_rotvec(res.x[:3]).as_matrix(), res.x[3:])
+    return geo.make_transform(geo.rotvec_to_matrix(res.x[:3]), res.x[3:])
 
 
 __all__ = ["MAX_RMS_PX", "BundleResult", "bundle_adjust", "refine_camera_pose"]

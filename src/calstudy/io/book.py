@@ -38,7 +38,6 @@ from calstudy.io.claims_cells import (
     is_ratio,
     judged_in,
     published_figure,
-    published_value,
     typeset,
 )
 from calstudy.io.results import read_claims
@@ -57,11 +56,9 @@ __all__ = [
     "claims_figure",
     "headline",
     "main",
-    "published_value",
     "read_results",
     "render_claims_page",
     "percent",
-    "typeset",
     "verdict_box",
 ]
 

@@ -6,13 +6,10 @@ are :mod:`calstudy.estimators.coc`):
 - :func:`coc_radius_mm` and :func:`coc_radius_far_mm`: the radius of the circle of confusion of
   an object point off the focused distance (Eq. 4, and its far-field form Eq. 5);
 - :func:`render_dot`: the sharp image of a round dot on a plane (exact perspective and lens
-  distortion per pixel), :func:`defocus` (the Gaussian energy model of Eq. 7),
+  distortion per pixel), :func:`defocus` (the Gaussian energy model of Eq. 7) and
   :func:`defocus_vignetted` (the same blur spot cut off axis by a lens rim: :func:`rim_shadow`,
-  :func:`defocus_kernel`) and
-  :func:`expose` (exposure time, saturation, shot and read noise, 8-bit quantisation);
-- :func:`fuse_exposures`: exposure fusion with contrast and well-exposedness weights (Eq. 3);
-  :func:`expose_and_fuse` does both in one pass (these three live in
-  :mod:`calstudy.models.exposure` and are re-exported here).
+  :func:`defocus_kernel`). The image's last steps, exposure with sensor noise and the fusion of
+  Eq. 3, are :mod:`calstudy.models.exposure`.
 
 Images are float arrays with values in [0, 1] (or uint8 for raw exposures); coordinates are in px
 with pixel centres at integers (OpenCV's convention); a region of interest (ROI) is given by the
@@ -28,11 +25,6 @@ import cv2
 import numpy as np
 
 from calstudy.core.errors import CalibrationError
-from calstudy.models.exposure import (  # noqa: F401  (re-exported: the model's last steps)
-    expose,
-    expose_and_fuse,
-    fuse_exposures,
-)
 
 # ----------------------------------------------------------------------------------------------
 # circle of confusion (Eq. 4-5)

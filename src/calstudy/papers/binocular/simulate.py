@@ -28,7 +28,7 @@ from calstudy.estimators.coc import (
     rectify_coc,
     rectify_cocs,
 )
-from calstudy.models import optics
+from calstudy.models import exposure, optics
 from calstudy.models.kinematics import Robot
 from calstudy.models.robots import perturb_robot
 from calstudy.models.sensors import PinholeCamera
@@ -196,7 +196,7 @@ def expose_and_fuse(
 ) -> np.ndarray:
     """The exposures of ``sensor.toml [exposure]`` of a blurred ROI, fused (Eq. 3)."""
     exp = scenario.sensor.exposure
-    return optics.expose_and_fuse(
+    return exposure.expose_and_fuse(
         blurred,
         exp.times_ms,
         exp.dot_peak_at_100ms,
