@@ -18,6 +18,7 @@ import time
 import numpy as np
 from timing import best_ms
 
+from calstudy import CalibrationError
 from calstudy import handeye as he
 from calstudy.core import geometry as geo
 from calstudy.handeye import calibrate as hp
@@ -136,7 +137,7 @@ def main() -> None:
 def _refused(a, b) -> None:
     try:
         hp.calibrate_handeye(a, b)
-    except hp.CalibrationError:
+    except CalibrationError:
         return
     raise AssertionError("the shuffled pose list was not refused")
 

@@ -23,7 +23,7 @@ import warnings
 
 import numpy as np
 
-from calstudy import CalibrationWarning
+from calstudy import CalibrationError, CalibrationWarning
 from calstudy.core import geometry as geo
 from calstudy.handeye import calibrate as hp
 from calstudy.handeye import simulate as hs
@@ -57,7 +57,7 @@ def covered(kind: str, n: int, seed: int) -> bool | None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", CalibrationWarning)
             res = hp.calibrate_handeye(a, cell.target2camera)
-    except hp.CalibrationError:
+    except CalibrationError:
         return None
     return res.camera_distance(cell.camera2flange) <= res.region_limit(0.95)
 

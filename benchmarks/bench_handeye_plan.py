@@ -18,7 +18,7 @@ import warnings
 
 import numpy as np
 
-from calstudy import CalibrationWarning
+from calstudy import CalibrationError, CalibrationWarning
 from calstudy.core import geometry as geo
 from calstudy.handeye import calibrate as hp
 from calstudy.handeye import plan as hplan
@@ -39,7 +39,7 @@ def tool_error(a, x, z, rng) -> float:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", CalibrationWarning)
             res = hp.calibrate_handeye(a, b)
-    except hp.CalibrationError:  # degenerate motions (random poses about one axis): refused
+    except CalibrationError:  # degenerate motions (random poses about one axis): refused
         return np.nan
     moved = geo.apply(res.camera2flange, TOOL_POINT) - geo.apply(x, TOOL_POINT)
     return float(np.linalg.norm(moved))

@@ -8,6 +8,7 @@ re-export): a name is imported from the module that defines it, or from a packag
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -133,20 +134,43 @@ def defined_names(tree: ast.Module) -> set[str]:
 
 
 def reexported_uses(tree: ast.Module, defined=None) -> list[tuple[int, str]]:
-    """(line, dotted name) of every name ``tree`` imports from a calstudy module (not a door)
-    that does not define it; ``defined(module)`` gives a module's own names."""
+    """(line, dotted name) of every name ``tree`` takes from a calstudy module (not a door) that
+    does not define it: imported from it, or reached as an attribute of it
+    (``report.bin_distance`` where ``report`` only imports it); ``defined(module)`` gives a
+    module's own names, None for a package."""
     if defined is None:
-        def defined(module):
-            path = _module_file(module)
-            return None if path is None else defined_names(ast.parse(path.read_text()))
+        defined = _own_names
     found = []
+    modules: dict[str, str] = {}  # local name -> calstudy module (not a package) it is bound to
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("calstudy."):
             own = defined(node.module)
-            if own is not None:
-                found += [(node.lineno, f"{node.module}.{a.name}") for a in node.names
-                          if a.name not in own]
-    return found
+            for alias in node.names:
+                sub = f"{node.module}.{alias.name}"
+                if own is None and defined(sub) is not None:  # a module of a package
+                    modules[alias.asname or alias.name] = sub
+                elif own is not None and alias.name not in own:
+                    found.append((node.lineno, sub))
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.asname and defined(alias.name) is not None:
+                    modules[alias.asname] = alias.name
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in modules
+        ):
+            module = modules[node.value.id]
+            if node.attr not in defined(module) and not node.attr.startswith("__"):
+                found.append((node.lineno, f"{module}.{node.attr}"))
+    return sorted(set(found))
+
+
+@functools.cache
+def _own_names(module: str) -> frozenset[str] | None:
+    path = _module_file(module)
+    return None if path is None else frozenset(defined_names(ast.parse(path.read_text())))
 
 
 def _all_files() -> list[Path]:
@@ -184,8 +208,12 @@ def test_a_module_exports_only_its_own_names(path):
         ("from calstudy.m import own, other", [(1, "calstudy.m.other")]),
         ("from calstudy.door import other", []),  # a door (package) may re-export
         ("from calstudy.m import own\nfrom numpy import other", []),
+        # a module reached through its package, or imported under a name, then its attributes
+        ("from calstudy.door import m\nm.own(m.other)", [(2, "calstudy.door.m.other")]),
+        ("import calstudy.m as m\nm.other", [(2, "calstudy.m.other")]),
+        ("from calstudy.door import m\nm.own\nx.other", []),
     ],
 )
 def test_the_check_finds_reexports(source, expected):
-    homes = {"calstudy.m": {"own"}, "calstudy.door": None}
+    homes = {"calstudy.m": {"own"}, "calstudy.door.m": {"own"}}  # calstudy.door: a package
     assert reexported_uses(ast.parse(source), homes.get) == expected

@@ -72,7 +72,7 @@ def test_monte_carlo_covariance_of_ml_matches_crb():
 
 def test_inconsistent_closed_form_is_refused(monkeypatch):
     cell = _cell(18)
-    real = hr.opencv_handeye
+    real = he.opencv_handeye
     wrong = geo.make_transform(geo.rotvec_to_matrix([0.0, np.deg2rad(27.0), 0.0]), [2300.0, 0, 0])
 
     def broken(a, b, method, tol=geo.ORTHONORMAL_TOL):

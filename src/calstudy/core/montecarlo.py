@@ -503,7 +503,7 @@ def _outcomes(
     if not pending:
         yield iter(())
     elif scheduler is None and n_jobs == 1:
-        with _one_blas_thread():
+        with one_blas_thread():
             yield (_run_trial(job, trial, False) for job, trial in pending)
     else:
         import joblib
@@ -527,10 +527,14 @@ def _outcomes(
                     results.close()
 
 
-def _one_blas_thread() -> contextlib.AbstractContextManager:
-    """BLAS on one thread, as in the workers: a multi-threaded BLAS splits its sums otherwise
-    and moves the last digits of the rows."""
-    return threadpool_limits(1)
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """BLAS on one thread inside the block, the caller's limits restored after; also a
+    decorator. The engine runs every trial under it (its workers start with one thread): a
+    multi-threaded BLAS splits its sums otherwise and moves the last digits of the rows. A
+    computation a notebook runs outside the engine takes it for the same reason."""
+    with threadpool_limits(1):
+        yield
 
 
 @contextlib.contextmanager
@@ -660,7 +664,7 @@ def _first_failure(
         for trial in range(t if job.index == p else n_trials):
             if (job.index, trial) in done:
                 continue
-            with _one_blas_thread():
+            with one_blas_thread():
                 q, s, _, err = _run_trial(job, trial, False)
             if err is not None:
                 return q, s, err
@@ -735,7 +739,7 @@ def trial_rows(
         pt,
         point,
     )
-    with _one_blas_thread():
+    with one_blas_thread():
         _, _, rows, error = _run_trial(job, trial, in_worker=False, generator=generator)
     if error is not None:
         raise _trial_error(experiment, seed, point, trial, error) from error

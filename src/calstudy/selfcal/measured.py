@@ -49,7 +49,7 @@ import pandas as pd
 from scipy import stats
 
 from calstudy.core.errors import CalibrationError, CalibrationWarning
-from calstudy.core.geometry import matrix_to_euler_zyx
+from calstudy.core.geometry import check_shape, matrix_to_euler_zyx
 from calstudy.core.schema import load_model
 from calstudy.core.stats import interval_level
 from calstudy.core.userfile import (
@@ -647,14 +647,10 @@ class CellFit:
         Raises
         ------
         CalibrationError
-            If ``params`` is not one value per parameter, or ``level`` is not a number in
-            (0, 1).
+            If ``params`` is not one finite value per parameter, or ``level`` is not a number
+            in (0, 1).
         """
-        p = np.asarray(params, dtype=float)
-        if p.shape != self.params.shape:
-            raise CalibrationError(
-                f"params has shape {p.shape}; the model has {self.params.size} parameters"
-            )
+        p = check_shape("params", params, self.params.shape)
         d = angle_wrap(p - self.params)[self.free]
         c = self.covariance[np.ix_(self.free, self.free)]
         return bool(d @ np.linalg.solve(c, d) <= self.region_limit(level))

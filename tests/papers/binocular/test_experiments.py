@@ -19,6 +19,7 @@ from calstudy.papers.binocular.simulate import (
     draw_world,
     reimage,
     view_calibrator,
+    viewpoints,
 )
 from calstudy.papers.binocular.simulate import exact_points as sim_exact_points
 
@@ -276,7 +277,7 @@ def test_the_observed_error_null_catches_a_modification_that_sees_the_scored_dis
     views = type("V", (), {})()
     for _ in range(n):
         world = draw_world(scenario, rng)
-        poses = [ex.viewpoints(scenario, scenario.calibrator2base, 1, rng)[1][0] for _ in range(3)]
+        poses = [viewpoints(scenario, scenario.calibrator2base, 1, rng)[1][0] for _ in range(3)]
         views.sensor2base = np.array([p @ scenario.sensor2flange for p in poses])
         exact8 = bino.with_virtual(sim_exact_points(scenario, views))
         hold = ex.exact_figures(world, exact8)

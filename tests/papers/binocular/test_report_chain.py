@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 from calstudy.papers.binocular import report_chain as rc
+from calstudy.papers.binocular.report import loglog_crossing
 from calstudy.papers.binocular.scenario import published
 
 
@@ -49,6 +50,6 @@ def test_chain_text_finds_where_the_baseline_meets_the_paper():
 
 
 def test_crossing_is_none_outside_the_swept_range():
-    assert rc._crossing([4.0, 8.0], [2.0, 1.0], 0.1) is None
-    assert rc._crossing([4.0, 16.0], [2.0, 0.5], 1.0) == pytest.approx(8.0)
-    assert np.isfinite(rc._crossing([4.0, 16.0], [0.5, 2.0], 1.0))
+    assert loglog_crossing([4.0, 8.0], [2.0, 1.0], 0.1) is None
+    assert loglog_crossing([4.0, 16.0], [2.0, 0.5], 1.0) == pytest.approx(8.0)
+    assert np.isfinite(loglog_crossing([4.0, 16.0], [0.5, 2.0], 1.0))

@@ -8,6 +8,7 @@ import pytest
 
 from calstudy.core.errors import CalibrationError
 from calstudy.papers.dualarm import report_design as rd
+from calstudy.papers.dualarm.experiments import BUDGET_SOURCES
 from calstudy.papers.dualarm.scenario import load_published
 
 
@@ -67,7 +68,7 @@ def test_the_paper_point_sentence_names_the_points_with_the_papers_poses(scenari
 def test_budget_table_orders_sources_and_shares_in_quadrature():
     rows = []
     levels = {"coded markers": 0.4, "true calibration": 0.01}
-    levels.update({f"budget: {s}": 0.1 * (k + 1) for k, s in enumerate(rd.BUDGET_SOURCES)})
+    levels.update({f"budget: {s}": 0.1 * (k + 1) for k, s in enumerate(BUDGET_SOURCES)})
     for t in range(30):
         for m, v in levels.items():
             rows.append({"part": "global", "method": m, "trial": t, "euclid_mm": v})

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from calstudy import CalibrationError
-from calstudy.papers.hybrid import compensation, report
+from calstudy.papers.hybrid import compensation, report, report_sweeps
 
 PUBLISHED_R = np.array([28, 58, 63, 10, 15])  # the paper's correlation counts (Table 1)
 
@@ -115,8 +115,8 @@ def test_correlation_distance_of_stations_drawn_from_the_published_bins():
     distance in at least 95 % of cases: the bound is a test that a faithful station passes."""
     rng = np.random.default_rng(4)
     counts = rng.multinomial(168, PUBLISHED_R / PUBLISHED_R.sum(), size=2000)
-    d = report.bin_distance(counts, PUBLISHED_R / PUBLISHED_R.sum() * 100)
-    assert np.mean(d <= report.kolmogorov_bound(168)) >= 0.95  # binned: conservative
+    d = report_sweeps.bin_distance(counts, PUBLISHED_R / PUBLISHED_R.sum() * 100)
+    assert np.mean(d <= report_sweeps.kolmogorov_bound(168)) >= 0.95  # binned: conservative
 
 
 def test_robot_error_sweep_summary_uses_the_claims_verdicts():

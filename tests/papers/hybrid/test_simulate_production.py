@@ -65,8 +65,10 @@ def test_the_taught_program_follows_the_stand_off():
     moved = dataclasses.replace(s, standoff=s.standoff - 20.0)
     q = simulate_production.teach_program(moved, features)
     assert np.abs(q - taught).max() > 1e-3
-    simulate_production._PROGRAM_CACHE.clear()
-    np.testing.assert_array_equal(simulate_production.teach_program(moved, features), q)
+    simulate_production._PROGRAM_CACHE.clear()  # and a fresh station: no IK memo either
+    fresh = simulate_production.teach_program(dataclasses.replace(moved), features)
+    np.testing.assert_array_equal(fresh, q)
+    assert not fresh.flags.writeable
     # every taught sensor pose moves 20 mm (along its axis, to stay 20 mm nearer the part)
     sensor = np.array([s.nominal.fk(qi) @ s.sensor2flange_true for qi in taught])
     sensor_moved = np.array([s.nominal.fk(qi) @ s.sensor2flange_true for qi in q])

@@ -15,7 +15,7 @@ from calstudy.core.montecarlo import trial_rows
 from calstudy.core.paths import RESULTS_DIR
 from calstudy.core.robustness import matches, point_setting
 from calstudy.core.trialcache import TrialCache
-from calstudy.papers.hybrid import report
+from calstudy.papers.hybrid import report, report_sweeps
 from calstudy.papers.hybrid import station_robustness as robustness
 
 STEM = "01_hybrid_global_calibration"
@@ -85,7 +85,7 @@ def test_the_adapter_gives_the_reports_verdicts():
     assert np.median(stats["hybrid.handeye"]) == pytest.approx(v.median, rel=1e-12)
     rows, verdicts, stats = judged["stationary"]
     st = report.stationary_figures(rows)
-    cols = report.CLAIMS["hybrid.stationary"]
+    cols = report_sweeps.CLAIMS["hybrid.stationary"]
     pooled = np.sqrt(np.mean(st[cols.figure] ** 2) / np.mean(st[cols.baseline] ** 2))
     assert cols.pooled and pooled == pytest.approx(verdicts["hybrid.stationary"].median, rel=1e-12)
     np.testing.assert_array_equal(stats["hybrid.stationary"], st["ratio"])

@@ -11,7 +11,7 @@ from calstudy.core.paths import RESULTS_DIR
 from calstudy.core.stats import rms_ratio_interval
 from calstudy.core.verdicts import judge_rms_ratio
 from calstudy.papers.hybrid import report
-from calstudy.papers.hybrid.report_sweeps import CLAIMS, ML_MULTIPLE
+from calstudy.papers.hybrid.report_sweeps import CLAIMS, ML_MULTIPLE, station_against_design
 
 TRIALS = RESULTS_DIR / "01_hybrid_global_calibration" / "trials_stationary.csv"
 
@@ -160,6 +160,6 @@ def test_station_against_design_says_which_is_better(scale, finding):
     rng = np.random.default_rng(5)
     design = np.abs(rng.normal(1.0, 0.3, 100))
     calibrated = scale * design * rng.uniform(0.9, 1.1, 100)
-    out = report.station_against_design(_station(calibrated, design))
+    out = station_against_design(_station(calibrated, design))
     assert finding in out["station_design_sentence"]
     assert out["station_design_low"] <= out["station_design_ratio"] <= out["station_design_high"]

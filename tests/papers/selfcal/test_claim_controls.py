@@ -30,6 +30,7 @@ from calstudy.papers.selfcal.experiments import (
 from calstudy.papers.selfcal.routes import refit
 from calstudy.papers.selfcal.simulate import (
     draw_placements,
+    draw_station,
     joint_deflection,
     link_gravity_torques,
     simulate,
@@ -250,7 +251,7 @@ def nominal_calib(scenario):
     from the layout, sensor from the bracket drawing; no compliance): every method as in the
     study, only the drawn station replaced."""
     sc = with_inputs(scenario, {"compliance.scale": 0.0})
-    draw = experiments.draw_station
+    draw = draw_station
 
     def nominal_station(scenario, rng):
         st = draw(scenario, rng)

@@ -70,7 +70,7 @@ def test_declared_noise_uses_normal_and_chi_square_quantiles(cell, scenario):
     np.testing.assert_allclose(fit.half_widths(0.9), norm.ppf(0.95) * std, rtol=1e-12)
     assert fit.region_limit(0.95) == pytest.approx(chi2.ppf(0.95, 30), rel=1e-12)
     assert fit.in_region(fit.params) and not fit.in_region(fit.params + 10 * std)
-    with pytest.raises(CalibrationError, match=r"params has shape \(29,\); the model has 30"):
+    with pytest.raises(CalibrationError, match=r"params has shape \(29,\); expected \(30\)"):
         fit.in_region(fit.params[:-1])
     with pytest.raises(CalibrationError, match="level"):
         fit.half_widths(1.5)

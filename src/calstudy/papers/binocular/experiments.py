@@ -25,11 +25,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from threadpoolctl import threadpool_limits
 
 from calstudy.core import geometry as geo
 from calstudy.core.errors import CalibrationError
-from calstudy.core.montecarlo import Experiment, child_rng, one_opencv_thread, streams
+from calstudy.core.montecarlo import (
+    Experiment,
+    child_rng,
+    one_blas_thread,
+    one_opencv_thread,
+    streams,
+)
 from calstudy.core.stats import rmse
 from calstudy.estimators import binocular as bino
 from calstudy.estimators.coc import detect_centre
@@ -586,7 +591,7 @@ def optics_experiment(
 
 
 @one_opencv_thread()
-@threadpool_limits.wrap(limits=1)
+@one_blas_thread()
 def defocus_shift(
     scenario: Scenario, depths_mm, tilts_deg=(0.0, 20.0, 40.0), field_deg: float = 15.0
 ) -> pd.DataFrame:

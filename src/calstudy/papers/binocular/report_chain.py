@@ -14,8 +14,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from calstudy.papers.binocular.report import OPTICS
-from calstudy.papers.binocular.report import loglog_crossing as _crossing
+from calstudy.papers.binocular.report import OPTICS, loglog_crossing
 from calstudy.papers.binocular.scenario import paper_table, published
 
 #: Columns of :func:`chain_table` taken as medians over the trials of a sweep point.
@@ -86,7 +85,7 @@ def chain_text(table: pd.DataFrame, trials_default: pd.DataFrame, f_number: floa
         f"{d['fig13_preliminary'].median():.3g} mm and a hand-eye translation error of "
         f"{d['trans_err_preliminary_mm'].median():.3g} mm; the paper's baseline is {fig13:.3g} mm."
     )
-    f_meet = _crossing(t["f_number"], t["fig13_exact_p7_preliminary"], fig13)
+    f_meet = loglog_crossing(t["f_number"], t["fig13_exact_p7_preliminary"], fig13)
     if f_meet is None:
         text += (
             f" No swept F-number brings the Fig. 13 baseline down to {fig13:.3g} mm (from "

@@ -92,8 +92,9 @@ class HybridStation:
     free_direction: float
     config: StationFile | None = field(default=None, repr=False)
     translation_pattern: str = "random"
-    # memos of answers that depend on the fields above only; not copied by dataclasses.replace,
-    # so a station with other fields never reuses them
+    # memos, not copied by dataclasses.replace: the sphere's reference pose depends on the
+    # fields above (a station with other fields finds its own), the IK answers on the robot
+    # and the pose only (their key)
     _sphere_ref: np.ndarray | None = field(default=None, init=False, repr=False)
     _ik_memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 

@@ -63,7 +63,9 @@ def teach_program(station: HybridStation, features: Features) -> np.ndarray:
                 q.append(station.solve_ik(station.nominal, pose))
             except CalibrationError as exc:
                 raise CalibrationError(f"feature {pid} is out of reach: {exc}") from exc
-        _PROGRAM_CACHE[key] = np.array(q)
+        program = np.array(q)
+        program.flags.writeable = False  # shared by every station with these poses
+        _PROGRAM_CACHE[key] = program
     return _PROGRAM_CACHE[key]
 
 
