@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from support import REPO_ROOT
 
-from calstudy.io.dependencies import notebook_code
+from calstudy.io.dependencies import module_file, notebook_code
 
 SOURCE = REPO_ROOT / "src" / "calstudy"
 NOTEBOOKS = REPO_ROOT / "notebooks"
@@ -111,10 +111,8 @@ def test_the_check_finds_private_names(source, expected):
 def _module_file(module: str) -> Path | None:
     """The file of a ``calstudy`` module that is not a package (a package's ``__init__`` is a
     door and may re-export), or None."""
-    path = SOURCE.joinpath(*module.split(".")[1:])
-    if (path / "__init__.py").exists() or not path.with_suffix(".py").exists():
-        return None
-    return path.with_suffix(".py")
+    path = module_file(module)
+    return None if path is None or path.name == "__init__.py" else path
 
 
 def defined_names(tree: ast.Module) -> set[str]:
